@@ -1,0 +1,106 @@
+"""The genome layout: which numbers are free, their bounds, and their bond-type groups.
+
+DESIGN.md §3: genes are grouped by bond type (all occurrences of a type share one parameter
+set); every gene has bounds; positive quantities with wide bounds are searched in log space.
+``decode`` maps a genome (search space) to :class:`Params` with one gather per field, so it
+vmaps over a population at no cost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from .params import Params
+
+# Bounds for a free parameter given without min/max: (lower, upper) from the file value v.
+_DEFAULT_BOUNDS = {
+    "stiffness": lambda v: (v / 100, v * 100) if v > 0 else (0.0, 1e3),
+    "damping": lambda v: (v / 100, v * 100) if v > 0 else (0.0, 10.0),
+    "rest_length": lambda v: (0.5 * v, 1.5 * v) if v > 0 else (0.0, 1.0),
+    "rest_angle": lambda v: (0.0, math.pi),
+    "gain": lambda v: (0.0, max(100.0, 2 * abs(v))),
+    "threshold": lambda v: (-5.0, 5.0),
+    "mass": lambda v: (v / 10, v * 10),
+    "anchor": lambda v: (v - 1.0, v + 1.0),
+}
+
+
+@dataclass(frozen=True)
+class Gene:
+    name: str  # e.g. "type:leg.stiffness" or "bond[2].weights.length[0]"
+    group: int  # bond-type group (crossover unit)
+    lower: float  # natural units
+    upper: float
+    log: bool
+    value: float  # the model file's value (natural units)
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Free parameters of a model as a flat genome, and how to put them back."""
+
+    genes: tuple[Gene, ...]
+    groups: tuple[str, ...]  # name of each group (bond type or particle mass)
+    group_slots: np.ndarray  # [n_groups, S] particles at the extremities of each occurrence, -1 pad
+    base: Params  # fixed values (and file values of free ones)
+    index: Params  # same shapes, int: gene index or -1 for fixed entries
+
+    @property
+    def n_genes(self) -> int:
+        return len(self.genes)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([_to_search(g.lower, g.log) for g in self.genes], dtype=np.float64)
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([_to_search(g.upper, g.log) for g in self.genes], dtype=np.float64)
+
+    @property
+    def log(self) -> np.ndarray:
+        return np.array([g.log for g in self.genes], dtype=bool)
+
+    @property
+    def gene_group(self) -> np.ndarray:
+        return np.array([g.group for g in self.genes], dtype=np.int32)
+
+    def initial(self) -> np.ndarray:
+        """The model file's values in search space."""
+        return np.array([_to_search(g.value, g.log) for g in self.genes], dtype=np.float64)
+
+    def natural(self, genome: np.ndarray) -> np.ndarray:
+        genome = np.asarray(genome, dtype=np.float64)
+        return np.where(self.log, np.exp(genome), genome)
+
+    def decode(self, genome):
+        """Genome (search space, [G]) -> Params. Pure JAX; vmap it over a population."""
+        values = jnp.where(jnp.asarray(self.log), jnp.exp(genome), genome)
+        padded = jnp.concatenate([values, jnp.zeros((1,), values.dtype)])
+
+        def field(base, index):
+            index = np.asarray(index)
+            if index.size == 0 or (index < 0).all():
+                return jnp.asarray(base, values.dtype)
+            gathered = padded[np.where(index >= 0, index, len(self.genes))]
+            return jnp.where(index >= 0, gathered, jnp.asarray(base, values.dtype))
+
+        return Params(*(field(b, i) for b, i in zip(self.base, self.index, strict=True)))
+
+
+def _to_search(x: float, log: bool) -> float:
+    return math.log(x) if log else x
+
+
+def default_bounds(kind: str, value: float) -> tuple[float, float]:
+    return _DEFAULT_BOUNDS[kind](value)
+
+
+def pick_log(lower: float, upper: float, log: bool | None) -> bool:
+    if log is not None:
+        return log
+    return lower > 0 and upper / lower >= 100
