@@ -1,0 +1,39 @@
+"""Trajectory layer: marker positions over time, read from and written to files.
+
+``read_trajectory`` and ``write_trajectory`` dispatch on the file extension
+(.csv, .trc, .c3d, .npz); :func:`describe` summarises a trajectory for the ``info``
+command.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from activebonds.data.readers import read_trajectory
+from activebonds.data.trajectory import Trajectory
+from activebonds.data.writers import write_trajectory
+
+__all__ = ["Trajectory", "describe", "read_trajectory", "write_trajectory"]
+
+
+def describe(traj: Trajectory) -> dict:
+    """JSON-ready summary: markers, frames, rate, dt, duration, units, dimension, gaps.
+
+    ``duration`` is the time from the first to the last frame, ``(frames - 1) / rate``;
+    ``units`` the length unit of the source file (positions are always in metres);
+    ``gaps`` maps each marker to its number of missing frames.
+    """
+    missing = np.count_nonzero(~traj.mask, axis=0)
+    return {
+        "source": traj.source,
+        "markers": list(traj.markers),
+        "frames": traj.n_frames,
+        "rate": traj.rate,
+        "dt": traj.dt,
+        "start_time": traj.start_time,
+        "duration": traj.duration,
+        "units": traj.source_units,
+        "dimension": traj.dimension,
+        "gaps": {name: int(n) for name, n in zip(traj.markers, missing, strict=True)},
+        "total_gaps": traj.n_gaps,
+    }

@@ -1,0 +1,333 @@
+"""Helpers shared by the trajectory readers and writers: units, sample rates, numbers, files.
+
+Everything here raises :class:`activebonds.errors.InputError` naming the file at fault.
+"""
+
+from __future__ import annotations
+
+import math
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import numpy as np
+
+from activebonds.errors import InputError
+
+#: Length units understood in trajectory files: how many of them make a metre.
+PER_METRE = {"mm": 1000.0, "cm": 100.0, "m": 1.0}
+
+_UNIT_ALIASES = {
+    "mm": "mm",
+    "millimeter": "mm",
+    "millimeters": "mm",
+    "millimetre": "mm",
+    "millimetres": "mm",
+    "cm": "cm",
+    "centimeter": "cm",
+    "centimeters": "cm",
+    "centimetre": "cm",
+    "centimetres": "cm",
+    "m": "m",
+    "meter": "m",
+    "meters": "m",
+    "metre": "m",
+    "metres": "m",
+}
+
+#: Relative disagreement between two sample rates that is reported as an error.
+RATE_TOLERANCE = 0.01
+
+
+def canonical_units(source: str | Path, units: object, where: str | None = None) -> str:
+    """Return "mm", "cm" or "m" for a unit name (case and spelling tolerant), else InputError."""
+    name = str(units).strip().lower() if isinstance(units, str) else None
+    if name not in _UNIT_ALIASES:
+        raise InputError(
+            source, f"unknown length unit {units!r}; expected one of mm, cm, m", where=where
+        )
+    return _UNIT_ALIASES[name]
+
+
+def to_metres(values: np.ndarray, units: str) -> np.ndarray:
+    """Convert an array in ``units`` (canonical name) to metres.
+
+    Divides (955.40527 mm / 1000 is the double nearest 0.95540527 m; multiplying by 1e-3
+    is not always).  Metres are returned unchanged (same array).
+    """
+    if units == "m":
+        return values
+    return values / PER_METRE[units]
+
+
+def parse_float(text: str, source: str | Path, where: str, what: str) -> float:
+    """Parse one number from a text file; blank, "nan" and "NaN" give NaN (missing).
+
+    Anything else that is not a finite decimal number raises InputError naming ``where``
+    (line and column) and ``what`` (column name).
+    """
+    s = text.strip()
+    if not s:
+        return math.nan
+    try:
+        if "_" in s:  # float() accepts "1_000"; a data file should not
+            raise ValueError(s)
+        value = float(s)
+    except ValueError:
+        raise InputError(
+            source, f"column {what}: {_short(s)!r} is not a number", where=where
+        ) from None
+    if math.isinf(value):
+        raise InputError(
+            source, f"column {what}: {_short(s)!r} is not a finite number", where=where
+        )
+    return value
+
+
+def _short(s: str, n: int = 40) -> str:
+    return s if len(s) <= n else s[:n] + "..."
+
+
+def positive_rate(value: object, source: str | Path, what: str) -> float:
+    """Check that a sample rate is a finite positive number and return it as float."""
+    try:
+        rate = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(
+            source, f"{what} {value!r} is not a number; expected a rate in Hz"
+        ) from None
+    if not math.isfinite(rate) or rate <= 0:
+        raise InputError(source, f"{what} {value!r} must be a positive finite rate in Hz")
+    return rate
+
+
+def decimals_of(text: str) -> int:
+    """Number of decimal places written in a number ("0.017" -> 3, "1e-3" -> 3, "2" -> 0)."""
+    try:
+        exponent = Decimal(text.strip()).as_tuple().exponent
+    except (InvalidOperation, ValueError):
+        return 0
+    return max(0, -exponent) if isinstance(exponent, int) else 0
+
+
+def rate_from_times(times: np.ndarray, resolution: float, source: str | Path) -> float:
+    """Robust sample-rate estimate from a time column.
+
+    ``(n - 1) / (t_last - t_first)`` is only known to within the rounding of the column
+    (``resolution``, e.g. 1e-3 for a column written with 3 decimals).  The estimate is
+    snapped to the number with the fewest decimals inside that uncertainty, so a 60 Hz
+    column rounded to milliseconds gives exactly 60.0 rather than 599 / 9.983.
+    """
+    n = len(times)
+    span = float(times[-1] - times[0])
+    if n < 2 or not span > 0:
+        raise InputError(source, "time column does not increase; cannot derive the sample rate")
+    raw = (n - 1) / span
+    eps = 4 * np.finfo(float).eps * max(abs(float(times[0])), abs(float(times[-1])), 1.0)
+    tolerance = raw * (max(resolution, eps) / span) + 1e-12 * raw
+    for digits in range(0, 16):
+        candidate = round(raw, digits)
+        if candidate > 0 and abs(candidate - raw) <= tolerance:
+            return float(candidate)
+    return float(raw)
+
+
+def check_time_column(
+    times: np.ndarray,
+    resolution: float,
+    source: str | Path,
+    declared: list[tuple[str, float]],
+    lines: list[int] | None = None,
+) -> tuple[float, float]:
+    """Check a time column against declared rates; return (rate estimate, start time).
+
+    ``declared`` lists (description, rate) pairs such as ("sample rate", 50.0); each must
+    agree with the column within :data:`RATE_TOLERANCE`.  The column must also be uniformly
+    sampled (no missing or duplicated rows): every time within a quarter of a sample
+    interval (plus the rounding) of the straight line through the first and last times.
+    """
+    estimate = rate_from_times(times, resolution, source)
+    for label, rate in declared:
+        if abs(rate - estimate) > RATE_TOLERANCE * estimate:
+            raise InputError(
+                source,
+                f"{label} {rate:g} Hz disagrees with the time column ({estimate:g} Hz)",
+            )
+    expected = times[0] + np.arange(len(times)) * ((times[-1] - times[0]) / (len(times) - 1))
+    deviation = np.abs(times - expected)
+    worst = int(np.argmax(deviation))
+    if deviation[worst] > 0.25 / estimate + resolution:
+        where = f"line {lines[worst]}" if lines is not None else f"frame {worst + 1}"
+        raise InputError(
+            source,
+            f"time column is not uniformly sampled at {estimate:g} Hz (time {times[worst]:g} s, "
+            f"expected about {expected[worst]:g} s); missing or duplicated rows?",
+            where=where,
+        )
+    return estimate, float(times[0])
+
+
+def reconcile_rates(source: str | Path, declared: list[tuple[str, float]]) -> float | None:
+    """Return the first declared rate after checking that all declared rates agree (1 %)."""
+    if not declared:
+        return None
+    first_label, first = declared[0]
+    for label, rate in declared[1:]:
+        if abs(rate - first) > RATE_TOLERANCE * rate:
+            raise InputError(
+                source, f"{first_label} {first:g} Hz disagrees with {label} ({rate:g} Hz)"
+            )
+    return first
+
+
+def read_text(path: Path) -> str:
+    """Read a UTF-8 (optionally BOM-prefixed) text file, or raise InputError."""
+    data = read_bytes(path)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(
+            path,
+            f"not a UTF-8 text file (byte 0x{data[exc.start]:02x} at offset {exc.start})",
+            where=f"line {line}",
+        ) from None
+
+
+def read_bytes(path: Path) -> bytes:
+    """Read a whole file, turning OS errors into InputError."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(path, "file not found") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a directory, expected a trajectory file") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read file ({exc.strerror or exc})") from None
+
+
+def data_lines(text: str) -> list[str]:
+    """Split text into lines on LF, dropping a trailing CR (CRLF files) but nothing else."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return [line[:-1] if line.endswith("\r") else line for line in lines]
+
+
+def ends_with_line_break(text: str) -> bool:
+    """True if the text after the last non-blank character contains a line break."""
+    return "\n" in text[len(text.rstrip()) :]
+
+
+def check_output_path(path: Path) -> None:
+    """A writer's target must be in an existing folder and must not be a folder itself."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(path, f"output folder {str(parent)!r} does not exist")
+    if path.is_dir():
+        raise InputError(path, "is a directory, expected a file name")
+
+
+def parse_rows(
+    source: str | Path,
+    rows: list[tuple[int, list[str]]],
+    columns: list[str],
+    coord_cols: list[int],
+    time_col: int | None,
+    frame_col: int | None,
+    final_newline: bool = True,
+) -> tuple[np.ndarray, list[str]]:
+    """Parse the data rows of a text table.
+
+    ``rows`` holds (line number, fields); ``columns`` the header names (their count is the
+    number of fields a row must have; extra fields must be blank).  Returns the coordinate
+    values [rows, len(coord_cols)] (NaN for blank/"nan") and the raw time strings.
+    A short row is reported with its line number (a truncated file), never dropped; so is
+    a last row whose last field is empty when the file does not end with a line break
+    (``final_newline`` False), the signature of a file cut just after a separator.
+    """
+    n_fields = len(columns)
+    values = np.empty((len(rows), len(coord_cols)), dtype=np.float64)
+    time_strings: list[str] = []
+    for r, (line_no, fields) in enumerate(rows):
+        where = f"line {line_no}"
+        if len(fields) < n_fields:
+            raise InputError(
+                source,
+                f"row has {len(fields)} fields but the header has {n_fields} "
+                "(truncated or incomplete row)",
+                where=where,
+            )
+        if len(fields) > n_fields and any(f.strip() for f in fields[n_fields:]):
+            raise InputError(
+                source, f"row has {len(fields)} fields but the header has only {n_fields}", where
+            )
+        if not final_newline and r == len(rows) - 1 and not fields[n_fields - 1].strip():
+            raise InputError(
+                source, "last row ends in an empty field and no line break (truncated file?)", where
+            )
+        for k in (frame_col, time_col):
+            if k is not None:
+                number = parse_float(fields[k], source, where, repr(columns[k]))
+                if math.isnan(number):
+                    raise InputError(source, f"column {columns[k]!r} is empty or NaN", where=where)
+        if time_col is not None:
+            time_strings.append(fields[time_col])
+        row = values[r]
+        for j, c in enumerate(coord_cols):
+            text = fields[c]
+            try:
+                if "_" in text:
+                    raise ValueError(text)
+                row[j] = float(text)
+            except ValueError:
+                row[j] = parse_float(text, source, where, repr(columns[c]))
+        if np.isinf(row).any():
+            j = int(np.flatnonzero(np.isinf(row))[0])
+            parse_float(fields[coord_cols[j]], source, where, repr(columns[coord_cols[j]]))
+    return values, time_strings
+
+
+def times_from_strings(source: str | Path, strings: list[str]) -> tuple[np.ndarray, float]:
+    """Time column values and their rounding resolution (10**-decimals written)."""
+    times = np.array([float(s) for s in strings], dtype=np.float64)
+    resolution = 10.0 ** -max((decimals_of(s) for s in strings), default=0)
+    return times, resolution
+
+
+def masked_positions(values: np.ndarray, n_markers: int, dim: int, units: str) -> tuple:
+    """Reshape [frames, markers*dim] values to positions in metres and the presence mask.
+
+    A marker-frame is present only if all its coordinates are numbers; a partly blank
+    sample is missing as a whole.
+    """
+    positions = values.reshape(values.shape[0], n_markers, dim)
+    mask = np.all(np.isfinite(positions), axis=-1)
+    positions = to_metres(positions, units)
+    positions[~mask] = np.nan
+    return positions, mask
+
+
+def resolve_rate(
+    source: str | Path,
+    declared: list[tuple[str, float]],
+    time_strings: list[str],
+    lines: list[int],
+) -> tuple[float, float]:
+    """Sample rate and start time from declared rates and an optional time column.
+
+    The first declared rate wins (all declared rates must agree within 1 %); with a time
+    column of two or more rows, every declared rate must agree with it, and with no
+    declared rate the rate is estimated from it.  The start time is the first time value.
+    """
+    rate = reconcile_rates(source, declared)
+    if not time_strings:
+        if rate is None:
+            raise InputError(source, "no time column and no sample rate given; pass the rate in Hz")
+        return rate, 0.0
+    times, resolution = times_from_strings(source, time_strings)
+    if len(times) < 2:
+        if rate is None:
+            raise InputError(source, "a single frame gives no sample rate; pass the rate in Hz")
+        return rate, float(times[0])
+    estimate, start = check_time_column(times, resolution, source, declared, lines)
+    return (rate if rate is not None else estimate), start
