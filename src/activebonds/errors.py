@@ -28,5 +28,5 @@ class InputError(Exception):
         return " ".join(text.split())  # always one line
 
 
-class DivergenceError(RuntimeError):
+class DivergenceError(ArithmeticError):
     """A simulation went non-finite; names the first bad step and the particle involved."""

@@ -1,0 +1,214 @@
+"""The ``activebonds`` command line (DESIGN.md §4).
+
+Bad input (model file, trajectory, option, run directory) prints one line naming the file and
+field and exits with code 2; nothing is half-written. An interrupted fit exits with 130 after
+saving a checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from ..errors import InputError
+
+app = typer.Typer(
+    help="Identify active particle-bond models (springs, dampers, mechanical-neural bonds) "
+    "from motion capture with a self-adaptive evolution strategy.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+out = Console()
+err = Console(stderr=True)
+
+
+def fail(error: InputError | str, code: int = 2):
+    text = error.line() if isinstance(error, InputError) else str(error)
+    err.print(f"error: {text}", markup=False, highlight=False, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+@app.command()
+def info(
+    traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .npz).")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+):
+    """Markers, frames, rate, units and gaps of a trajectory file."""
+    from ..data import describe, read_trajectory
+
+    try:
+        d = describe(read_trajectory(traj))
+    except InputError as e:
+        fail(e)
+    if as_json:
+        print(json.dumps(d, indent=2))
+        return
+    table = Table(title=str(traj), show_header=False)
+    for key in ("frames", "rate", "dt", "duration", "units", "dimension", "total_gaps"):
+        value = d[key]
+        if key == "rate":
+            value = f"{value:g} Hz"
+        elif key in ("dt", "duration"):
+            value = f"{value:.6g} s"
+        elif key == "units":
+            value = f"{value} in the file (read as metres)"
+        table.add_row(key, str(value))
+    table.add_row("markers", f"{len(d['markers'])}: " + ", ".join(d["markers"]))
+    gaps = {k: v for k, v in d["gaps"].items() if v}
+    if gaps:
+        table.add_row("gaps", ", ".join(f"{k} {v}" for k, v in gaps.items()))
+    out.print(table)
+
+
+@app.command()
+def simulate(
+    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    frames: Annotated[int, typer.Option(help="Number of frames to write.", min=2)] = ...,
+    rate: Annotated[float, typer.Option(help="Frame rate in Hz.")] = ...,
+    out_path: Annotated[Path, typer.Option("--out", help="Trajectory to write.")] = ...,
+    start: Annotated[
+        Path | None,
+        typer.Option("--from", help="Start from the first two frames of this recording."),
+    ] = None,
+    substeps: Annotated[int, typer.Option(min=1, help="Integration steps per frame.")] = 1,
+    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
+):
+    """Free-run a model from its particles' initial state (or a recording's first two frames)."""
+    from ..simulate import simulate_to_file
+
+    try:
+        n = simulate_to_file(model, frames, rate, out_path, start, substeps, integrator)
+    except InputError as e:
+        fail(e)
+    except ArithmeticError as e:
+        fail(str(e), code=1)
+    out.print(f"wrote {n} frames to {out_path}")
+
+
+@app.command()
+def fit(
+    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Run directory to create.")] = ...,
+    markers: Annotated[
+        str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
+    ] = None,
+    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = "model",
+    population: Annotated[int, typer.Option(help="Population size.")] = 100,
+    generations: Annotated[int, typer.Option(help="Generations.")] = 1000,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    horizon: Annotated[int, typer.Option(help="Frames between restarts from the data.")] = 1,
+    substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = 1,
+    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
+    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 5000,
+    precision: Annotated[str, typer.Option(help="float64 or float32.")] = "float64",
+    adapt_variants: Annotated[
+        bool, typer.Option(help="Adapt the mutation-variant rates to their success.")
+    ] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,
+):
+    """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
+    from ..identify import fit as run_fit
+    from ..identify.settings import parse_frames
+    from .options import settings_from_options
+
+    try:
+        settings = settings_from_options(
+            markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
+            frames=_frames(frames, parse_frames),
+            bonds=bonds,
+            population=population,
+            generations=generations,
+            seed=seed,
+            horizon=horizon,
+            substeps=substeps,
+            integrator=integrator,
+            checkpoint_every=checkpoint_every,
+            precision=precision,
+            adapt_variants=adapt_variants,
+        )
+        with _progress(generations) as progress:
+            result = run_fit(model, traj, settings, out=out_dir, overwrite=overwrite, progress=progress)
+    except InputError as e:
+        fail(e)
+    except KeyboardInterrupt:
+        fail(f"interrupted; continue with: activebonds resume {out_dir}", code=130)
+    _summary(result)
+
+
+@app.command()
+def resume(
+    run: Annotated[Path, typer.Argument(help="Run directory of an interrupted fit.")],
+    generations: Annotated[
+        int | None, typer.Option(help="New total number of generations (to extend a run).")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option(help="Continue even if inputs, settings or versions changed.")
+    ] = False,
+):
+    """Continue an interrupted fit exactly where its last checkpoint stopped."""
+    from ..identify import resume as run_resume
+    from ..identify.rundir import read_meta
+
+    try:
+        total = generations or read_meta(run)["settings"]["generations"]
+        with _progress(total) as progress:
+            result = run_resume(run, force=force, generations=generations, progress=progress)
+    except InputError as e:
+        fail(e)
+    except KeyboardInterrupt:
+        fail(f"interrupted; continue with: activebonds resume {run}", code=130)
+    _summary(result)
+
+
+def _frames(text, parse):
+    try:
+        return parse(text)
+    except ValueError as e:
+        raise InputError("--frames", str(e)) from None
+
+
+def _progress(total: int):
+    from .progress import fit_progress
+
+    return fit_progress(total, out)
+
+
+def _summary(result) -> None:
+    if result.status != "completed":
+        fail(f"{result.run or 'fit'}: {result.status}", code=1)
+    out.print(
+        f"[bold]{result.status}[/]: best RMS error {result.rms_mm:.4g} mm "
+        f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())})"
+    )
+    if result.run is not None:
+        out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
+
+
+def main() -> None:
+    """Entry point: usage errors become one line and exit code 2."""
+    try:
+        code = app(standalone_mode=False)
+    except typer.Exit as e:
+        code = e.exit_code
+    except typer.Abort:
+        print("error: aborted", file=sys.stderr)
+        code = 130
+    except Exception as e:  # usage errors of the command-line parser
+        if not (hasattr(e, "format_message") and hasattr(e, "exit_code")):
+            raise
+        ctx = getattr(e, "ctx", None)
+        cmd = ctx.command_path if ctx is not None else "activebonds"
+        message = " ".join(e.format_message().split())
+        if message:
+            print(f"error: {cmd}: {message}", file=sys.stderr)
+        code = 2 if e.exit_code == 1 else e.exit_code
+    sys.exit(code if isinstance(code, int) else 0)

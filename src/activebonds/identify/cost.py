@@ -1,0 +1,90 @@
+"""The short-term cost of the paper (§3.2), with local costs per particle and a horizon H.
+
+DESIGN.md §3: velocities come from backward differences ``v_t = (x_t - x_{t-1}) / dt`` so a
+prediction never sees the frame it predicts. From the *real* state at a start frame s, the model
+is integrated H steps; every predicted position is compared with the recorded one. Starts are
+s = 1, 1 + H, 1 + 2H, ... so H = 1 is the paper's one-step cost and H = window length a free run.
+The local cost of particle p is its own share; the global cost is their sum. A prediction whose
+inputs (the state at s and s - 1) or target are missing contributes nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model.model import Model
+from ..physics.integrate import advance, rollout_states
+
+
+@dataclass(frozen=True, eq=False)
+class Windows:
+    """Restart states and targets cut from a recorded trajectory (NumPy, float64)."""
+
+    x0: np.ndarray  # [S, P, D] real positions at each start
+    v0: np.ndarray  # [S, P, D] backward-difference velocities at each start
+    target: np.ndarray  # [S, H, P, D] recorded positions to predict (0 where missing)
+    weight: np.ndarray  # [S, H, P] 1.0 where the term counts
+    dt: float
+
+    @property
+    def n_terms(self) -> int:
+        return int(self.weight.sum())
+
+    @property
+    def horizon(self) -> int:
+        return int(self.target.shape[1])
+
+
+def make_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: int = 1) -> Windows:
+    """Cut restart windows from positions [F, P, D] (NaN where missing) and mask [F, P]."""
+    n_frames = positions.shape[0]
+    if n_frames < 3:
+        raise ValueError("the cost needs at least 3 frames (two to start, one to predict)")
+    horizon = max(1, min(int(horizon), n_frames - 2))
+    x = np.where(mask[..., None], positions, 0.0)
+    starts = np.arange(1, n_frames - 1, horizon)
+    x0 = x[starts]
+    v0 = (x[starts] - x[starts - 1]) / dt
+    ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
+    frames = starts[:, None] + np.arange(1, horizon + 1)[None, :]  # [S, H]
+    inside = frames < n_frames
+    frames_c = np.minimum(frames, n_frames - 1)
+    target = x[frames_c]
+    weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
+    return Windows(x0=x0, v0=v0, target=target, weight=weight, dt=float(dt))
+
+
+def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
+    """A pure function ``genome -> (global cost, local costs [P])`` for one individual.
+
+    Costs are sums of squared position errors (m^2); a non-finite prediction gives +inf.
+    """
+    topo, layout = model.topology, model.layout
+    x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
+    target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
+    dt, horizon = windows.dt, windows.horizon
+
+    def predict(params):
+        if horizon == 1:
+            step = jax.vmap(lambda x, v: advance(params, topo, x, v, dt, substeps, method)[0])
+            return step(x0, v0)[:, None]
+        run = jax.vmap(lambda x, v: rollout_states(params, topo, x, v, dt, horizon, substeps, method)[0])
+        return run(x0, v0)
+
+    def cost(genome):
+        params = layout.decode(genome)
+        err2 = jnp.sum((predict(params) - target) ** 2, axis=-1)  # [S, H, P]
+        local = jnp.sum(jnp.where(weight > 0, err2, 0.0), axis=(0, 1))
+        local = jnp.where(jnp.isfinite(local), local, jnp.inf)
+        return jnp.sum(local), local
+
+    return cost
+
+
+def rms_mm(cost, n_terms: int):
+    """A summed squared error (m^2) shown as the RMS position error in millimetres."""
+    return np.sqrt(np.asarray(cost, dtype=np.float64) / max(n_terms, 1)) * 1000.0

@@ -1,0 +1,68 @@
+"""Settings of an identification run, validated (pydantic) and stored in the run directory."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from .es import ESSettings
+
+
+class FitSettings(BaseModel):
+    """Everything that, with the model, the data and the software versions, decides a run."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    markers: tuple[str, ...] | None = None  # default: the model's particles' markers
+    frames: tuple[int, int | None] = (0, None)  # [start, stop) of the recorded frames
+    bonds: Literal["model", "standard", "neural"] = "model"
+    population: int = Field(100, ge=4, le=100_000)
+    generations: int = Field(1000, ge=1, le=100_000_000)
+    seed: int = Field(0, ge=0, le=2**31 - 1)
+    horizon: int = Field(1, ge=1)
+    substeps: int = Field(1, ge=1, le=1000)
+    integrator: Literal["euler", "verlet"] = "euler"
+    elite_fraction: float = Field(0.1, gt=0, lt=1)
+    crossover_rate: float = Field(0.5, ge=0, le=1)
+    selection_pressure: float = Field(4.0, ge=0)
+    sigma_init: float = Field(0.1, gt=0, le=1)
+    adapt_variants: bool = False
+    chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call
+    checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
+    precision: Literal["float32", "float64"] = "float64"
+
+    @field_validator("frames")
+    @classmethod
+    def _frames(cls, v):
+        start, stop = v
+        if start < 0 or (stop is not None and stop <= start):
+            raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
+        return v
+
+    def es(self) -> ESSettings:
+        return ESSettings(
+            population=self.population,
+            elite_fraction=self.elite_fraction,
+            crossover_rate=self.crossover_rate,
+            selection_pressure=self.selection_pressure,
+            sigma_init=self.sigma_init,
+            adapt_variants=self.adapt_variants,
+        )
+
+    def job(self) -> dict:
+        """The settings that define the result (chunking and checkpoint frequency do not)."""
+        return self.model_dump(mode="json", exclude={"chunk", "checkpoint_every", "generations"})
+
+
+def parse_frames(text: str) -> tuple[int, int | None]:
+    """'START:STOP' (either side may be empty) -> (start, stop)."""
+    if ":" not in text:
+        raise ValueError(f"expected START:STOP, got '{text}'")
+    a, b = text.split(":", 1)
+    try:
+        start = int(a) if a.strip() else 0
+        stop = int(b) if b.strip() else None
+    except ValueError:
+        raise ValueError(f"expected START:STOP with integers, got '{text}'") from None
+    return start, stop
