@@ -464,3 +464,18 @@ def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch):
         write_trajectory(synthetic(), target)
     assert target.read_bytes() == b"previous"
     assert [p.name for p in tmp_path.iterdir()] == ["t.npz"]
+
+
+def test_c3d_occluded_points_are_zero_filled(tmp_path):
+    import warnings
+
+    import c3d
+
+    t = synthetic()
+    path = write_trajectory(t, tmp_path / "z.c3d")
+    with open(path, "rb") as handle, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        frames = [p.copy() for _, p, _ in c3d.Reader(handle).read_frames()]
+    points = np.stack(frames)
+    assert (points[~t.mask][:, 3] == -1).all() and (points[~t.mask][:, :3] == 0).all()
+    assert (points[t.mask][:, 3] == 0).all()

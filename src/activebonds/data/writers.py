@@ -140,7 +140,16 @@ def render_c3d(traj: Trajectory, path: Path) -> bytes:
         writer.set_point_labels(list(traj.markers))
         writer.set_start_frame(first)
         writer.write(buffer)
-    return buffer.getvalue()
+        data_start = (int(writer.header.data_block) - 1) * 512
+    # The library leaves the previous frame's coordinates under a residual of -1; zero-fill
+    # them as the C3D convention for occluded points says.
+    data = bytearray(buffer.getvalue())
+    size = traj.n_frames * traj.n_markers * 4
+    words = np.frombuffer(data, dtype="<f4", count=size, offset=data_start).copy()
+    words = words.reshape(traj.n_frames, traj.n_markers, 4)
+    words[~traj.mask, :3] = 0.0
+    data[data_start : data_start + 4 * size] = words.tobytes()
+    return bytes(data)
 
 
 WRITERS: dict[str, Callable[[Trajectory, Path], bytes]] = {
