@@ -1,0 +1,217 @@
+"""A plain NumPy reference of the physics (DESIGN.md §2), written from the equations alone.
+
+Deliberately simple: explicit Python loops over particles and bonds, float64 throughout, no
+code shared with :mod:`activebonds.physics`. ``params`` and ``topo`` are any objects with the
+attribute names of :class:`activebonds.model.Params` and :class:`activebonds.model.Topology`.
+
+Equations (SI units):
+
+* uniform field: F_p += m_p g
+* unary spring + damper: F_p += -k_u (x_p - a) - c_u v_p
+* binary bond i-j: d = x_j - x_i, L = |d|, u = d / L, Ldot = (v_j - v_i) . u,
+  tension f = k (L - l0) + c Ldot (+ g_b a_b if neural), F_i += f u, F_j -= f u
+* neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b), e_j = L_j - l0_j
+* ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _arr(a) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# Forces, one family at a time
+# --------------------------------------------------------------------------------------------
+
+
+def uniform_field_force(params, topo, x, v) -> np.ndarray:
+    x = _arr(x)
+    mass, g = _arr(params.mass), _arr(params.gravity)
+    f = np.zeros_like(x)
+    for p in range(x.shape[0]):
+        f[p] = mass[p] * g
+    return f
+
+
+def unary_force(params, topo, x, v) -> np.ndarray:
+    x, v = _arr(x), _arr(v)
+    f = np.zeros_like(x)
+    for b, p in enumerate(np.asarray(topo.unary).reshape(-1)):
+        k = float(params.unary_k[b])
+        c = float(params.unary_c[b])
+        a = _arr(params.unary_anchor[b])
+        f[p] += -k * (x[p] - a) - c * v[p]
+    return f
+
+
+def bond_state(topo, x, v):
+    """Per binary bond: lengths L, elongation rates Ldot, unit vectors u (from i to j)."""
+    x, v = _arr(x), _arr(v)
+    pairs = np.asarray(topo.binary).reshape(-1, 2)
+    n = pairs.shape[0]
+    lengths = np.zeros(n)
+    rates = np.zeros(n)
+    units = np.zeros((n, x.shape[1]))
+    for b, (i, j) in enumerate(pairs):
+        d = x[j] - x[i]
+        length = math.sqrt(float(np.dot(d, d)))
+        u = d / length
+        lengths[b] = length
+        units[b] = u
+        rates[b] = float(np.dot(v[j] - v[i], u))
+    return lengths, rates, units
+
+
+def neuron_activations(params, topo, x, v) -> np.ndarray:
+    """a_b for every binary bond (computed for all; only neural bonds use it)."""
+    lengths, rates, _ = bond_state(topo, x, v)
+    e = lengths - _arr(params.l0)
+    w_len, w_rate = _arr(params.w_len), _arr(params.w_rate)
+    n = len(lengths)
+    acts = np.zeros(n)
+    for b in range(n):
+        s = 0.0
+        for j in range(n):
+            if j != b:
+                s += w_len[b, j] * e[j] + w_rate[b, j] * rates[j]
+        acts[b] = math.tanh(s - float(params.threshold[b]))
+    return acts
+
+
+def binary_force(params, topo, x, v) -> np.ndarray:
+    x = _arr(x)
+    f = np.zeros_like(x)
+    pairs = np.asarray(topo.binary).reshape(-1, 2)
+    if pairs.shape[0] == 0:
+        return f
+    lengths, rates, units = bond_state(topo, x, v)
+    acts = neuron_activations(params, topo, x, v)
+    neural = np.asarray(topo.neural).reshape(-1)
+    for b, (i, j) in enumerate(pairs):
+        tension = float(params.k[b]) * (lengths[b] - float(params.l0[b]))
+        tension += float(params.c[b]) * rates[b]
+        if neural[b]:
+            tension += float(params.gain[b]) * acts[b]
+        f[i] += tension * units[b]
+        f[j] -= tension * units[b]
+    return f
+
+
+def _cos_and_gradients(xi, xj, xk):
+    """cos of the angle at xj between xi - xj and xk - xj, and its gradients wrt xi, xj, xk."""
+    a = xi - xj
+    b = xk - xj
+    la = math.sqrt(float(np.dot(a, a)))
+    lb = math.sqrt(float(np.dot(b, b)))
+    ua, ub = a / la, b / lb
+    cos = float(np.dot(ua, ub))
+    # d cos / d a = (ub - cos ua) / |a|, likewise for b; xj enters through both with a minus.
+    g_i = (ub - cos * ua) / la
+    g_k = (ua - cos * ub) / lb
+    g_j = -g_i - g_k
+    return cos, g_i, g_j, g_k
+
+
+def ternary_force(params, topo, x, v) -> np.ndarray:
+    x = _arr(x)
+    f = np.zeros_like(x)
+    for t, (i, j, k) in enumerate(np.asarray(topo.ternary).reshape(-1, 3)):
+        cos, g_i, g_j, g_k = _cos_and_gradients(x[i], x[j], x[k])
+        # E = 1/2 kf (cos - cos0)^2  ->  dE/dx = kf (cos - cos0) dcos/dx
+        dE = float(params.tern_k[t]) * (cos - math.cos(float(params.tern_angle[t])))
+        f[i] -= dE * g_i
+        f[j] -= dE * g_j
+        f[k] -= dE * g_k
+    return f
+
+
+FAMILIES = {
+    "uniform_field": uniform_field_force,
+    "unary": unary_force,
+    "binary": binary_force,
+    "ternary": ternary_force,
+}
+
+
+def total_force(params, topo, x, v) -> np.ndarray:
+    f = np.zeros_like(_arr(x))
+    for family in FAMILIES.values():
+        f = f + family(params, topo, x, v)
+    return f
+
+
+# --------------------------------------------------------------------------------------------
+# Energy of the conservative part (no dampers, no neurons); x, v may carry leading batch axes
+# --------------------------------------------------------------------------------------------
+
+
+def potential_energy(params, topo, x) -> np.ndarray:
+    """Gravity + unary springs + binary springs + flexion springs. x: [..., P, D]."""
+    x = _arr(x)
+    mass = _arr(params.mass)
+    energy = -np.einsum("p,...pd,d->...", mass, x, _arr(params.gravity))
+    for b, p in enumerate(np.asarray(topo.unary).reshape(-1)):
+        r = x[..., p, :] - _arr(params.unary_anchor[b])
+        energy = energy + 0.5 * float(params.unary_k[b]) * np.sum(r * r, axis=-1)
+    for b, (i, j) in enumerate(np.asarray(topo.binary).reshape(-1, 2)):
+        length = np.linalg.norm(x[..., j, :] - x[..., i, :], axis=-1)
+        energy = energy + 0.5 * float(params.k[b]) * (length - float(params.l0[b])) ** 2
+    for t, (i, j, k) in enumerate(np.asarray(topo.ternary).reshape(-1, 3)):
+        a = x[..., i, :] - x[..., j, :]
+        b = x[..., k, :] - x[..., j, :]
+        cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+        cos0 = math.cos(float(params.tern_angle[t]))
+        energy = energy + 0.5 * float(params.tern_k[t]) * (cos - cos0) ** 2
+    return energy
+
+
+def kinetic_energy(params, v) -> np.ndarray:
+    v = _arr(v)
+    return 0.5 * np.einsum("p,...pd,...pd->...", _arr(params.mass), v, v)
+
+
+def energy(params, topo, x, v) -> np.ndarray:
+    return kinetic_energy(params, v) + potential_energy(params, topo, x)
+
+
+# --------------------------------------------------------------------------------------------
+# Integrators
+# --------------------------------------------------------------------------------------------
+
+
+def euler_step(params, topo, x, v, h):
+    """Semi-implicit Euler: v <- v + h F(x, v) / m, then x <- x + h v (new v)."""
+    m = _arr(params.mass)[:, None]
+    v_new = _arr(v) + h * total_force(params, topo, x, v) / m
+    return _arr(x) + h * v_new, v_new
+
+
+def verlet_step(params, topo, x, v, h):
+    """Velocity Verlet; the second force is evaluated at (x_new, v_half)."""
+    m = _arr(params.mass)[:, None]
+    v_half = _arr(v) + 0.5 * h * total_force(params, topo, x, v) / m
+    x_new = _arr(x) + h * v_half
+    v_new = v_half + 0.5 * h * total_force(params, topo, x_new, v_half) / m
+    return x_new, v_new
+
+
+STEPS = {"euler": euler_step, "verlet": verlet_step}
+
+
+def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler"):
+    """Positions of n_frames frames (the first is x0), each frame dt after the previous."""
+    step = STEPS[method]
+    h = dt / substeps
+    x, v = _arr(x0).copy(), _arr(v0).copy()
+    frames = [x.copy()]
+    for _ in range(n_frames - 1):
+        for _ in range(substeps):
+            x, v = step(params, topo, x, v, h)
+        frames.append(x.copy())
+    return np.stack(frames)

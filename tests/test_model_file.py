@@ -1,0 +1,690 @@
+"""The model file: round trips through TOML and every error path of the loader."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from activebonds.errors import InputError
+from activebonds.model import dumps_model, load_model, loads_model, save_model
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLE_NAMES = ["triangle", "horse_limb", "chain2d"]
+
+
+def assert_params_equal(a, b):
+    assert a._fields == b._fields
+    for name, x, y in zip(a._fields, a, b, strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y), err_msg=name)
+
+
+def assert_same_model(a, b):
+    assert a.spec == b.spec
+    assert_params_equal(a.params, b.params)
+    for name in ("unary", "binary", "neural", "ternary"):
+        np.testing.assert_array_equal(getattr(a.topology, name), getattr(b.topology, name))
+    assert a.layout.genes == b.layout.genes
+    assert a.layout.groups == b.layout.groups
+    assert_params_equal(a.layout.index, b.layout.index)
+    for x, y in zip(a.initial_state(), b.initial_state(), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+# --------------------------------------------------------------------------------------------
+# Round trips
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", EXAMPLE_NAMES)
+def test_example_load_dump_load(name):
+    model = load_model(EXAMPLES / f"{name}.toml")
+    assert model.name == name
+    text = dumps_model(model)
+    again = loads_model(text, "<dumped>")
+    assert_same_model(model, again)
+    assert dumps_model(again) == text  # the dump is a fixed point after one round
+
+
+@pytest.mark.parametrize("name", EXAMPLE_NAMES)
+def test_example_save_load(name, tmp_path):
+    model = load_model(EXAMPLES / f"{name}.toml")
+    path = tmp_path / f"{name}.toml"
+    save_model(model, path)
+    assert_same_model(model, load_model(path))
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left
+
+
+def test_example_shapes():
+    """What the examples contain, so a broken loader cannot pass the round trips vacuously."""
+    tri = load_model(EXAMPLES / "triangle.toml")
+    assert (tri.dimension, tri.topology.n_particles, tri.topology.n_binary) == (3, 3, 3)
+    np.testing.assert_array_equal(tri.params.mass, [1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(tri.params.k, [40.0, 60.0, 80.0])
+    np.testing.assert_array_equal(tri.params.l0, [0.5, 0.6, 0.45])
+    np.testing.assert_array_equal(tri.params.c, [0.5, 1.0, 0.8])
+    assert tri.layout.n_genes == 9
+    horse = load_model(EXAMPLES / "horse_limb.toml")
+    assert horse.topology.neural.all() and horse.markers == ("Head", "Withers", "HFL")
+    assert horse.layout.n_genes == 3 * (5 + 4)  # k, l0, c, gain, threshold + 2x2 weights
+    chain = load_model(EXAMPLES / "chain2d.toml")
+    assert chain.dimension == 2 and len(chain.topology.ternary) == 3
+    np.testing.assert_array_equal(chain.params.gravity, [0.0, -9.81])
+    np.testing.assert_array_equal(chain.topology.binary, [[0, 1], [1, 2], [2, 3], [3, 4]])
+    # the four "link" bonds share one set of genes, the three "joint" bonds another
+    assert chain.layout.n_genes == 2 + 3 + 1
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("name", EXAMPLE_NAMES)
+def test_with_genome_dump_load_keeps_values(name, seed):
+    model = load_model(EXAMPLES / f"{name}.toml")
+    layout = model.layout
+    rng = np.random.default_rng(seed)
+    genome = rng.uniform(layout.lower, layout.upper)
+    changed = model.with_genome(genome)
+    decoded = layout.decode(jnp.asarray(genome))
+    # the new model's values are the genome's (up to exp/log rounding of log-scaled genes) ...
+    for field, x, y in zip(decoded._fields, changed.params, decoded, strict=True):
+        np.testing.assert_allclose(x, np.asarray(y), rtol=1e-14, atol=0, err_msg=field)
+    np.testing.assert_allclose(changed.layout.initial(), genome, rtol=1e-13, atol=1e-15)
+    assert [(g.name, g.lower, g.upper, g.log) for g in changed.layout.genes] == [
+        (g.name, g.lower, g.upper, g.log) for g in layout.genes
+    ]
+    # ... and survive a dump and load exactly
+    again = loads_model(dumps_model(changed), "<dumped>")
+    assert_same_model(changed, again)
+    assert not np.array_equal(changed.params.k, model.params.k)
+
+
+def test_with_genome_weights_become_per_bond_lists():
+    model = load_model(EXAMPLES / "horse_limb.toml")
+    genome = np.linspace(-1.0, 1.0, model.layout.n_genes) + model.layout.initial()
+    genome = np.clip(genome, model.layout.lower, model.layout.upper)
+    changed = loads_model(dumps_model(model.with_genome(genome)))
+    decoded = model.layout.decode(jnp.asarray(genome))
+    for b in range(3):
+        np.testing.assert_allclose(changed.params.w_len[b], np.asarray(decoded.w_len[b]), 1e-14)
+        assert changed.params.w_len[b, b] == 0.0 and changed.params.w_rate[b, b] == 0.0
+        assert isinstance(changed.spec.bond[b].weights.length, list)
+
+
+MODEL_WITHOUT_FREE_PARAMETERS = """
+dimension = 2
+[[particle]]
+name = "a"
+position = [0.0, 0.0]
+[[particle]]
+name = "b"
+position = [1.0, 0.0]
+[[bond]]
+kind = "binary"
+particles = ["a", "b"]
+stiffness = 3.0
+rest_length = 1.0
+"""
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=IndexError,
+    reason="model.py with_values indexes an empty values array when no parameter is free",
+)
+def test_with_genome_on_a_model_without_free_parameters():
+    model = loads_model(MODEL_WITHOUT_FREE_PARAMETERS)
+    assert model.layout.n_genes == 0
+    same = model.with_genome(np.zeros(0))
+    assert_params_equal(same.params, model.params)
+
+
+# --------------------------------------------------------------------------------------------
+# Error paths: one line, naming the file and the field
+# --------------------------------------------------------------------------------------------
+
+H_WEIGHTS = "weights = { length = 0.0, rate = 0.0, min = -10.0, max = 10.0 }"
+T_STIFFNESS = "stiffness = { value = 40.0, min = 1.0, max = 1000.0 }"
+
+# Known defects of the loader (see the xfail reasons):
+NO_ERROR = "no_error"  # the bad file is accepted
+NOISE = "noise"  # pydantic union noise ("Input should be a valid number") precedes the message
+VAGUE = "vague"  # names the bond or nothing rather than the field, or says the wrong thing
+
+REASONS = {
+    NO_ERROR: "the loader accepts this file (schema.py does not check it)",
+    NOISE: "io._explain keeps the error of the float alternative of `float | Param`: the message "
+    "starts with 'Input should be a valid number' although a table was given",
+    VAGUE: "the message does not name the field at fault (only the bond, or nothing), or states "
+    "the wrong problem",
+}
+
+
+@dataclass(frozen=True)
+class Case:
+    id: str
+    example: str  # file to mutate; "<bytes>" (non-UTF-8) or "<missing>" for no file
+    old: str
+    new: str
+    owner: str  # what the message must name now (the field or its bond/particle)
+    field: str  # the exact field path a good message names ("{line}": the line of `new`)
+    keyword: str  # the problem, in the message's words
+    bugs: tuple[str, ...] = ()
+
+
+CASES = [
+    Case(
+        "unknown top-level key",
+        "triangle",
+        'name = "triangle"\n',
+        'name = "triangle"\ncolour = "red"\n',
+        "colour",
+        "colour",
+        "unknown key",
+    ),
+    Case(
+        "unknown bond key",
+        "triangle",
+        'particles = ["A", "B"]\n',
+        'particles = ["A", "B"]\nspring = 3.0\n',
+        "bond[0].spring",
+        "bond[0].spring",
+        "unknown key",
+    ),
+    Case(
+        "unknown key in a parameter table",
+        "triangle",
+        "value = 40.0,",
+        "value = 40.0, step = 2.0,",
+        "bond[0].stiffness",
+        "bond[0].stiffness.step",
+        "unknown key",
+        (NOISE,),
+    ),
+    Case(
+        "unknown particle in a bond",
+        "triangle",
+        'particles = ["A", "B"]',
+        'particles = ["A", "Z"]',
+        "bond[0]",
+        "bond[0].particles",
+        "'Z'",
+    ),
+    Case(
+        "duplicate particle names",
+        "triangle",
+        'name = "C"',
+        'name = "B"',
+        "particle[2]",
+        "particle[2].name",
+        "duplicate",
+    ),
+    Case(
+        "duplicate markers",
+        "horse_limb",
+        'marker = "HFL"',
+        'marker = "Head"',
+        "",
+        "particle[2].marker",
+        "marker",
+        (VAGUE,),
+    ),
+    Case(
+        "nan parameter value",
+        "triangle",
+        "value = 40.0",
+        "value = nan",
+        "bond[0].stiffness",
+        "bond[0].stiffness.value",
+        "finite",
+        (NOISE,),
+    ),
+    Case(
+        "-inf parameter bound",
+        "triangle",
+        "value = 40.0, min = 1.0",
+        "value = 40.0, min = -inf",
+        "bond[0].stiffness",
+        "bond[0].stiffness.min",
+        "finite",
+        (NOISE,),
+    ),
+    Case(
+        "nan plain stiffness",
+        "triangle",
+        T_STIFFNESS,
+        "stiffness = nan",
+        "bond[0].stiffness",
+        "bond[0].stiffness",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "inf plain rest_length",
+        "triangle",
+        "rest_length = { value = 0.5, min = 0.25, max = 0.75 }",
+        "rest_length = inf",
+        "bond[0].rest_length",
+        "bond[0].rest_length",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "inf plain damping",
+        "triangle",
+        "damping = { value = 0.5, min = 0.01, max = 10.0 }",
+        "damping = inf",
+        "bond[0].damping",
+        "bond[0].damping",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "nan plain threshold",
+        "horse_limb",
+        "threshold = { value = 0.0, min = -5.0, max = 5.0 }",
+        "threshold = nan",
+        "bond[0].threshold",
+        "bond[0].threshold",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "inf mass",
+        "triangle",
+        "mass = 1.5",
+        "mass = inf",
+        "particle[1].mass",
+        "particle[1].mass",
+        "finite",
+    ),
+    Case(
+        "nan position",
+        "triangle",
+        "[0.55, 0.0, 0.05]",
+        "[nan, 0.0, 0.05]",
+        "particle[1].position",
+        "particle[1].position",
+        "finite",
+    ),
+    Case(
+        "nan gravity",
+        "triangle",
+        "dimension = 3\n",
+        "dimension = 3\ngravity = [0.0, nan, 0.0]\n",
+        "gravity",
+        "gravity",
+        "finite",
+    ),
+    Case(
+        "nan anchor",
+        "chain2d",
+        "anchor = [0.0, 0.0]",
+        "anchor = [nan, 0.0]",
+        "bond[0].anchor",
+        "bond[0].anchor",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "inf anchor bound",
+        "chain2d",
+        "anchor = [0.0, 0.0]",
+        "anchor = { value = [0.0, 0.0], min = -inf, max = 1.0 }",
+        "bond[0].anchor",
+        "bond[0].anchor.min",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "nan weight",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = nan, rate = 0.0 }",
+        "bond[0].weights",
+        "bond[0].weights.length",
+        "finite",
+        (VAGUE,),
+    ),
+    Case(
+        "inf weight bound",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = 0.0, rate = 0.0, min = -inf }",
+        "bond[0].weights",
+        "bond[0].weights.min",
+        "finite",
+        (NO_ERROR,),
+    ),
+    Case(
+        "negative mass",
+        "triangle",
+        "mass = 1.5",
+        "mass = -1.5",
+        "particle[1].mass",
+        "particle[1].mass",
+        "> 0",
+    ),
+    Case(
+        "zero mass",
+        "triangle",
+        "mass = 1.5",
+        "mass = 0.0",
+        "particle[1].mass",
+        "particle[1].mass",
+        "> 0",
+    ),
+    Case(
+        "min >= max",
+        "triangle",
+        "min = 1.0, max = 1000.0",
+        "min = 1000.0, max = 1.0",
+        "bond[0].stiffness",
+        "bond[0].stiffness",
+        "must be below max",
+        (NOISE,),
+    ),
+    Case(
+        "min >= max in weights",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = 0.0, rate = 0.0, min = 10.0, max = -10.0 }",
+        "bond[0].weights",
+        "bond[0].weights",
+        "must be below max",
+        (VAGUE,),
+    ),
+    Case(
+        "min >= max in an anchor",
+        "chain2d",
+        "anchor = [0.0, 0.0]",
+        "anchor = { value = [0.0, 0.0], min = 1.0, max = -1.0 }",
+        "bond[0].anchor",
+        "bond[0].anchor",
+        "must be below max",
+        (NO_ERROR,),
+    ),
+    Case(
+        "value above max",
+        "triangle",
+        "value = 40.0",
+        "value = 4000.0",
+        "bond[0].stiffness",
+        "bond[0].stiffness",
+        "above max",
+        (NOISE,),
+    ),
+    Case(
+        "value below min",
+        "triangle",
+        "mass = 1.5",
+        "mass = { value = 0.5, min = 1.0, max = 2.0 }",
+        "particle[1].mass",
+        "particle[1].mass",
+        "below min",
+        (NOISE,),
+    ),
+    Case(
+        "weight outside bounds",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = 20.0, rate = 0.0, min = -10.0, max = 10.0 }",
+        "bond[0].weights",
+        "bond[0].weights.length",
+        "outside",
+        (VAGUE,),
+    ),
+    Case(
+        "anchor outside bounds",
+        "chain2d",
+        "anchor = [0.0, 0.0]",
+        "anchor = { value = [5.0, 0.0], min = -1.0, max = 1.0 }",
+        "bond[0].anchor",
+        "bond[0].anchor",
+        "above max",
+        (NO_ERROR,),
+    ),
+    Case(
+        "gravity of the wrong length",
+        "triangle",
+        "dimension = 3\n",
+        "dimension = 3\ngravity = [0.0, -9.81]\n",
+        "gravity",
+        "gravity",
+        "expected 3 components",
+    ),
+    Case(
+        "anchor of the wrong length",
+        "chain2d",
+        "anchor = [0.0, 0.0]",
+        "anchor = [0.0, 0.0, 0.0]",
+        "bond[0].anchor",
+        "bond[0].anchor",
+        "expected 2 components",
+    ),
+    Case(
+        "position of the wrong length",
+        "triangle",
+        "[0.55, 0.0, 0.05]",
+        "[0.55, 0.0]",
+        "particle[1].position",
+        "particle[1].position",
+        "expected 3 components",
+    ),
+    Case(
+        "velocity of the wrong length",
+        "triangle",
+        "velocity = [0.0, -0.2, 0.0]",
+        "velocity = [0.0, -0.2]",
+        "particle[1].velocity",
+        "particle[1].velocity",
+        "expected 3 components",
+    ),
+    Case(
+        "ternary bond with a repeated particle",
+        "chain2d",
+        'particles = ["p1", "p2", "p3"]',
+        'particles = ["p1", "p2", "p1"]',
+        "bond[6]",
+        "bond[6].particles",
+        "distinct",
+        (VAGUE,),
+    ),
+    Case(
+        "binary bond with three particles",
+        "triangle",
+        'particles = ["B", "C"]',
+        'particles = ["A", "B", "C"]',
+        "bond[1]",
+        "bond[1].particles",
+        "got 3",
+        (VAGUE,),
+    ),
+    Case(
+        "neural ternary bond",
+        "chain2d",
+        'particles = ["p1", "p2", "p3"]\n',
+        'particles = ["p1", "p2", "p3"]\nneural = true\n',
+        "bond[6]",
+        "bond[6].neural",
+        "only binary bonds",
+        (VAGUE,),
+    ),
+    Case(
+        "gain without neural",
+        "triangle",
+        'particles = ["B", "C"]\n',
+        'particles = ["B", "C"]\ngain = 2.0\n',
+        "bond[1]",
+        "bond[1].gain",
+        "neural = true",
+        (VAGUE,),
+    ),
+    Case(
+        "weights list of the wrong length",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = [0.0, 1.0], rate = 0.0 }",
+        "bond[0].weights.length",
+        "bond[0].weights.length",
+        "expected 3 entries",
+    ),
+    Case(
+        "rate list of the wrong length",
+        "horse_limb",
+        H_WEIGHTS,
+        "weights = { length = 0.0, rate = [0.0, 1.0, 2.0, 3.0] }",
+        "bond[0].weights.rate",
+        "bond[0].weights.rate",
+        "expected 3 entries",
+    ),
+    Case(
+        "binary bond without rest_length",
+        "triangle",
+        "rest_length = { value = 0.5, min = 0.25, max = 0.75 }\n",
+        "",
+        "bond[0]",
+        "bond[0].rest_length",
+        "needs rest_length",
+        (VAGUE,),
+    ),
+    Case(
+        "unknown bond kind",
+        "triangle",
+        'kind = "binary"\nparticles = ["A", "B"]',
+        'kind = "spring"\nparticles = ["A", "B"]',
+        "bond[0].kind",
+        "bond[0].kind",
+        "'unary', 'binary' or 'ternary'",
+    ),
+    Case(
+        "invalid TOML syntax",
+        "triangle",
+        "mass = 1.5",
+        "mass = = 1.5",
+        "line {line}",
+        "line {line}",
+        "not valid TOML",
+    ),
+    Case("non-UTF-8 bytes", "<bytes>", "", "", "", "", "UTF-8"),
+    Case("missing file", "<missing>", "", "", "", "", "no such model file"),
+    Case(
+        "dimension 4",
+        "triangle",
+        "dimension = 3",
+        "dimension = 4",
+        "dimension",
+        "dimension",
+        "2 or 3",
+    ),
+]
+
+
+def write_case(case: Case, tmp_path: Path) -> tuple[Path, int]:
+    path = tmp_path / "model.toml"
+    if case.example == "<bytes>":
+        path.write_bytes(b'name = "caf\xe9"\ndimension = 3\n')
+        return path, 0
+    if case.example == "<missing>":
+        return path, 0
+    text = (EXAMPLES / f"{case.example}.toml").read_text(encoding="utf-8")
+    assert text.count(case.old) >= 1, f"mutation of {case.id} no longer applies"
+    start = text.index(case.old)
+    text = text.replace(case.old, case.new, 1)
+    path.write_text(text, encoding="utf-8")
+    return path, text[:start].count("\n") + 1
+
+
+def load_error(case: Case, tmp_path: Path) -> tuple[str, int, Path]:
+    path, line = write_case(case, tmp_path)
+    with pytest.raises(InputError) as info:
+        load_model(path)
+    return str(info.value), line, path
+
+
+# Where each defect comes from (src/activebonds/model/...), for the xfail reasons.
+NOTES = {
+    "duplicate markers": "schema.py ModelSpec._check_references: 'two particles follow the same "
+    "marker' names neither the field (particle[2].marker) nor the marker",
+    "nan plain stiffness": "schema.py: Scalar = float | Param; a plain float is never checked "
+    "for finiteness (Bond._check_kind only tests value < 0, False for nan)",
+    "inf plain rest_length": "schema.py: a plain float parameter is never checked for finiteness",
+    "inf plain damping": "schema.py: a plain float parameter is never checked for finiteness",
+    "nan plain threshold": "schema.py: a plain float parameter is never checked for finiteness",
+    "nan anchor": "schema.py: a plain-list anchor (Vector = list[float] | VectorParam) is never "
+    "checked for finiteness",
+    "inf anchor bound": "schema.py VectorParam: min/max are not checked at all",
+    "inf weight bound": "schema.py Weights: min/max are not checked for finiteness",
+    "min >= max in an anchor": "schema.py VectorParam: no min < max check",
+    "anchor outside bounds": "schema.py VectorParam: no check that value lies in [min, max]",
+    "nan weight": "schema.py Weights._check: the error is raised on the Weights model, so the "
+    "path stops at bond[0].weights instead of bond[0].weights.length",
+    "weight outside bounds": "schema.py Weights._check: path stops at bond[0].weights instead of "
+    "bond[0].weights.length",
+    "min >= max in weights": "schema.py Weights._check tests the weights against [min, max] "
+    "before min < max, so it reports 'weight 0.0 outside [min, max] = [10.0, -10.0]'",
+    "ternary bond with a repeated particle": "schema.py Bond._check_kind errors carry no field: "
+    "'bond[6]: ...' instead of 'bond[6].particles: ...'",
+    "binary bond with three particles": "schema.py Bond._check_kind: 'bond[1]: ...' instead of "
+    "'bond[1].particles: ...'",
+    "neural ternary bond": "schema.py Bond._check_kind: 'bond[6]: ...' instead of "
+    "'bond[6].neural: ...'",
+    "gain without neural": "schema.py Bond._check_kind: 'bond[1]: ...' instead of "
+    "'bond[1].gain: ...'",
+    "binary bond without rest_length": "schema.py Bond._check_kind: 'bond[0]: ...' instead of "
+    "'bond[0].rest_length: ...'",
+}
+
+
+def xfail_for(case: Case, bugs: set[str]):
+    found = [b for b in case.bugs if b in bugs]
+    if not found:
+        return []
+    reason = "; ".join([REASONS[b] for b in found] + [NOTES.get(case.id, "")]).strip("; ")
+    return [pytest.mark.xfail(strict=True, reason=reason)]
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, id=c.id, marks=xfail_for(c, {NO_ERROR})) for c in CASES]
+)
+def test_model_error_is_one_line_naming_file_and_place(case, tmp_path):
+    message, line, path = load_error(case, tmp_path)
+    assert "\n" not in message and "\r" not in message
+    assert message.startswith(f"{path}: ")
+    assert case.owner.format(line=line) in message
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, id=c.id, marks=xfail_for(c, set(REASONS))) for c in CASES]
+)
+def test_model_error_names_field_and_problem(case, tmp_path):
+    message, line, path = load_error(case, tmp_path)
+    assert case.field.format(line=line) in message
+    assert case.keyword in message
+    assert "Input should be a valid number" not in message
+    assert "Input should be a valid list" not in message
+
+
+def test_model_error_for_a_toml_overflow(tmp_path):
+    """1e400 parses as inf in TOML: it must be reported as a non-finite bound."""
+    text = (EXAMPLES / "triangle.toml").read_text()
+    path = tmp_path / "overflow.toml"
+    path.write_text(text.replace("max = 1000.0", "max = 1e400"))
+    with pytest.raises(InputError) as info:
+        load_model(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path))
+    assert "bond[0].stiffness.max: value must be a finite number, got inf" in message
+
+
+def test_loads_model_names_its_source():
+    with pytest.raises(InputError) as info:
+        loads_model("dimension = 3\n", "inline.toml")
+    assert str(info.value) == "inline.toml: particle: required key is missing"
+
+
+def test_model_error_is_not_swallowed_for_a_directory(tmp_path):
+    with pytest.raises(InputError) as info:
+        load_model(tmp_path)
+    assert str(info.value).startswith(str(tmp_path)) and "\n" not in str(info.value)
