@@ -128,11 +128,6 @@ rest_length = 1.0
 """
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=IndexError,
-    reason="model.py with_values indexes an empty values array when no parameter is free",
-)
 def test_with_genome_on_a_model_without_free_parameters():
     model = loads_model(MODEL_WITHOUT_FREE_PARAMETERS)
     assert model.layout.n_genes == 0
@@ -147,19 +142,6 @@ def test_with_genome_on_a_model_without_free_parameters():
 H_WEIGHTS = "weights = { length = 0.0, rate = 0.0, min = -10.0, max = 10.0 }"
 T_STIFFNESS = "stiffness = { value = 40.0, min = 1.0, max = 1000.0 }"
 
-# Known defects of the loader (see the xfail reasons):
-NO_ERROR = "no_error"  # the bad file is accepted
-NOISE = "noise"  # pydantic union noise ("Input should be a valid number") precedes the message
-VAGUE = "vague"  # names the bond or nothing rather than the field, or says the wrong thing
-
-REASONS = {
-    NO_ERROR: "the loader accepts this file (schema.py does not check it)",
-    NOISE: "io._explain keeps the error of the float alternative of `float | Param`: the message "
-    "starts with 'Input should be a valid number' although a table was given",
-    VAGUE: "the message does not name the field at fault (only the bond, or nothing), or states "
-    "the wrong problem",
-}
-
 
 @dataclass(frozen=True)
 class Case:
@@ -170,7 +152,6 @@ class Case:
     owner: str  # what the message must name now (the field or its bond/particle)
     field: str  # the exact field path a good message names ("{line}": the line of `new`)
     keyword: str  # the problem, in the message's words
-    bugs: tuple[str, ...] = ()
 
 
 CASES = [
@@ -200,7 +181,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness.step",
         "unknown key",
-        (NOISE,),
     ),
     Case(
         "unknown particle in a bond",
@@ -228,7 +208,6 @@ CASES = [
         "",
         "particle[2].marker",
         "marker",
-        (VAGUE,),
     ),
     Case(
         "nan parameter value",
@@ -238,7 +217,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness.value",
         "finite",
-        (NOISE,),
     ),
     Case(
         "-inf parameter bound",
@@ -248,7 +226,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness.min",
         "finite",
-        (NOISE,),
     ),
     Case(
         "nan plain stiffness",
@@ -258,7 +235,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "inf plain rest_length",
@@ -268,7 +244,6 @@ CASES = [
         "bond[0].rest_length",
         "bond[0].rest_length",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "inf plain damping",
@@ -278,7 +253,6 @@ CASES = [
         "bond[0].damping",
         "bond[0].damping",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "nan plain threshold",
@@ -288,7 +262,6 @@ CASES = [
         "bond[0].threshold",
         "bond[0].threshold",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "inf mass",
@@ -325,7 +298,6 @@ CASES = [
         "bond[0].anchor",
         "bond[0].anchor",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "inf anchor bound",
@@ -335,7 +307,6 @@ CASES = [
         "bond[0].anchor",
         "bond[0].anchor.min",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "nan weight",
@@ -345,7 +316,6 @@ CASES = [
         "bond[0].weights",
         "bond[0].weights.length",
         "finite",
-        (VAGUE,),
     ),
     Case(
         "inf weight bound",
@@ -355,7 +325,6 @@ CASES = [
         "bond[0].weights",
         "bond[0].weights.min",
         "finite",
-        (NO_ERROR,),
     ),
     Case(
         "negative mass",
@@ -383,7 +352,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness",
         "must be below max",
-        (NOISE,),
     ),
     Case(
         "min >= max in weights",
@@ -393,7 +361,6 @@ CASES = [
         "bond[0].weights",
         "bond[0].weights",
         "must be below max",
-        (VAGUE,),
     ),
     Case(
         "min >= max in an anchor",
@@ -403,7 +370,6 @@ CASES = [
         "bond[0].anchor",
         "bond[0].anchor",
         "must be below max",
-        (NO_ERROR,),
     ),
     Case(
         "value above max",
@@ -413,7 +379,6 @@ CASES = [
         "bond[0].stiffness",
         "bond[0].stiffness",
         "above max",
-        (NOISE,),
     ),
     Case(
         "value below min",
@@ -423,7 +388,6 @@ CASES = [
         "particle[1].mass",
         "particle[1].mass",
         "below min",
-        (NOISE,),
     ),
     Case(
         "weight outside bounds",
@@ -433,7 +397,6 @@ CASES = [
         "bond[0].weights",
         "bond[0].weights.length",
         "outside",
-        (VAGUE,),
     ),
     Case(
         "anchor outside bounds",
@@ -443,7 +406,6 @@ CASES = [
         "bond[0].anchor",
         "bond[0].anchor",
         "above max",
-        (NO_ERROR,),
     ),
     Case(
         "gravity of the wrong length",
@@ -489,7 +451,6 @@ CASES = [
         "bond[6]",
         "bond[6].particles",
         "distinct",
-        (VAGUE,),
     ),
     Case(
         "binary bond with three particles",
@@ -499,7 +460,6 @@ CASES = [
         "bond[1]",
         "bond[1].particles",
         "got 3",
-        (VAGUE,),
     ),
     Case(
         "neural ternary bond",
@@ -509,7 +469,6 @@ CASES = [
         "bond[6]",
         "bond[6].neural",
         "only binary bonds",
-        (VAGUE,),
     ),
     Case(
         "gain without neural",
@@ -519,7 +478,6 @@ CASES = [
         "bond[1]",
         "bond[1].gain",
         "neural = true",
-        (VAGUE,),
     ),
     Case(
         "weights list of the wrong length",
@@ -547,7 +505,6 @@ CASES = [
         "bond[0]",
         "bond[0].rest_length",
         "needs rest_length",
-        (VAGUE,),
     ),
     Case(
         "unknown bond kind",
@@ -603,51 +560,7 @@ def load_error(case: Case, tmp_path: Path) -> tuple[str, int, Path]:
     return str(info.value), line, path
 
 
-# Where each defect comes from (src/activebonds/model/...), for the xfail reasons.
-NOTES = {
-    "duplicate markers": "schema.py ModelSpec._check_references: 'two particles follow the same "
-    "marker' names neither the field (particle[2].marker) nor the marker",
-    "nan plain stiffness": "schema.py: Scalar = float | Param; a plain float is never checked "
-    "for finiteness (Bond._check_kind only tests value < 0, False for nan)",
-    "inf plain rest_length": "schema.py: a plain float parameter is never checked for finiteness",
-    "inf plain damping": "schema.py: a plain float parameter is never checked for finiteness",
-    "nan plain threshold": "schema.py: a plain float parameter is never checked for finiteness",
-    "nan anchor": "schema.py: a plain-list anchor (Vector = list[float] | VectorParam) is never "
-    "checked for finiteness",
-    "inf anchor bound": "schema.py VectorParam: min/max are not checked at all",
-    "inf weight bound": "schema.py Weights: min/max are not checked for finiteness",
-    "min >= max in an anchor": "schema.py VectorParam: no min < max check",
-    "anchor outside bounds": "schema.py VectorParam: no check that value lies in [min, max]",
-    "nan weight": "schema.py Weights._check: the error is raised on the Weights model, so the "
-    "path stops at bond[0].weights instead of bond[0].weights.length",
-    "weight outside bounds": "schema.py Weights._check: path stops at bond[0].weights instead of "
-    "bond[0].weights.length",
-    "min >= max in weights": "schema.py Weights._check tests the weights against [min, max] "
-    "before min < max, so it reports 'weight 0.0 outside [min, max] = [10.0, -10.0]'",
-    "ternary bond with a repeated particle": "schema.py Bond._check_kind errors carry no field: "
-    "'bond[6]: ...' instead of 'bond[6].particles: ...'",
-    "binary bond with three particles": "schema.py Bond._check_kind: 'bond[1]: ...' instead of "
-    "'bond[1].particles: ...'",
-    "neural ternary bond": "schema.py Bond._check_kind: 'bond[6]: ...' instead of "
-    "'bond[6].neural: ...'",
-    "gain without neural": "schema.py Bond._check_kind: 'bond[1]: ...' instead of "
-    "'bond[1].gain: ...'",
-    "binary bond without rest_length": "schema.py Bond._check_kind: 'bond[0]: ...' instead of "
-    "'bond[0].rest_length: ...'",
-}
-
-
-def xfail_for(case: Case, bugs: set[str]):
-    found = [b for b in case.bugs if b in bugs]
-    if not found:
-        return []
-    reason = "; ".join([REASONS[b] for b in found] + [NOTES.get(case.id, "")]).strip("; ")
-    return [pytest.mark.xfail(strict=True, reason=reason)]
-
-
-@pytest.mark.parametrize(
-    "case", [pytest.param(c, id=c.id, marks=xfail_for(c, {NO_ERROR})) for c in CASES]
-)
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
 def test_model_error_is_one_line_naming_file_and_place(case, tmp_path):
     message, line, path = load_error(case, tmp_path)
     assert "\n" not in message and "\r" not in message
@@ -655,9 +568,7 @@ def test_model_error_is_one_line_naming_file_and_place(case, tmp_path):
     assert case.owner.format(line=line) in message
 
 
-@pytest.mark.parametrize(
-    "case", [pytest.param(c, id=c.id, marks=xfail_for(c, set(REASONS))) for c in CASES]
-)
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
 def test_model_error_names_field_and_problem(case, tmp_path):
     message, line, path = load_error(case, tmp_path)
     assert case.field.format(line=line) in message

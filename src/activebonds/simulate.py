@@ -42,7 +42,16 @@ def simulate(
         v0 = (data.positions[1] - data.positions[0]) * rate
     n_run = n_frames if first is None else n_frames - 1
     xs = np.asarray(
-        rollout(model.params, model.topology, jnp.asarray(x0), jnp.asarray(v0), dt, n_run, substeps, integrator)
+        rollout(
+            model.params,
+            model.topology,
+            jnp.asarray(x0),
+            jnp.asarray(v0),
+            dt,
+            n_run,
+            substeps,
+            integrator,
+        )
     )
     if first is not None:
         xs = np.concatenate([first[None], xs])
@@ -75,7 +84,9 @@ def check_finite(model: Model, xs: np.ndarray, rate: float) -> None:
     )
 
 
-def simulate_to_file(model_path, n_frames, rate, out, start_path=None, substeps=1, integrator="euler"):
+def simulate_to_file(
+    model_path, n_frames, rate, out, start_path=None, substeps=1, integrator="euler"
+):
     model = load_model(model_path)
     start = read_trajectory(start_path) if start_path is not None else None
     traj = simulate(model, n_frames, rate, start, substeps, integrator)

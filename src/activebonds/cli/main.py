@@ -136,7 +136,9 @@ def fit(
             adapt_variants=adapt_variants,
         )
         with _progress(generations) as progress:
-            result = run_fit(model, traj, settings, out=out_dir, overwrite=overwrite, progress=progress)
+            result = run_fit(
+                model, traj, settings, out=out_dir, overwrite=overwrite, progress=progress
+            )
     except InputError as e:
         fail(e)
     except KeyboardInterrupt:

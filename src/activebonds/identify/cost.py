@@ -72,7 +72,9 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
         if horizon == 1:
             step = jax.vmap(lambda x, v: advance(params, topo, x, v, dt, substeps, method)[0])
             return step(x0, v0)[:, None]
-        run = jax.vmap(lambda x, v: rollout_states(params, topo, x, v, dt, horizon, substeps, method)[0])
+        run = jax.vmap(
+            lambda x, v: rollout_states(params, topo, x, v, dt, horizon, substeps, method)[0]
+        )
         return run(x0, v0)
 
     def cost(genome):

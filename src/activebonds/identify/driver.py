@@ -19,10 +19,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory, write_trajectory
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model, loads_model, save_model
-from ..atomic import write_text_atomic
 from . import es, rundir
 from .cost import rms_mm
 from .problem import Identification, identification
@@ -156,16 +156,27 @@ def _check_unchanged(run: Path, meta: dict) -> None:
     for name, rec in meta.get("inputs", {}).items():
         path = Path(rec["path"])
         if not path.is_file():
-            raise InputError(run, f"the {name} file {path} is gone; pass --force to use the copy in the run")
+            raise InputError(
+                run, f"the {name} file {path} is gone; pass --force to use the copy in the run"
+            )
         if rundir.sha256_file(path) != rec["sha256"]:
-            raise InputError(run, f"the {name} file {path} changed since the run started; pass --force to continue anyway")
+            raise InputError(
+                run,
+                f"the {name} file {path} changed since the run started; pass --force to continue anyway",
+            )
     now = rundir.versions()
     for pkg, version in meta.get("versions", {}).items():
         if now.get(pkg) != version:
-            raise InputError(run, f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway")
+            raise InputError(
+                run,
+                f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway",
+            )
     stored = rundir.read_status(run).get("job")
     if stored is not None and stored != FitSettings(**meta["settings"]).job():
-        raise InputError(run / "run.json", "settings changed since the run started; pass --force to continue anyway")
+        raise InputError(
+            run / "run.json",
+            "settings changed since the run started; pass --force to continue anyway",
+        )
 
 
 def _to_numpy(state: es.ESState) -> dict[str, np.ndarray]:
@@ -212,13 +223,24 @@ def _evolve(ident, settings: FitSettings, run, state_np, history, progress) -> F
     total = settings.generations
 
     if state_np is None:
-        state = jax.jit(partial(es.init, problem=problem, settings=es_settings, dtype=dtype))(init_key)
+        state = jax.jit(partial(es.init, problem=problem, settings=es_settings, dtype=dtype))(
+            init_key
+        )
         history = {c: np.zeros(0) for c in rundir.HISTORY_COLUMNS}
         if not np.isfinite(np.asarray(state.cost)).any():
-            return _finish(ident, settings, run, state, history, "failed: every candidate's simulation went non-finite")
+            return _finish(
+                ident,
+                settings,
+                run,
+                state,
+                history,
+                "failed: every candidate's simulation went non-finite",
+            )
     else:
         state = _from_numpy(state_np, dtype)
-    chunk = jax.jit(partial(es.run, problem=problem, settings=es_settings, n_generations=settings.chunk))
+    chunk = jax.jit(
+        partial(es.run, problem=problem, settings=es_settings, n_generations=settings.chunk)
+    )
     gen = int(state.generation)
     last_ckpt = gen
     if run is not None and state_np is None:
@@ -298,4 +320,3 @@ def _finish(ident, settings, run, state, history, status, started=None) -> FitRe
 
 
 __all__ = ["FitResult", "FitSettings", "fit", "resume"]
-

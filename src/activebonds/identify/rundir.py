@@ -143,7 +143,9 @@ def read_status(run: Path) -> dict:
 def history_csv(history: dict[str, np.ndarray]) -> str:
     lines = [",".join(HISTORY_COLUMNS)]
     cols = [history[c] for c in HISTORY_COLUMNS]
-    ints = {"generation", "failed"} | {c for c in HISTORY_COLUMNS if c.startswith(("trials", "succ"))}
+    ints = {"generation", "failed"} | {
+        c for c in HISTORY_COLUMNS if c.startswith(("trials", "succ"))
+    }
     for row in zip(*cols, strict=True):
         lines.append(
             ",".join(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 import tomllib
 from pathlib import Path
@@ -14,15 +15,17 @@ from ..errors import InputError
 from .model import Model, build
 from .schema import ModelSpec
 
+_NOISE = {"float_type", "float_parsing", "list_type", "model_type", "dict_type", "is_instance_of"}
+_LEADING_FIELD = re.compile(r"^([A-Za-z_][\w\[\]\.]*): (.*)$", re.S)
+
 
 def _field_path(loc: tuple) -> str:
+    """('bond', 2, 'stiffness', 'Param', 'value') -> 'bond[2].stiffness.value' (union tags out)."""
     out = ""
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in ("float", "Param", "VectorParam", "list[float]", "function-after[_check_bounds(), Param]"):
-            continue
-        elif str(part).startswith(("function-", "list[", "float", "Param", "VectorParam", "Weights")):
+        elif str(part)[:1].isupper() or str(part).startswith(("function-", "list[", "float")):
             continue
         else:
             out += ("." if out else "") + str(part)
@@ -30,20 +33,32 @@ def _field_path(loc: tuple) -> str:
 
 
 def _explain(err: ValidationError, source: str) -> InputError:
-    problems = []
-    seen = set()
+    """Every problem on one line, each as 'field.path: what is wrong'. The errors of the
+    alternatives a union did not take ('a number or a table') are dropped when a real
+    problem was found at or below the same field."""
+    found = []
     for e in err.errors():
         where = _field_path(tuple(e["loc"]))
         msg = e["msg"].removeprefix("Value error, ")
+        m = _LEADING_FIELD.match(msg)
+        if e["type"] == "value_error" and m:
+            where = f"{where}.{m.group(1)}" if where else m.group(1)
+            msg = m.group(2)
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
         elif e["type"] == "missing":
             msg = "required key is missing"
-        if (where, msg) in seen:
+        found.append((where, msg, e["type"] in _NOISE))
+    real = [w for w, _, noise in found if not noise]
+    problems: list[str] = []
+    for where, msg, noise in found:
+        if noise and any(
+            r == where or r.startswith(where + ".") or r.startswith(where + "[") for r in real
+        ):
             continue
-        seen.add((where, msg))
-        problems.append(f"{where}: {msg}" if where else msg)
-    # Union types report one error per alternative; keep the first few, distinct.
+        text = f"{where}: {msg}" if where else msg
+        if text not in problems:
+            problems.append(text)
     return InputError(source, "; ".join(problems[:4]))
 
 
@@ -81,9 +96,7 @@ def load_model(path: str | Path) -> Model:
 def dumps_model(model: Model | ModelSpec) -> str:
     spec = model.spec if isinstance(model, Model) else model
     data = spec.model_dump(exclude_none=True, exclude_defaults=False)
-    data["particle"] = [
-        {k: v for k, v in p.items() if v is not None} for p in data["particle"]
-    ]
+    data["particle"] = [{k: v for k, v in p.items() if v is not None} for p in data["particle"]]
     return tomli_w.dumps(data)
 
 

@@ -93,9 +93,9 @@ def build(spec: ModelSpec) -> Model:
             -1, 2
         ),
         neural=np.array([b.neural for b in binary], dtype=bool).reshape(-1),
-        ternary=np.array([[names[n] for n in b.particles] for b in ternary], dtype=np.int32).reshape(
-            -1, 3
-        ),
+        ternary=np.array(
+            [[names[n] for n in b.particles] for b in ternary], dtype=np.int32
+        ).reshape(-1, 3),
     )
     shapes = {
         "mass": (len(spec.particle),),
@@ -162,8 +162,10 @@ def build(spec: ModelSpec) -> Model:
         slots[g].extend(names[n] for n in b.particles)
         for pname, field in _FIELDS[b.kind].items():
             p = getattr(b, pname)
-            if p is None and pname not in ("stiffness", "damping") and not (
-                b.neural and pname in ("gain", "threshold")
+            if (
+                p is None
+                and pname not in ("stiffness", "damping")
+                and not (b.neural and pname in ("gain", "threshold"))
             ):
                 continue
             v = _value(p, _DEFAULTS.get(pname, 0.0))
@@ -208,6 +210,7 @@ def build(spec: ModelSpec) -> Model:
 def with_values(model: Model, values: np.ndarray) -> ModelSpec:
     """A spec equal to the model's, with every free parameter set to ``values`` (natural units)."""
     layout = model.layout
+    values = np.concatenate([np.asarray(values, dtype=np.float64).reshape(-1), [0.0]])
     params = Params(
         *(
             np.where(np.asarray(i) >= 0, np.asarray(values)[np.maximum(np.asarray(i), 0)], b)
@@ -247,7 +250,9 @@ def spec_with_params(spec: ModelSpec, params: Params) -> ModelSpec:
         if b.kind == "unary" and b.anchor is not None:
             vals = [float(x) for x in params.unary_anchor[pos]]
             a = b.anchor
-            update["anchor"] = a.model_copy(update={"value": vals}) if isinstance(a, VectorParam) else vals
+            update["anchor"] = (
+                a.model_copy(update={"value": vals}) if isinstance(a, VectorParam) else vals
+            )
         if b.kind == "binary" and b.neural and b.weights is not None:
             row_l = [0.0 if j == pos else float(x) for j, x in enumerate(params.w_len[pos])]
             row_r = [0.0 if j == pos else float(x) for j, x in enumerate(params.w_rate[pos])]

@@ -10,9 +10,9 @@ binary bond of the model (in file order; a neuron's own entry is ignored and wri
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 
 class _Strict(BaseModel):
@@ -23,6 +23,13 @@ def _finite(x: float, what: str = "value") -> float:
     if not math.isfinite(x):
         raise ValueError(f"{what} must be a finite number, got {x}")
     return x
+
+
+FiniteFloat = Annotated[float, AfterValidator(_finite)]
+
+
+def _value_of(p: float | Param | None) -> float | None:
+    return p.value if isinstance(p, Param) else p
 
 
 class Param(_Strict):
@@ -42,7 +49,7 @@ class Param(_Strict):
     @model_validator(mode="after")
     def _check_bounds(self) -> Param:
         if self.min is not None and self.max is not None and self.min >= self.max:
-            raise ValueError(f"min ({self.min}) must be below max ({self.max})")
+            raise ValueError(f"min: min ({self.min}) must be below max ({self.max})")
         if self.min is not None and self.value < self.min:
             raise ValueError(f"value {self.value} is below min {self.min}")
         if self.max is not None and self.value > self.max:
@@ -55,15 +62,28 @@ class Param(_Strict):
 class VectorParam(_Strict):
     """A vector parameter (anchor, gravity): one value per axis, shared scalar or per-axis bounds."""
 
-    value: list[float]
-    min: float | list[float] | None = None
-    max: float | list[float] | None = None
+    value: list[FiniteFloat]
+    min: FiniteFloat | list[FiniteFloat] | None = None
+    max: FiniteFloat | list[FiniteFloat] | None = None
     fixed: bool = False
 
-    @field_validator("value")
-    @classmethod
-    def _check_values(cls, xs: list[float]) -> list[float]:
-        return [_finite(x) for x in xs]
+    @model_validator(mode="after")
+    def _check_bounds(self) -> VectorParam:
+        n = len(self.value)
+        for name in ("min", "max"):
+            b = getattr(self, name)
+            if isinstance(b, list) and len(b) != n:
+                raise ValueError(f"{name}: expected {n} components, got {len(b)}")
+        lo = self.min if isinstance(self.min, list) else [self.min] * n
+        hi = self.max if isinstance(self.max, list) else [self.max] * n
+        for ax, (v, a, b) in enumerate(zip(self.value, lo, hi, strict=True)):
+            if a is not None and b is not None and a >= b:
+                raise ValueError(f"min: min ({a}) must be below max ({b}) on axis {ax}")
+            if a is not None and v < a:
+                raise ValueError(f"value: component {ax} = {v} is below min {a}")
+            if b is not None and v > b:
+                raise ValueError(f"value: component {ax} = {v} is above max {b}")
+        return self
 
 
 class Weights(_Strict):
@@ -73,26 +93,28 @@ class Weights(_Strict):
     A scalar is broadcast to every other binary bond.
     """
 
-    length: float | list[float] = 0.0
-    rate: float | list[float] = 0.0
-    min: float = -10.0
-    max: float = 10.0
+    length: FiniteFloat | list[FiniteFloat] = 0.0
+    rate: FiniteFloat | list[FiniteFloat] = 0.0
+    min: FiniteFloat = -10.0
+    max: FiniteFloat = 10.0
     fixed: bool = False
 
     @model_validator(mode="after")
     def _check(self) -> Weights:
-        for xs in (self.length, self.rate):
-            for x in xs if isinstance(xs, list) else [xs]:
-                _finite(x, "weight")
-                if not self.min <= x <= self.max:
-                    raise ValueError(f"weight {x} outside [min, max] = [{self.min}, {self.max}]")
         if self.min >= self.max:
-            raise ValueError(f"min ({self.min}) must be below max ({self.max})")
+            raise ValueError(f"min: min ({self.min}) must be below max ({self.max})")
+        for name in ("length", "rate"):
+            xs = getattr(self, name)
+            for x in xs if isinstance(xs, list) else [xs]:
+                if not self.min <= x <= self.max:
+                    raise ValueError(
+                        f"{name}: weight {x} outside [min, max] = [{self.min}, {self.max}]"
+                    )
         return self
 
 
-Scalar = float | Param
-Vector = list[float] | VectorParam
+Scalar = FiniteFloat | Param
+Vector = list[FiniteFloat] | VectorParam
 
 
 class Particle(_Strict):
@@ -143,35 +165,34 @@ class Bond(_Strict):
     @model_validator(mode="after")
     def _check_kind(self) -> Bond:
         arity = {"unary": 1, "binary": 2, "ternary": 3}[self.kind]
+        # Messages start with the field at fault ("field: ..."); the loader adds it to the path.
         if len(self.particles) != arity:
             raise ValueError(
-                f"a {self.kind} bond needs {arity} particle name(s), got {len(self.particles)}"
+                f"particles: a {self.kind} bond needs {arity} particle name(s), "
+                f"got {len(self.particles)}"
             )
         if len(set(self.particles)) != arity:
-            raise ValueError(f"a {self.kind} bond needs {arity} distinct particles")
+            raise ValueError(f"particles: a {self.kind} bond needs {arity} distinct particles")
         if self.neural and self.kind != "binary":
-            raise ValueError("only binary bonds can be neural")
+            raise ValueError("neural: only binary bonds can be neural")
         allowed = _KIND_PARAMS[self.kind]
         for name in _KIND_PARAMS["binary"] | _KIND_PARAMS["unary"] | _KIND_PARAMS["ternary"]:
             if getattr(self, name) is not None and name not in allowed:
-                raise ValueError(f"'{name}' is not a parameter of a {self.kind} bond")
+                raise ValueError(f"{name}: not a parameter of a {self.kind} bond")
         for name in _NEURAL_ONLY:
             if getattr(self, name) is not None and not self.neural:
-                raise ValueError(f"'{name}' needs neural = true")
+                raise ValueError(f"{name}: '{name}' needs neural = true")
         if self.kind == "binary" and self.rest_length is None:
-            raise ValueError("a binary bond needs rest_length")
+            raise ValueError("rest_length: a binary bond needs rest_length")
         if self.kind == "ternary" and self.rest_angle is None:
-            raise ValueError("a ternary bond needs rest_angle (radians)")
+            raise ValueError("rest_angle: a ternary bond needs rest_angle (radians)")
         for name in ("stiffness", "damping", "rest_length"):
-            p = getattr(self, name)
-            value = p.value if isinstance(p, Param) else p
+            value = _value_of(getattr(self, name))
             if value is not None and value < 0:
-                raise ValueError(f"{name} must be >= 0, got {value}")
-        if self.rest_angle is not None:
-            p = self.rest_angle
-            value = p.value if isinstance(p, Param) else p
-            if not 0.0 <= value <= math.pi:
-                raise ValueError(f"rest_angle must be in [0, pi] radians, got {value}")
+                raise ValueError(f"{name}: must be >= 0, got {value}")
+        value = _value_of(self.rest_angle)
+        if value is not None and not 0.0 <= value <= math.pi:
+            raise ValueError(f"rest_angle: must be in [0, pi] radians, got {value}")
         return self
 
 
@@ -193,9 +214,15 @@ class ModelSpec(_Strict):
             if n in seen:
                 raise ValueError(f"particle[{i}].name: duplicate particle name '{n}'")
             seen.add(n)
-        markers = [p.marker or p.name for p in self.particle]
-        if len(set(markers)) != len(markers):
-            raise ValueError("two particles follow the same marker")
+        followed: dict[str, str] = {}
+        for i, p in enumerate(self.particle):
+            m = p.marker or p.name
+            if m in followed:
+                raise ValueError(
+                    f"particle[{i}].marker: marker '{m}' is already followed by particle "
+                    f"'{followed[m]}'"
+                )
+            followed[m] = p.name
         if self.gravity is not None:
             if len(self.gravity) != d:
                 raise ValueError(f"gravity: expected {d} components, got {len(self.gravity)}")
