@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import operators as ops
+from . import rng
 
 
 @dataclass(frozen=True)
@@ -97,10 +98,15 @@ def init(key, problem: Problem, settings: ESSettings, dtype=None) -> ESState:
     )
 
 
-def generation(base_key, state: ESState, problem: Problem, settings: ESSettings):
-    """One generation. Returns (new state, row of history)."""
-    key = jax.random.fold_in(base_key, state.generation)
-    k_parent, k_cross, k_do, k_variant, k_mut, k_sel = jax.random.split(key, 6)
+def noise(base_key, generation_index, problem: Problem, settings: ESSettings, dtype):
+    """The random numbers of one generation: a pure function of (seed key, generation)."""
+    key = jax.random.fold_in(base_key, generation_index)
+    shape = np.asarray(problem.group_slots).shape
+    return ops.draw(key, settings.population, len(problem.lower), shape, dtype)
+
+
+def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSettings):
+    """One generation from its random numbers. Returns (new state, row of history)."""
     n = settings.population
     dtype = state.genes.dtype
     bounds = ops.Bounds(jnp.asarray(problem.lower, dtype), jnp.asarray(problem.upper, dtype))
@@ -108,19 +114,19 @@ def generation(base_key, state: ESState, problem: Problem, settings: ESSettings)
     slots = jnp.asarray(problem.group_slots)
 
     # 1. parents, crossover per bond type
-    first = ops.tournament(k_parent, state.cost, n)
+    first = ops.tournament(nz.parent, state.cost)
     cross_genes, cross_sigma = ops.crossover(
-        k_cross, state.genes, state.sigma, state.local, slots, gene_group
+        nz.cross, state.genes, state.sigma, state.local, slots, gene_group
     )
-    do_cross = jax.random.uniform(k_do, (n, 1)) < settings.crossover_rate
+    do_cross = nz.do_cross < settings.crossover_rate
     genes = jnp.where(do_cross, cross_genes, state.genes[first])
     sigma = jnp.where(do_cross, cross_sigma, state.sigma[first])
 
     # 2. mutation: one variant per child
-    variant = ops.choose(k_variant, jnp.broadcast_to(state.variant_probs, (n, ops.N_VARIANTS)))
+    variant = ops.choose(nz.variant, jnp.broadcast_to(state.variant_probs, (n, ops.N_VARIANTS)))
     group_prob = ops.group_bias(state.local[first], slots, slots.shape[0])
     genes, sigma = ops.mutate(
-        k_mut, genes, sigma, variant, group_prob, gene_group, bounds, settings.sigma_floor
+        nz, genes, sigma, variant, group_prob, gene_group, bounds, settings.sigma_floor
     )
 
     # 3. evaluation
@@ -133,7 +139,7 @@ def generation(base_key, state: ESState, problem: Problem, settings: ESSettings)
 
     # 4. selection from parents + children
     all_cost = jnp.concatenate([state.cost, cost])
-    keep = ops.select(k_sel, all_cost, n, settings.n_elite, settings.selection_pressure)
+    keep = ops.select(nz.gumbel, all_cost, n, settings.n_elite, settings.selection_pressure)
     pool_genes = jnp.concatenate([state.genes, genes])
     pool_sigma = jnp.concatenate([state.sigma, sigma])
     pool_local = jnp.concatenate([state.local, local])
@@ -170,15 +176,30 @@ def generation(base_key, state: ESState, problem: Problem, settings: ESSettings)
 
 def run(base_key, state: ESState, problem: Problem, settings: ESSettings, n_generations: int, stop):
     """``n_generations`` generations in one compiled ``lax.scan``; generations at or beyond
-    ``stop`` leave the state unchanged (so one compiled chunk length serves a whole run)."""
+    ``stop`` leave the state unchanged (so one compiled chunk length serves a whole run).
 
-    def body(s, _):
-        new, row = generation(base_key, s, problem, settings)
+    The random numbers of the whole chunk are drawn first, in bulk (vectorised over
+    generations), then read by the scan; each generation's numbers depend only on the seed
+    key and the generation index, so results do not depend on the chunk length."""
+    dtype = state.genes.dtype
+    indices = state.generation + jnp.arange(n_generations, dtype=jnp.int32)
+    noises = jax.vmap(lambda g: noise(base_key, g, problem, settings, jnp.float32))(indices)
+    del dtype
+
+    def body(s, nz):
+        new, row = generation(nz, s, problem, settings)
         active = s.generation < stop
         s = jax.tree.map(lambda a, b: jnp.where(active, a, b), new, s)
         return s, (row, active)
 
-    return jax.lax.scan(body, state, None, length=n_generations)
+    return jax.lax.scan(body, state, noises)
+
+
+def noise_bytes(problem: Problem, settings: ESSettings) -> int:
+    """Memory of one generation's random numbers (float32), to size the chunks."""
+    n, g = settings.population, len(problem.lower)
+    t, s = np.asarray(problem.group_slots).shape
+    return 4 * (n * (2 + 2 * t * s + 5 + 2 * g + 1) + 2 * n)
 
 
 def best(state: ESState):

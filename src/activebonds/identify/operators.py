@@ -16,6 +16,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from . import rng
+
 N_VARIANTS = 4
 
 
@@ -24,37 +26,72 @@ class Bounds(NamedTuple):
     upper: jax.Array  # [G]
 
 
-def randindex(key, shape, n: int):
-    """Uniform integers in [0, n): floor(u n) of a uniform u (cheaper than randint on CPU;
-    the bias is below 2^-20 for the population sizes used here)."""
-    u = jax.random.uniform(key, shape)
+class Noise(NamedTuple):
+    """The random numbers of one generation, drawn up front (``draw``) so that the compiled
+    generation only reads them: XLA would otherwise fuse the generator into every consumer
+    and recompute it per element. Uniforms are in (0, 1)."""
+
+    parent: jax.Array  # [2, N] uniforms: tournament candidates for the first parent
+    cross: jax.Array  # [2, N, T, S] uniforms: local-tournament candidates per slot
+    do_cross: jax.Array  # [N, 1] uniforms
+    variant: jax.Array  # [N, 1] uniforms
+    group: jax.Array  # [N, 1] uniforms: bond type for variant 2
+    gene: jax.Array  # [N] uniforms: gene for variant 4
+    z0: jax.Array  # [N, 1] normals: global self-adaptation
+    zi: jax.Array  # [N, G] normals: per-gene self-adaptation
+    step: jax.Array  # [N, G] normals: gene steps
+    cauchy: jax.Array  # [N] Cauchy
+    gumbel: jax.Array  # [2N] Gumbel, for selection
+
+
+def draw(key, n: int, n_genes: int, slots_shape: tuple[int, int], dtype=jnp.float32) -> Noise:
+    k = rng.streams(key, 11)
+    t, s = slots_shape
+    return Noise(
+        parent=rng.uniform(k[0], (2, n)),
+        cross=rng.uniform(k[1], (2, n, t, s)),
+        do_cross=rng.uniform(k[2], (n, 1)),
+        variant=rng.uniform(k[3], (n, 1)),
+        group=rng.uniform(k[4], (n, 1)),
+        gene=rng.uniform(k[5], (n,)),
+        z0=rng.normal(k[6], (n, 1), dtype),
+        zi=rng.normal(k[7], (n, n_genes), dtype),
+        step=rng.normal(k[8], (n, n_genes), dtype),
+        cauchy=rng.cauchy(k[9], (n,), dtype),
+        gumbel=rng.gumbel(k[10], (2 * n,), dtype),
+    )
+
+
+def _index(u, n: int):
     return jnp.minimum((u * n).astype(jnp.int32), n - 1)
 
 
-def choose(key, probs):
-    """One category per row of ``probs`` [..., K] by inverse CDF (one uniform per row)."""
-    u = jax.random.uniform(key, probs.shape[:-1] + (1,), probs.dtype)
+def choose(u, probs):
+    """One category per row of ``probs`` [..., K] by inverse CDF, from uniforms u [..., 1]."""
     cdf = jnp.cumsum(probs, axis=-1)
     return jnp.minimum(jnp.sum(cdf < u * cdf[..., -1:], axis=-1), probs.shape[-1] - 1)
 
 
-def tournament(key, fitness, n: int):
-    """Indices of ``n`` binary-tournament winners (lower fitness wins): a random choice
-    biased to good individuals. ``fitness`` is [N]."""
-    a, b = randindex(key, (2, n), fitness.shape[0])
+def tournament(u, fitness):
+    """Binary-tournament winners (lower fitness wins): a random choice biased to good
+    individuals. u [2, n] uniforms, fitness [N] -> indices [n]."""
+    a, b = _index(u, fitness.shape[0])
     return jnp.where(fitness[b] < fitness[a], b, a)
 
 
-def local_tournament(key, local, slots):
+def local_tournament(u, local, slots):
     """For each child, group and slot, a parent biased to a low *local* cost at the slot's
-    particle (§3.2.2 crossover). local [N, P], slots [T, S] (-1 = padding) -> [n, T, S]."""
-    n = local.shape[0]
-    a, b = randindex(key, (2, n) + slots.shape, n)
+    particle (§3.2.2 crossover). u [2, n, T, S], local [N, P], slots [T, S] (-1 = padding)
+    -> [n, T, S]."""
+    a, b = _index(u, local.shape[0])
     p = jnp.maximum(slots, 0)[None]
-    return jnp.where(local[b, p] < local[a, p], b, a)
+    # argmin (a reduction) materialises the outcome; a plain `where` would be fused into the
+    # crossover's gathers and re-evaluated for every gene.
+    second_wins = jnp.argmin(jnp.stack([local[a, p], local[b, p]]), axis=0) == 1
+    return jnp.where(second_wins, b, a)
 
 
-def crossover(key, genes, sigma, local, slots, gene_group):
+def crossover(u, genes, sigma, local, slots, gene_group):
     """Multi-parent crossover per bond type (§3.2.2).
 
     For each bond type, for each occurrence, for each particle at its extremity, a parent is
@@ -62,20 +99,15 @@ def crossover(key, genes, sigma, local, slots, gene_group):
     of that bond type are the mean of the chosen parents' genes (mutabilities: geometric mean).
     Returns child genes and mutabilities [N, G].
     """
-    parents = local_tournament(key, local, slots)  # [N, T, S]
-    coef = crossover_weights(slots, gene_group, genes.shape[1]).astype(genes.dtype)
-    # Whole-row gathers, then a weighted sum that keeps each gene's own group: [N, T, S, G].
-    child = jnp.einsum("ntsg,tsg->ng", genes[parents], coef)
-    child_sigma = jnp.exp(jnp.einsum("ntsg,tsg->ng", jnp.log(sigma)[parents], coef))
+    parents = local_tournament(u, local, slots)  # [N, T, S]
+    valid = (slots >= 0).astype(genes.dtype)  # [T, S]
+    per_gene = parents[:, gene_group, :]  # [N, G, S]: the parents of each gene's bond type
+    w = valid[gene_group]  # [G, S]
+    gidx = jnp.arange(genes.shape[1])[None, :, None]
+    norm = w.sum(axis=-1)
+    child = jnp.sum(genes[per_gene, gidx] * w, axis=-1) / norm
+    child_sigma = jnp.exp(jnp.sum(jnp.log(sigma)[per_gene, gidx] * w, axis=-1) / norm)
     return child, child_sigma
-
-
-def crossover_weights(slots, gene_group, n_genes: int):
-    """[T, S, G]: 1/(slots of group t) where gene g belongs to group t and slot s is used."""
-    valid = (slots >= 0).astype(jnp.float32)
-    per_group = valid / jnp.maximum(valid.sum(-1, keepdims=True), 1.0)
-    member = (gene_group[None, :] == jnp.arange(slots.shape[0])[:, None]).astype(jnp.float32)
-    return per_group[:, :, None] * member[:, None, :]
 
 
 def group_bias(local, slots, n_groups):
@@ -90,7 +122,7 @@ def group_bias(local, slots, n_groups):
     return jnp.where(total > 0, score / jnp.where(total > 0, total, 1.0), uniform)
 
 
-def mutate(key, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, sigma_floor):
+def mutate(noise: Noise, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, sigma_floor):
     """Apply the drawn mutation variant to each child.
 
     Mutabilities self-adapt log-normally before the genes move (Schwefel:
@@ -99,13 +131,8 @@ def mutate(key, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, s
     n, g = genes.shape
     tau_global = 1.0 / jnp.sqrt(2.0 * g)
     tau_local = 1.0 / jnp.sqrt(2.0 * jnp.sqrt(g))
-    k_global, k_local, k_step, k_group, k_gene, k_cauchy = jax.random.split(key, 6)
-    z0 = jax.random.normal(k_global, (n, 1), genes.dtype)
-    zi = jax.random.normal(k_local, (n, g), genes.dtype)
-    step = jax.random.normal(k_step, (n, g), genes.dtype)
-    group = choose(k_group, group_prob)  # [N]
-    one_gene = randindex(k_gene, (n,), g)
-    cauchy = jax.random.cauchy(k_cauchy, (n,), genes.dtype)
+    group = choose(noise.group, group_prob)  # [N]
+    one_gene = _index(noise.gene, g)
 
     in_group = gene_group[None, :] == group[:, None]  # [N, G]
     single = jnp.arange(g)[None, :] == one_gene[:, None]
@@ -115,9 +142,11 @@ def mutate(key, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, s
     adapt = touched & ((v == 0) | (v == 1))
 
     span = bounds.upper - bounds.lower
+    z0, zi, step = (x.astype(genes.dtype) for x in (noise.z0, noise.zi, noise.step))
     new_sigma = jnp.where(adapt, sigma * jnp.exp(tau_global * z0 + tau_local * zi), sigma)
     new_sigma = jnp.clip(new_sigma, sigma_floor * span, span)
-    delta = jnp.where(v == 3, new_sigma * cauchy[:, None], new_sigma * step)
+    cauchy = noise.cauchy.astype(genes.dtype)[:, None]
+    delta = jnp.where(v == 3, new_sigma * cauchy, new_sigma * step)
     moved = jnp.where(touched, genes + delta, genes)
     return reflect(moved, bounds), new_sigma
 
@@ -130,18 +159,22 @@ def reflect(genes, bounds: Bounds):
     return jnp.clip(genes, lo, hi)
 
 
-def select(key, cost, n_keep: int, n_elite: int, pressure: float):
+def select(gumbel, cost, n_keep: int, n_elite: int, pressure: float):
     """Survivors: the ``n_elite`` best unchanged (elitism, so the best cost never rises), the
-    rest drawn at random without replacement, biased to low global cost (rank-based weights,
-    Gumbel top-k). Non-finite costs rank below every finite one and are only drawn when fewer
-    finite candidates than places exist. cost [M] -> indices [n_keep]."""
+    rest drawn at random without replacement, biased to low global cost (Gumbel top-k on
+    logits ``-pressure/4 * z`` with z the standardised log cost). Non-finite costs rank below
+    every finite one and are only drawn when fewer finite candidates than places exist.
+    cost [M] -> indices [n_keep]."""
     m = cost.shape[0]
-    _, order = jax.lax.top_k(-cost, m)  # full ordering, best first (faster than argsort on CPU)
-    rank = jnp.zeros(m, jnp.int32).at[order].set(jnp.arange(m, dtype=jnp.int32))
-    elite = order[:n_elite]
-    logits = -pressure * rank.astype(cost.dtype) / m
-    logits = jnp.where(jnp.isfinite(cost), logits, -1e6 - rank.astype(cost.dtype))
-    logits = jnp.where(rank < n_elite, -jnp.inf, logits)
-    gumbel = jax.random.gumbel(key, (m,), cost.dtype)
-    _, rest = jax.lax.top_k(logits + gumbel, n_keep - n_elite)
+    _, elite = jax.lax.top_k(-cost, n_elite)
+    finite = jnp.isfinite(cost)
+    log_cost = jnp.log(jnp.where(finite, cost, 1.0) + 1e-300)
+    count = jnp.maximum(finite.sum(), 1)
+    mean = jnp.sum(jnp.where(finite, log_cost, 0.0)) / count
+    var = jnp.sum(jnp.where(finite, (log_cost - mean) ** 2, 0.0)) / count
+    z = (log_cost - mean) / jnp.sqrt(var + 1e-12)
+    logits = jnp.where(finite, -0.25 * pressure * z + gumbel.astype(cost.dtype), -1e6 + gumbel)
+    logits = logits.at[elite].set(-jnp.inf)
+    _, rest = jax.lax.top_k(logits, n_keep - n_elite)
+    del m
     return jnp.concatenate([elite, rest])
