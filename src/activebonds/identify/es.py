@@ -24,7 +24,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import operators as ops
-from . import rng
 
 
 @dataclass(frozen=True)

@@ -122,7 +122,9 @@ def group_bias(local, slots, n_groups):
     return jnp.where(total > 0, score / jnp.where(total > 0, total, 1.0), uniform)
 
 
-def mutate(noise: Noise, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, sigma_floor):
+def mutate(
+    noise: Noise, genes, sigma, variant, group_prob, gene_group, bounds: Bounds, sigma_floor
+):
     """Apply the drawn mutation variant to each child.
 
     Mutabilities self-adapt log-normally before the genes move (Schwefel:

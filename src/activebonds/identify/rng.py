@@ -53,7 +53,10 @@ def cos_turns(t):
     x = _TWO_PI * jnp.minimum(s, 0.5 - s)  # [0, pi/2]
     x2 = x * x
     # Taylor series of cos to x^14 in nested (Horner) form
-    c = 1.0 - x2 / 2 * (1 - x2 / 12 * (1 - x2 / 30 * (1 - x2 / 56 * (1 - x2 / 90 * (1 - x2 / 132 * (1 - x2 / 182))))))
+    c = 1.0 - x2 / 2 * (
+        1
+        - x2 / 12 * (1 - x2 / 30 * (1 - x2 / 56 * (1 - x2 / 90 * (1 - x2 / 132 * (1 - x2 / 182)))))
+    )
     return sign * c
 
 

@@ -18,41 +18,42 @@ def uniform_field(params: Params, topo: Topology, x, v):
     return jnp.broadcast_to(params.mass[:, None] * params.gravity[None, :], x.shape)
 
 
-def _select(index, n: int) -> np.ndarray:
-    """One-hot selection matrix [len(index), n]: ``_select(i, P) @ x == x[i]``.
-
-    Gathers and scatters become products with constant matrices, which vmap into one large
-    matrix product over the population instead of many small scatters (much faster on CPU)."""
-    out = np.zeros((len(index), n))
-    out[np.arange(len(index)), index] = 1.0
-    return out
+def _accumulate(n: int, terms) -> jnp.ndarray:
+    """Sum per-element force rows into particles: ``terms`` is a list of (index array,
+    sign, rows [K, D]); returns [n, D]. The topology is static, so this unrolls into plain
+    slices and adds (a scatter-add vmapped over a population is slow on CPU)."""
+    dim = terms[0][2].shape[-1]
+    dtype = terms[0][2].dtype
+    per_particle = [[] for _ in range(n)]
+    for index, sign, rows in terms:
+        for k, p in enumerate(np.asarray(index)):
+            per_particle[int(p)].append((sign, rows[k]))
+    out = []
+    for contributions in per_particle:
+        total = jnp.zeros((dim,), dtype)
+        for sign, row in contributions:
+            total = total + row if sign > 0 else total - row
+        out.append(total)
+    return jnp.stack(out)
 
 
 def unary(params: Params, topo: Topology, x, v):
     """Unary spring + damper to the environment: F_p += -k_u (x_p - a) - c_u v_p."""
     if topo.unary.size == 0:
         return jnp.zeros_like(x)
-    sel = _select(topo.unary, topo.n_particles).astype(x.dtype)
-    f = -params.unary_k[:, None] * (sel @ x - params.unary_anchor) - params.unary_c[:, None] * (
-        sel @ v
-    )
-    return sel.T @ f
+    idx = topo.unary
+    f = -params.unary_k[:, None] * (x[idx] - params.unary_anchor) - params.unary_c[:, None] * v[idx]
+    return _accumulate(topo.n_particles, [(idx, 1, f)])
 
 
 def bond_kinematics(topo: Topology, x, v):
     """Per binary bond: unit vector u (i -> j), length L, elongation rate Ldot."""
-    diff = _bond_difference(topo).astype(x.dtype)
-    d = diff @ x
+    i, j = topo.binary[:, 0], topo.binary[:, 1]
+    d = x[j] - x[i]
     length = jnp.sqrt(jnp.sum(d * d, axis=-1))
     u = d / length[:, None]
-    rate = jnp.sum((diff @ v) * u, axis=-1)
+    rate = jnp.sum((v[j] - v[i]) * u, axis=-1)
     return u, length, rate
-
-
-def _bond_difference(topo: Topology) -> np.ndarray:
-    """[B, P] matrix with +1 at j and -1 at i, so ``diff @ x`` is x_j - x_i for each bond."""
-    n = topo.n_particles
-    return _select(topo.binary[:, 1], n) - _select(topo.binary[:, 0], n)
 
 
 def activation(params: Params, topo: Topology, elongation, rate):
@@ -75,8 +76,8 @@ def binary(params: Params, topo: Topology, x, v):
     if topo.neural.any():
         a = activation(params, topo, elongation, rate)
         tension = tension + jnp.where(topo.neural, params.gain * a, 0.0)
-    diff = _bond_difference(topo).astype(x.dtype)
-    return -(diff.T @ (tension[:, None] * u))
+    f = tension[:, None] * u
+    return _accumulate(topo.n_particles, [(topo.binary[:, 0], 1, f), (topo.binary[:, 1], -1, f)])
 
 
 def ternary(params: Params, topo: Topology, x, v):
@@ -84,10 +85,9 @@ def ternary(params: Params, topo: Topology, x, v):
     particle; F = -grad E on all three particles (they sum to zero)."""
     if topo.ternary.size == 0:
         return jnp.zeros_like(x)
-    n = topo.n_particles
-    si, sj, sk = (_select(topo.ternary[:, c], n).astype(x.dtype) for c in range(3))
-    a = (si - sj) @ x
-    b = (sk - sj) @ x
+    i, j, k = topo.ternary[:, 0], topo.ternary[:, 1], topo.ternary[:, 2]
+    a = x[i] - x[j]
+    b = x[k] - x[j]
     na = jnp.sqrt(jnp.sum(a * a, axis=-1))[:, None]
     nb = jnp.sqrt(jnp.sum(b * b, axis=-1))[:, None]
     cos = jnp.sum(a * b, axis=-1)[:, None] / (na * nb)
@@ -95,7 +95,8 @@ def ternary(params: Params, topo: Topology, x, v):
     dcos_db = a / (na * nb) - cos * b / (nb * nb)
     s = -params.tern_k[:, None] * (cos - jnp.cos(params.tern_angle)[:, None])
     fi, fk = s * dcos_da, s * dcos_db
-    return si.T @ fi + sk.T @ fk - sj.T @ (fi + fk)
+    terms = [(i, 1, fi), (k, 1, fk), (j, -1, fi + fk)]
+    return _accumulate(topo.n_particles, terms)
 
 
 FAMILIES = (uniform_field, unary, binary, ternary)

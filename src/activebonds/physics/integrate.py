@@ -36,7 +36,9 @@ def verlet_step(params: Params, topo: Topology, x, v, h):
 STEPS: dict[str, Callable] = {"euler": euler_step, "verlet": verlet_step}
 
 
-def advance(params: Params, topo: Topology, x, v, dt, substeps: int = 1, method: Integrator = "euler"):
+def advance(
+    params: Params, topo: Topology, x, v, dt, substeps: int = 1, method: Integrator = "euler"
+):
     """Integrate over one sample interval dt in ``substeps`` steps."""
     step = STEPS[method]
     h = dt / substeps
