@@ -214,3 +214,7 @@ def main() -> None:
             print(f"error: {cmd}: {message}", file=sys.stderr)
         code = 2 if e.exit_code == 1 else e.exit_code
     sys.exit(code if isinstance(code, int) else 0)
+
+
+# Commands defined in their own modules register themselves on import.
+from . import experiments_cmd as _experiments_cmd  # noqa: E402,F401

@@ -264,6 +264,16 @@ def _evolve(ident, settings: FitSettings, run, state_np, history, progress) -> F
     return _finish(ident, settings, run, state, history, "completed", started)
 
 
+NOISE_BUDGET = 64 * 2**20  # bytes of random numbers drawn per compiled chunk
+
+
+def chunk_length(problem, es_settings, requested: int, runs: int = 1) -> int:
+    """Generations per compiled chunk: as requested, fewer if their random numbers would
+    exceed NOISE_BUDGET. Results do not depend on it (see es.run)."""
+    per_generation = es.noise_bytes(problem, es_settings) * runs
+    return int(max(1, min(requested, NOISE_BUDGET // per_generation)))
+
+
 def _cast(evaluate, dtype):
     def cast(genome):
         cost, local = evaluate(genome)

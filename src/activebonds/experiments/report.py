@@ -1,0 +1,103 @@
+"""The report of ``reproduce`` / ``demo``: one self-contained HTML page for all experiments run,
+built from the pieces of :mod:`activebonds.report` (figures, tables, canvas player)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..model import load_model
+from ..report import animation, plots
+from ..report.html import Figure, Section, Table, fmt, write_comparison_report
+from ..report.predict import predict
+from .paper import EXPERIMENTS, SERIES
+
+
+def _histories(folder: Path, series: str) -> list[dict]:
+    with np.load(folder / f"{series}_curves.npz") as z:
+        best, median = z["best_rms_mm"], z["median_rms_mm"]
+    return [
+        {
+            "best_rms_mm": b,
+            "best_cost": (b / 1000.0) ** 2,
+            "median_cost": (m / 1000.0) ** 2,
+        }
+        for b, m in zip(best, median, strict=True)
+    ]
+
+
+def _config_section(name: str, exp, config: str, c: dict, folder: Path, n_seeds: int) -> Section:
+    figs = folder / "figures"
+    series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
+    title = f"{exp.title}: population {c['population']}, {c['generations']} generations"
+    figures = [Figure(plots.convergence(series, figs / "convergence", title=title)[0])]
+    rows = []
+    for s in SERIES:
+        r = c["series"][s]
+        rows.append(
+            [
+                s,
+                f"{fmt(r['fit_rms_mm_median'], 3)} [{fmt(r['fit_rms_mm_iqr'][0], 3)}, "
+                f"{fmt(r['fit_rms_mm_iqr'][1], 3)}]",
+                fmt(r["one_step_rms_mm_median"], 3),
+                fmt(r["free_run_rms_mm_median"], 3),
+                fmt(r.get("saturated_share_median", float("nan")), 2),
+                fmt(r.get("near_zero_weight_share_median", float("nan")), 2),
+                str(r["failed_evaluations"]),
+                f"{r['seconds']:.0f} s",
+            ]
+        )
+    a, b = c["series"]["standard"]["test_frames"]
+    table = Table(
+        columns=[
+            "series",
+            "fit RMS mm, median [IQR]",
+            f"one-step RMS mm, frames {a}-{b - 1}",
+            f"free-run RMS mm, frames {a}-{b - 1}",
+            "saturated neurons",
+            "near-zero weights",
+            "failed evaluations",
+            "wall time",
+        ],
+        rows=rows,
+        caption=f"Medians over {n_seeds} seeds. Fit: frames {exp.fit_frames[0]}-"
+        f"{exp.fit_frames[1] - 1}; the following frames were never seen by the fit.",
+    )
+    recording = exp.data().window(0, b)
+    preds = []
+    for s in SERIES:
+        model = load_model(folder / f"best_{s}.toml")
+        preds.append((f"{s} (best seed)", predict(model, recording, fit_frames=exp.fit_frames[1])))
+        if s == "neural":
+            figures.append(
+                Figure(
+                    plots.weight_heatmap(model, figs / "neural_weights")[0],
+                    "Identified neural weights of the best neural model",
+                )
+            )
+    gif = animation.write_gif(preds, figs / "animation.gif", title=f"{name} {config}")
+    return Section(
+        title=f"{name}: {config}",
+        tables=[table],
+        figures=figures,
+        animation=animation.payload(preds, title=f"{name} {config}: recorded vs best models"),
+        anchor=f"{name}-{config}",
+        notes=[f"GIF of the animation: {gif.relative_to(folder.parent.parent)}"],
+    )
+
+
+def write_experiments_report(summaries: dict, out: Path) -> Path:
+    sections = []
+    for name, s in summaries.items():
+        exp = EXPERIMENTS[name]
+        for config, c in s["configs"].items():
+            sections.append(
+                _config_section(name, exp, config, c, out / name / config, len(s["seeds"]))
+            )
+    return write_comparison_report(
+        out / "report.html",
+        "activebonds: the paper's experiments, standard vs mechanical-neural bonds",
+        sections,
+        subtitle="Stanciulescu & Louchet (2000), reproduced with several seeds per series.",
+    )
