@@ -35,9 +35,15 @@ class ESSettings:
     crossover_rate: float = 0.5
     selection_pressure: float = 4.0
     sigma_init: float = 0.1  # initial mutability, as a fraction of each gene's range
+    # crossover_rate: the fraction of children made by crossover (the others are copies of a
+    # tournament winner); all children are then mutated.
     sigma_floor: float = 1e-9  # smallest mutability, as a fraction of the range
     variant_probs: tuple[float, float, float, float] = (0.25, 0.25, 0.25, 0.25)
     adapt_variants: bool = False
+
+    @property
+    def n_cross(self) -> int:
+        return int(round(self.crossover_rate * self.population))
 
     @property
     def n_elite(self) -> int:
@@ -101,7 +107,7 @@ def noise(base_key, generation_index, problem: Problem, settings: ESSettings, dt
     """The random numbers of one generation: a pure function of (seed key, generation)."""
     key = jax.random.fold_in(base_key, generation_index)
     shape = np.asarray(problem.group_slots).shape
-    return ops.draw(key, settings.population, len(problem.lower), shape, dtype)
+    return ops.draw(key, settings.population, settings.n_cross, len(problem.lower), shape, dtype)
 
 
 def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSettings):
@@ -113,13 +119,16 @@ def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSett
     slots = jnp.asarray(problem.group_slots)
 
     # 1. parents, crossover per bond type
+    # children [0, C) by crossover, [C, N) copies of their first parent
     first = ops.tournament(nz.parent, state.cost)
-    cross_genes, cross_sigma = ops.crossover(
-        nz.cross, state.genes, state.sigma, state.local, slots, gene_group
-    )
-    do_cross = nz.do_cross < settings.crossover_rate
-    genes = jnp.where(do_cross, cross_genes, state.genes[first])
-    sigma = jnp.where(do_cross, cross_sigma, state.sigma[first])
+    c = settings.n_cross
+    genes, sigma = state.genes[first], state.sigma[first]
+    if c > 0:
+        cross_genes, cross_sigma = ops.crossover(
+            nz.cross, state.genes, state.sigma, state.local, slots, gene_group
+        )
+        genes = jnp.concatenate([cross_genes, genes[c:]])
+        sigma = jnp.concatenate([cross_sigma, sigma[c:]])
 
     # 2. mutation: one variant per child
     variant = ops.choose(nz.variant, jnp.broadcast_to(state.variant_probs, (n, ops.N_VARIANTS)))
@@ -198,7 +207,7 @@ def noise_bytes(problem: Problem, settings: ESSettings) -> int:
     """Memory of one generation's random numbers (float32), to size the chunks."""
     n, g = settings.population, len(problem.lower)
     t, s = np.asarray(problem.group_slots).shape
-    return 4 * (n * (2 + 2 * t * s + 5 + 2 * g + 1) + 2 * n)
+    return 4 * (n * (2 + 4 + 2 * g + 1) + 2 * settings.n_cross * t * s + 2 * n)
 
 
 def best(state: ESState):

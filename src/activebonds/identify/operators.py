@@ -32,8 +32,7 @@ class Noise(NamedTuple):
     and recompute it per element. Uniforms are in (0, 1)."""
 
     parent: jax.Array  # [2, N] uniforms: tournament candidates for the first parent
-    cross: jax.Array  # [2, N, T, S] uniforms: local-tournament candidates per slot
-    do_cross: jax.Array  # [N, 1] uniforms
+    cross: jax.Array  # [2, C, T, S] uniforms: local-tournament candidates per slot
     variant: jax.Array  # [N, 1] uniforms
     group: jax.Array  # [N, 1] uniforms: bond type for variant 2
     gene: jax.Array  # [N] uniforms: gene for variant 4
@@ -44,13 +43,14 @@ class Noise(NamedTuple):
     gumbel: jax.Array  # [2N] Gumbel, for selection
 
 
-def draw(key, n: int, n_genes: int, slots_shape: tuple[int, int], dtype=jnp.float32) -> Noise:
+def draw(
+    key, n: int, n_cross: int, n_genes: int, slots_shape: tuple[int, int], dtype=jnp.float32
+) -> Noise:
     k = rng.streams(key, 11)
     t, s = slots_shape
     return Noise(
         parent=rng.uniform(k[0], (2, n)),
-        cross=rng.uniform(k[1], (2, n, t, s)),
-        do_cross=rng.uniform(k[2], (n, 1)),
+        cross=rng.uniform(k[1], (2, n_cross, t, s)),
         variant=rng.uniform(k[3], (n, 1)),
         group=rng.uniform(k[4], (n, 1)),
         gene=rng.uniform(k[5], (n,)),

@@ -61,11 +61,14 @@ def cos_turns(t):
 
 
 def normal(stream, shape, dtype=jnp.float32):
-    """Standard normal (Box-Muller)."""
+    """Standard normals (Box-Muller, both the cosine and the sine branch of each pair)."""
     size = math.prod(shape)
-    u1 = uniform(stream, shape, dtype)
-    u2 = uniform(stream, shape, dtype, offset=size)
-    return jnp.sqrt(-2.0 * jnp.log(u1)) * cos_turns(u2)
+    half = (size + 1) // 2
+    u1 = uniform(stream, (half,), dtype)
+    u2 = uniform(stream, (half,), dtype, offset=half)
+    r = jnp.sqrt(-2.0 * jnp.log(u1))
+    z = jnp.concatenate([r * cos_turns(u2), r * cos_turns(u2 - 0.25)])
+    return z[:size].reshape(shape)
 
 
 def cauchy(stream, shape, dtype=jnp.float32):
