@@ -123,6 +123,9 @@ def run_experiment(
             results[series] = _run_series(
                 exp, model, recording, config, series, seeds, folder, progress
             )
+        summary["internal_force_floor_mm"] = internal_force_floor_mm(
+            recording.window(*exp.fit_frames)
+        )
         summary["configs"][config.name] = {
             "population": config.population,
             "generations": config.generations,
@@ -160,6 +163,17 @@ def _run_series(exp, model, recording, config, series, seeds, folder, progress) 
     result = _analyse(exp, ident.model, recording, runs, folder, series)
     write_text_atomic(done, json.dumps(result, indent=2) + "\n")
     return result
+
+
+def internal_force_floor_mm(window: Trajectory) -> float:
+    """The lowest one-step RMS error (mm) any model with only internal forces and equal
+    masses can reach on ``window``: such forces sum to zero, so the predicted centre of mass
+    moves at constant velocity, and for every frame sum_p |e_p|^2 >= P |mean_p e_p|^2."""
+    x = window.positions
+    com = x.mean(axis=1)  # [F, D]
+    predicted = com[1:-1] + (com[1:-1] - com[:-2])  # x_t + dt v_t, v by backward difference
+    err = np.sum((com[2:] - predicted) ** 2, axis=-1)
+    return float(np.sqrt(np.nanmean(err)) * 1000.0)
 
 
 def _pooled(rms_per_particle) -> float:
