@@ -1,0 +1,401 @@
+"""One self-contained HTML report: tables, figures as base64 PNG data URIs, and a canvas player
+whose numbers are an inline JSON blob. No external resource of any kind (works offline).
+
+:func:`write_report` reports one run; :func:`write_comparison_report` builds a report from
+any sections (e.g. standard vs neural series over several seeds), reusing the same pieces.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from . import animation, plots
+from .files import check_replaceable, staged_directory, write_html
+from .predict import Prediction, default_frames, predict_run
+from .runs import RunRecord, load_run
+
+PLAYER_IDS = ("canvas", "play", "frame", "frame-label", "mode", "zoom", "speed")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A PNG figure to embed (its SVG twin, if any, stays beside it on disk)."""
+
+    path: Path
+    caption: str = ""
+
+
+@dataclass(frozen=True)
+class Table:
+    columns: Sequence[str]
+    rows: Sequence[Sequence[object]]
+    caption: str = ""
+    key_value: bool = False  # two columns: a header cell then a value
+
+
+@dataclass(frozen=True)
+class Section:
+    """A titled part of a report: text paragraphs, tables, figures, and optionally a player
+    for an :func:`activebonds.report.animation.payload`."""
+
+    title: str
+    text: Sequence[str] = ()
+    tables: Sequence[Table] = ()
+    figures: Sequence[Figure | Path] = ()
+    animation: dict | None = None
+    anchor: str = ""
+    notes: Sequence[str] = field(default_factory=tuple)
+
+
+def fmt(x: object, digits: int = 4) -> str:
+    """Numbers to short text (NaN/None as an em dash); other values as str."""
+    if x is None:
+        return "—"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, int | np.integer):
+        return str(int(x))
+    if isinstance(x, float | np.floating):
+        if not math.isfinite(float(x)):
+            return "—" if math.isnan(float(x)) else ("∞" if x > 0 else "−∞")
+        return f"{float(x):.{digits}g}"
+    return str(x)
+
+
+def _asset(name: str) -> str:
+    return (resources.files("activebonds.report") / "assets" / name).read_text(encoding="utf-8")
+
+
+def _img(path: Path, alt: str) -> str:
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    mime = {".png": "image/png", ".gif": "image/gif", ".svg": "image/svg+xml"}.get(
+        Path(path).suffix.lower(), "image/png"
+    )
+    return f'<img src="data:{mime};base64,{data}" alt="{html.escape(alt)}">'
+
+
+def _table(t: Table) -> str:
+    out = ['<table class="kv">' if t.key_value else "<table>"]
+    if t.caption:
+        out.append(f"<caption>{html.escape(t.caption)}</caption>")
+    if not t.key_value:
+        out.append("<tr>" + "".join(f"<th>{html.escape(str(c))}</th>" for c in t.columns) + "</tr>")
+    for row in t.rows:
+        cells = []
+        for i, v in enumerate(row):
+            text = html.escape(fmt(v))
+            if t.key_value:
+                cells.append(f"<th>{text}</th>" if i == 0 else f"<td>{text}</td>")
+            else:
+                num = isinstance(v, int | float | np.integer | np.floating) and not isinstance(
+                    v, bool
+                )
+                cells.append(f'<td class="num">{text}</td>' if num else f"<td>{text}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _player(index: int, anim: dict) -> str:
+    suffix = "" if index == 0 else f"-{index + 1}"
+    ids = {k: f"{k}{suffix}" for k in PLAYER_IDS}
+    title = html.escape(anim.get("title") or "")
+    speeds = "".join(
+        f'<option value="{v}"{" selected" if v == 12 else ""}>{v} frames/s</option>'
+        for v in (3, 6, 12, 30, 60)
+    )
+    return f"""<div class="player" data-index="{index}">
+<canvas id="{ids["canvas"]}" width="760" height="460" aria-label="{title or "animation"}"></canvas>
+<div class="controls">
+<button type="button" class="play" id="{ids["play"]}" aria-pressed="false">&#9654; play</button>
+<input type="range" class="frame" id="{ids["frame"]}" min="0" max="0" value="0" step="1" aria-label="frame">
+<span class="frame-label" id="{ids["frame-label"]}">frame 0</span>
+<label>show <select class="mode" id="{ids["mode"]}">
+<option value="both" selected>one-step + free run</option>
+<option value="one">one-step only</option>
+<option value="free">free run only</option></select></label>
+<label>view <select class="zoom" id="{ids["zoom"]}"><option value="all" selected>all markers</option></select></label>
+<label>speed <select class="speed" id="{ids["speed"]}">{speeds}</select></label>
+</div></div>
+<p class="note">Black: recorded markers and bonds (grey: their paths). Circles, solid bonds:
+one-step predictions (each frame from the recorded state of the two frames before).
+Squares, dashed bonds: free run from the first two frames. Projection on the
+{html.escape(" / ".join(anim.get("axes", [])))} axes (the two of largest spread).</p>"""
+
+
+def _json_blob(data: dict) -> str:
+    text = json.dumps(data, allow_nan=False, separators=(",", ":"))
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
+def render(title: str, sections: Sequence[Section], *, subtitle: str = "") -> str:
+    """The whole HTML document as one string (CSS, images, data and JS inline)."""
+    animations: list[dict] = []
+    body: list[str] = []
+    nav = []
+    for k, s in enumerate(sections):
+        anchor = s.anchor or f"s{k + 1}"
+        nav.append(f'<a href="#{html.escape(anchor)}">{html.escape(s.title)}</a>')
+        body.append(f'<section id="{html.escape(anchor)}"><h2>{html.escape(s.title)}</h2>')
+        body.extend(f"<p>{html.escape(p)}</p>" for p in s.text)
+        if s.animation is not None:
+            body.append(_player(len(animations), s.animation))
+            animations.append(s.animation)
+        body.extend(_table(t) for t in s.tables)
+        for f in s.figures:
+            f = f if isinstance(f, Figure) else Figure(Path(f))
+            cap = f"<figcaption>{html.escape(f.caption)}</figcaption>" if f.caption else ""
+            body.append(f"<figure>{_img(f.path, f.caption or f.path.stem)}{cap}</figure>")
+        body.extend(f'<p class="note">{html.escape(n)}</p>' for n in s.notes)
+        body.append("</section>")
+    script = ""
+    if animations:
+        script = (
+            f'<script type="application/json" id="report-data">'
+            f"{_json_blob({'animations': animations})}</script>\n<script>\n{_asset('player.js')}\n</script>"
+        )
+    sub = f'<p class="subtitle">{html.escape(subtitle)}</p>' if subtitle else ""
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{html.escape(title)}</title>
+<link rel="icon" href="data:,">
+<style>
+{_asset("report.css")}
+</style>
+</head>
+<body>
+<h1>{html.escape(title)}</h1>
+{sub}
+<nav>{" ".join(nav)}</nav>
+{chr(10).join(body)}
+{script}
+</body>
+</html>
+"""
+
+
+def write_comparison_report(
+    out_path: str | Path, title: str, sections: Sequence[Section], *, subtitle: str = ""
+) -> Path:
+    """Write a report made of ``sections`` to ``out_path`` atomically; returns the path.
+
+    Figures are read (and embedded) now, so they may live in a folder that is about to be
+    swapped in with :func:`activebonds.report.files.staged_directory`."""
+    out_path = Path(out_path)
+    return write_html(out_path, render(title, sections, subtitle=subtitle))
+
+
+# ----------------------------------------------------------------------------- one run
+
+
+def _markers_text(pred: Prediction) -> str:
+    return ", ".join(
+        n if n == m else f"{n} ← {m}" for n, m in zip(pred.names, pred.markers, strict=True)
+    )
+
+
+def summary_table(record: RunRecord, pred: Prediction) -> Table:
+    """The run at a glance: inputs, settings, outcome, versions, wall time."""
+    meta, st, s = record.meta, record.status, record.settings
+    inputs = meta.get("inputs", {})
+    w = record.window
+    start = s.frames[0]
+    gens_done = int(st.get("generation", len(record.history.get("generation", []))))
+    per = ", ".join(
+        f"{n} {fmt(v, 3)}" for n, v in zip(pred.names, pred.one_step_rms_mm, strict=True)
+    )
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(meta.get("versions", {}).items()))
+    be = meta.get("backend", {})
+    wall = st.get("wall_seconds")
+    rows = [
+        ("run", str(record.path)),
+        ("status", st.get("status", "unknown") + ("" if record.has_best else " (no best model)")),
+        ("model", f"{record.model.name} ({inputs.get('model', {}).get('path', 'in memory')})"),
+        ("bond variant", s.bonds),
+        ("data", inputs.get("data", {}).get("path", w.source or "in memory")),
+        ("markers (particle ← marker)", _markers_text(pred)),
+        (
+            "frames fitted",
+            f"{start}:{start + w.n_frames} ({w.n_frames} frames, {w.duration:.4g} s)",
+        ),
+        ("rate", f"{w.rate:g} Hz"),
+        ("population", s.population),
+        ("generations", f"{gens_done} of {s.generations}"),
+        ("seed", s.seed),
+        (
+            "cost",
+            f"horizon {s.horizon}, {s.integrator} with {s.substeps} substep(s), {s.precision}",
+        ),
+        ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),
+        ("best RMS per particle (one-step)", f"{per} mm"),
+        ("failed evaluations", st.get("failed_evaluations", "—")),
+        ("wall time", "—" if wall is None else f"{float(wall):.4g} s"),
+        ("versions", versions),
+        ("backend", f"{be.get('backend', '?')} ({be.get('platform', '?')}), x64 {be.get('x64')}"),
+        ("created", meta.get("created", "—")),
+        ("command", meta.get("command", "—")),
+    ]
+    return Table(columns=("", ""), rows=rows, key_value=True, caption="Run")
+
+
+def errors_table(pred: Prediction, caption: str = "RMS position error per particle (mm)") -> Table:
+    cols = ["particle", "marker", "one-step (fit)", "free run (fit)"]
+    if pred.extended:
+        cols += ["one-step (beyond)", "free run (beyond)"]
+    rows = []
+    for p, (n, m) in enumerate(zip(pred.names, pred.markers, strict=True)):
+        row = [n, m, float(pred.one_step_rms_mm[p]), float(pred.free_run_rms_mm[p])]
+        if pred.extended:
+            row += [float(pred.one_step_rms_mm_beyond[p]), float(pred.free_run_rms_mm_beyond[p])]
+        rows.append(row)
+    return Table(columns=cols, rows=rows, caption=caption)
+
+
+def parameters_table(record: RunRecord) -> Table:
+    rows = [
+        (g.name, float(g.value), float(g.lower), float(g.upper), g.log)
+        for g in record.model.layout.genes
+    ]
+    return Table(("parameter", "value", "min", "max", "log search"), rows, "Identified parameters")
+
+
+def neural_table(pred: Prediction, labels: Sequence[str]) -> Table:
+    rows = [("saturated samples (|a| > 0.95) along the free run", pred.saturated_share)]
+    for b in np.flatnonzero(pred.neural):
+        rows.append((f"  neuron {labels[b]}", float(pred.saturated_per_neuron[b])))
+    rows.append(("near-zero weights (|w| < 1 % of the weight range)", pred.near_zero_weight_share))
+    return Table(("", ""), rows, "Neurons", key_value=True)
+
+
+def _report_paths(run: Path, out: str | Path | None) -> tuple[Path, Path]:
+    if out is None:
+        return run / "report.html", run / "figures"
+    out = Path(out)
+    if out.is_dir():
+        out = out / "report.html"
+    if out.suffix.lower() not in (".html", ".htm"):
+        raise InputError(out, "the report file must end in .html")
+    return out, out.with_name(f"{out.stem}-figures")
+
+
+def write_report(
+    run_dir: str | Path, out: str | Path | None = None, *, frames: int | None = None
+) -> Path:
+    """Write the report of one run: ``RUN/report.html`` (or ``out``) and its figures
+    (``RUN/figures/*.png|svg`` and ``animation.gif``; beside ``out``: ``STEM-figures/``).
+
+    ``frames``: how many frames of the original recording to predict, from the fitted
+    window's start (default: twice the window; only the window if the recording is gone or
+    changed). Raises :class:`InputError` for a missing or invalid run."""
+    run = Path(run_dir)
+    record = load_run(run)
+    if frames is not None and frames < 1:
+        raise InputError("--frames", "must be at least 1")
+    html_path, fig_dir = _report_paths(run, out)
+    if not html_path.absolute().parent.is_dir():
+        raise InputError(html_path, "the folder does not exist")
+    check_replaceable(fig_dir)
+    pred, _ = predict_run(record, frames if frames is not None else default_frames(record))
+    with staged_directory(fig_dir) as tmp:
+        sections = run_sections(record, pred, tmp)
+        title = f"activebonds report: {run.resolve().name}"
+        subtitle = f"{record.model.name}, {record.settings.bonds} bonds — {record.status.get('status', 'unknown')}"
+        write_comparison_report(html_path, title, sections, subtitle=subtitle)
+    return html_path
+
+
+def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Section]:
+    """The sections of a one-run report; figures are written into ``fig_dir``."""
+    model = record.model
+    labels = plots.bond_labels(model)
+    conv = plots.convergence(
+        [plots.Series(record.label, [record.history])], fig_dir / "convergence"
+    )
+    traj = plots.trajectories(pred, fig_dir / "trajectories")
+    params = plots.parameters(model, fig_dir / "parameters")
+    variants = plots.variant_success(record.history, fig_dir / "variants")
+    gif = animation.write_gif([(record.label, pred)], fig_dir / "animation.gif")
+    extra = []
+    if not pred.extended:
+        extra.append(
+            "Only the fitted window is shown (the original recording is not available, "
+            "unchanged, or longer)."
+        )
+    elif pred.diverged_at is not None:
+        extra.append(f"The free run went non-finite at frame {pred.diverged_at}.")
+    sections = [
+        Section(
+            "Summary", tables=[summary_table(record, pred), errors_table(pred)], anchor="summary"
+        ),
+        Section(
+            "Convergence",
+            figures=[Figure(conv[0], "Best and population-median cost as RMS position error.")],
+            anchor="convergence",
+        ),
+        Section(
+            "Recorded vs model",
+            text=[
+                f"Frames 0–{pred.fit_frames - 1} were fitted"
+                + (
+                    f"; frames {pred.fit_frames}–{pred.n_frames - 1} test generalisation."
+                    if pred.extended
+                    else "."
+                )
+            ],
+            animation=animation.payload([(record.label, pred)], title="recorded vs model"),
+            figures=[
+                Figure(traj[0], "Positions against time: recorded, one-step predictions, free run.")
+            ],
+            notes=[
+                *extra,
+                f"An animated GIF of the same is written to {gif.name} beside the figures.",
+            ],
+            anchor="animation",
+        ),
+        Section(
+            "Parameters",
+            figures=[
+                Figure(params[0], "Identified parameters within their bounds (search space).")
+            ],
+            tables=[parameters_table(record)],
+            anchor="parameters",
+        ),
+    ]
+    if pred.neural.any():
+        heat = plots.weight_heatmap(model, fig_dir / "weights")
+        act = plots.activations(pred, labels, fig_dir / "activations")
+        sections.append(
+            Section(
+                "Neurons",
+                figures=[
+                    Figure(
+                        heat[0],
+                        "Input weights of each neuron (length and rate of the other bonds).",
+                    ),
+                    Figure(act[0], "Activations along the free run."),
+                ],
+                tables=[neural_table(pred, labels)],
+                anchor="neurons",
+            )
+        )
+    sections.append(
+        Section(
+            "Mutation variants",
+            figures=[Figure(variants[0], "Success rate and share of each mutation variant.")],
+            anchor="variants",
+        )
+    )
+    return sections

@@ -1,0 +1,379 @@
+"""Reports: prediction numbers, saturation and weight shares, figures, the self-contained HTML,
+the comparison report and the ``report`` command."""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import typer
+from PIL import Image
+from typer.testing import CliRunner
+
+from activebonds.data import Trajectory
+from activebonds.errors import InputError
+from activebonds.identify import fit
+from activebonds.model import as_standard, load_model, loads_model
+from activebonds.report import (
+    Figure,
+    Section,
+    Series,
+    Table,
+    load_run,
+    payload,
+    plots,
+    predict,
+    predict_run,
+    projection_axes,
+    staged_directory,
+    write_comparison_report,
+    write_report,
+)
+from activebonds.report.predict import near_zero_share, rms_mm, saturation_share
+from activebonds.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIANGLE = ROOT / "examples" / "triangle.toml"
+HORSE_MODEL = ROOT / "examples" / "horse_limb.toml"
+HORSE_DATA = (
+    ROOT / "src" / "activebonds" / "datasets" / "horse_vhdc" / "Horse1_M1_trot1_kinematics.csv"
+)
+FIGURES = ("convergence", "trajectories", "parameters", "variants", "weights", "activations")
+
+_RUNS: dict[str, tuple] = {}
+
+
+def report_app() -> typer.Typer:
+    """The ``report`` command on its own (the main app registers the same function)."""
+    from activebonds.cli.report_cmd import report
+
+    app = typer.Typer()
+    app.command()(report)
+    return app
+
+
+def tiny_run(base: Path):
+    """One tiny neural fit of the horse limb (population 20, 30 generations) and its report
+    written by the ``report`` command; made once per session, shared with the browser test.
+    Returns (FitResult, report path, the command's result)."""
+    if "neural" not in _RUNS:
+        run = base / "run"
+        result = fit(
+            HORSE_MODEL,
+            HORSE_DATA,
+            out=run,
+            markers=("Head", "Withers", "HFL"),
+            frames=(0, 10),
+            bonds="neural",
+            population=20,
+            generations=30,
+        )
+        cli = CliRunner().invoke(report_app(), [str(run)])
+        assert cli.exit_code == 0, cli.output
+        _RUNS["neural"] = (result, run / "report.html", cli)
+    return _RUNS["neural"]
+
+
+@pytest.fixture(scope="module")
+def neural_run(tmp_path_factory):
+    return tiny_run(tmp_path_factory.mktemp("report"))
+
+
+@pytest.fixture(scope="module")
+def triangle():
+    model = load_model(TRIANGLE)
+    return model, simulate(model, 120, 60.0)
+
+
+# ----------------------------------------------------------------------------- numbers
+
+
+def test_one_step_of_the_true_model_has_no_error(triangle):
+    model, traj = triangle
+    pred = predict(model, traj)
+    err = np.abs(pred.one_step[2:] - traj.positions[2:])
+    assert np.isnan(pred.one_step[:2]).all()
+    assert err.max() < 1e-12
+    assert pred.one_step_rms_mm.max() < 1e-9
+    assert pred.one_step.dtype == np.float64
+
+
+def test_free_run_of_the_true_model_reproduces_the_data(triangle):
+    model, traj = triangle
+    pred = predict(model, traj)
+    assert np.abs(pred.free_run - traj.positions).max() < 1e-9
+    assert pred.free_run_rms_mm.max() < 1e-6
+    assert pred.diverged_at is None
+    assert not pred.extended and pred.one_step_rms_mm_beyond is None
+
+
+def test_a_wrong_model_has_errors_and_a_longer_window_is_generalisation(triangle):
+    model, traj = triangle
+    stiff = model.spec.model_copy(
+        update={"bond": [b.model_copy(update={"stiffness": 400.0}) for b in model.spec.bond]}
+    )
+    wrong = load_model_from_spec(stiff)
+    pred = predict(wrong, traj, fit_frames=60)
+    assert pred.extended and pred.fit_frames == 60
+    assert (pred.one_step_rms_mm > 1e-3).all() and (
+        pred.free_run_rms_mm > pred.one_step_rms_mm
+    ).all()
+    assert pred.one_step_rms_mm_beyond.shape == (3,)
+
+
+def load_model_from_spec(spec):
+    from activebonds.model import build
+
+    return build(spec)
+
+
+def test_rms_mm_ignores_missing_frames():
+    rec = np.zeros((5, 2, 3))
+    pred = rec.copy()
+    pred[..., 0] += 0.003  # 3 mm off along x
+    pred[1, 1] = np.nan
+    pred[:, 1, 2] = [0.004, np.nan, 0.004, 0.004, 0.004]
+    pred[:, 1, 0] = 0.003
+    out = rms_mm(pred, rec)
+    assert out[0] == pytest.approx(3.0)
+    assert out[1] == pytest.approx(5.0)
+    assert np.isnan(rms_mm(np.full_like(rec, np.nan), rec)).all()
+
+
+def test_saturation_share_on_a_hand_built_case():
+    act = np.array([[0.96, 0.5, 0.99], [-0.97, np.nan, 0.1], [0.2, -0.951, 1.0]])
+    neural = np.array([True, True, False])
+    share, per = saturation_share(act, neural)
+    # neural samples known: 0.96, 0.5, -0.97, 0.2, -0.951 -> saturated 0.96, -0.97, -0.951
+    assert share == pytest.approx(3 / 5)
+    assert per[0] == pytest.approx(2 / 3) and per[1] == pytest.approx(1 / 2)
+    assert np.isnan(per[2])
+    share, per = saturation_share(act, np.zeros(3, bool))
+    assert np.isnan(share) and np.isnan(per).all()
+
+
+NEURAL_MODEL = """
+name = "n3"
+dimension = 2
+[[particle]]
+name = "a"
+[[particle]]
+name = "b"
+[[particle]]
+name = "c"
+[[bond]]
+kind = "binary"
+particles = ["a", "b"]
+rest_length = 1.0
+neural = true
+weights = { length = [0.0, 0.1, 5.0], rate = [0.0, -0.19, 0.3], min = -10.0, max = 10.0 }
+[[bond]]
+kind = "binary"
+particles = ["b", "c"]
+rest_length = 1.0
+neural = true
+weights = { length = [0.0, 0.0, -0.005], rate = [0.5, 0.0, 0.0], min = -1.0, max = 1.0 }
+[[bond]]
+kind = "binary"
+particles = ["a", "c"]
+rest_length = 1.0
+"""
+
+
+def test_near_zero_weight_share_on_a_hand_built_case():
+    model = loads_model(NEURAL_MODEL)
+    # bond 0, range 20 (near zero: |w| < 0.2): length[1] 0.1 and rate[1] -0.19 are, 5.0 and
+    # 0.3 are not; bond 1, range 2 (|w| < 0.02): length[0] 0, length[2] -0.005 and rate[2] 0
+    # are, rate[0] 0.5 is not; a neuron's own entry is unused; bond 2 has no neuron.
+    shares = near_zero_share(model)
+    assert shares == pytest.approx(5 / 8)
+    assert np.isnan(near_zero_share(as_standard(model)))
+
+
+def test_projection_axes_pick_the_largest_spread():
+    t = np.linspace(0, 1, 50)
+    pos = np.zeros((50, 2, 3))
+    pos[:, 0, 0] = 2 * t  # X travels
+    pos[:, 1, 2] = 0.5 * np.sin(6 * t)  # Z oscillates
+    pos[:, :, 1] = 0.01 * t[:, None]  # little lateral motion
+    assert projection_axes(pos) == (0, 2)
+    assert projection_axes(pos[..., :2]) == (0, 1)
+
+
+# ----------------------------------------------------------------------------- run report
+
+
+def _html(path: Path) -> str:
+    return path.read_text(encoding="utf-8")
+
+
+def _report_data(text: str) -> dict:
+    m = re.search(r'<script type="application/json" id="report-data">(.*?)</script>', text, re.S)
+    assert m, "no JSON blob"
+    return json.loads(m.group(1))
+
+
+def test_report_of_a_tiny_fit(neural_run):
+    result, report, _ = neural_run
+    run = result.run
+    assert report == run / "report.html" and report.is_file()
+    figs = run / "figures"
+    for name in FIGURES:
+        assert (figs / f"{name}.png").stat().st_size > 1000
+        assert (figs / f"{name}.svg").read_text(encoding="utf-8").lstrip().startswith("<?xml")
+    with Image.open(figs / "animation.gif") as gif:
+        assert gif.n_frames == 20  # fitted window (10) + as many frames beyond
+    assert not list(run.glob(".figures*")) and not list(run.glob(".tmp-*"))
+
+    text = _html(report)
+    data = _report_data(text)
+    anim = data["animations"][0]
+    assert len(anim["recorded"]) == 20 and anim["fit_frames"] == 10
+    assert anim["axes"] == ["X", "Z"]  # the horse's sagittal plane
+    assert [m["label"] for m in anim["models"]] == ["run"]
+    for ident in ('id="play"', 'id="frame"', 'type="range"', "<canvas", 'id="mode"'):
+        assert ident in text
+    # every figure is embedded, byte for byte
+    for name in FIGURES:
+        encoded = base64.b64encode((figs / f"{name}.png").read_bytes()).decode()
+        assert f'src="data:image/png;base64,{encoded}"' in text
+    # the summary shows the fit's numbers
+    assert f"{result.rms_mm:.4g} mm" in text
+    assert "neural" in text and "Head" in text and "failed evaluations" in text
+
+
+def test_report_html_is_self_contained(neural_run):
+    text = _html(neural_run[1])
+    assert "http://" not in text and "https://" not in text
+    assert 'src="http' not in text and 'href="http' not in text
+    refs = re.findall(r'(?:src|href)\s*=\s*"([^"]*)"', text)
+    assert refs and all(r.startswith(("data:", "#")) for r in refs), refs
+    assert "<script src" not in text and 'rel="stylesheet"' not in text
+    assert "@import" not in text and "url(" not in text
+
+
+def test_one_step_predictions_match_the_fit_cost(neural_run):
+    result = neural_run[0]
+    pred, record = predict_run(result.run)
+    assert record.has_best and not pred.extended
+    expected = [result.local_rms_mm[n] for n in pred.names]
+    np.testing.assert_allclose(pred.one_step_rms_mm, expected, rtol=1e-9)
+    longer, _ = predict_run(result.run, frames=20)
+    assert longer.n_frames == 20 and longer.fit_frames == 10
+    np.testing.assert_allclose(longer.one_step[:10], pred.one_step, rtol=0, atol=1e-15)
+    assert 0.0 <= longer.saturated_share <= 1.0
+    assert longer.activation.shape == (20, 3)
+
+
+def test_figures_folder_is_replaced_whole_and_foreign_files_are_guarded(neural_run, tmp_path):
+    target = tmp_path / "figures"
+    target.mkdir()
+    (target / "stale.png").write_bytes(b"old")
+    with staged_directory(target) as new:
+        (new / "a.png").write_bytes(b"new")
+        assert (target / "stale.png").exists()  # untouched until the new folder is complete
+    assert sorted(p.name for p in target.iterdir()) == ["a.png"]
+    with pytest.raises(RuntimeError), staged_directory(target) as new:
+        (new / "b.png").write_bytes(b"half")
+        raise RuntimeError("interrupted")
+    assert sorted(p.name for p in target.iterdir()) == ["a.png"]
+    assert [p.name for p in tmp_path.iterdir()] == ["figures"]  # no leftovers
+
+    run = tmp_path / "copy"
+    shutil.copytree(neural_run[0].run, run)
+    before = (run / "report.html").read_bytes()
+    (run / "figures" / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="not figures"):
+        write_report(run)
+    assert (run / "figures" / "notes.txt").read_text() == "mine"
+    assert (run / "report.html").read_bytes() == before
+    assert not list(run.glob(".figures*"))
+
+
+def test_run_without_best_model_is_reported_with_the_start_values(neural_run, tmp_path):
+    run = tmp_path / "nobest"
+    shutil.copytree(neural_run[0].run, run)
+    (run / "best_model.toml").unlink()
+    record = load_run(run)
+    assert not record.has_best
+    assert record.model.topology.neural.all()  # the bond variant of the run is applied
+
+
+@pytest.mark.parametrize(
+    "setup, message",
+    [
+        (lambda p: None, "no such run directory"),
+        (lambda p: p.mkdir(), "not a run directory"),
+        (lambda p: (p.mkdir(), (p / "run.json").write_text("{")), "unreadable run.json"),
+    ],
+)
+def test_invalid_run_directories_are_one_line_errors(tmp_path, setup, message):
+    run = tmp_path / "bad"
+    setup(run)
+    with pytest.raises(InputError, match=message) as err:
+        write_report(run)
+    assert "\n" not in err.value.line()
+
+
+def test_report_command(neural_run, tmp_path):
+    result, report, cli = neural_run
+    assert cli.output.strip() == str(report)  # prints the path of the report it wrote
+    runner = CliRunner()
+    res = runner.invoke(report_app(), [str(tmp_path / "missing")])
+    assert res.exit_code == 2
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "missing" in lines[0]
+    res = runner.invoke(report_app(), [str(result.run), "--out", str(tmp_path / "r.txt")])
+    assert res.exit_code == 2 and "must end in .html" in res.output
+
+
+# ----------------------------------------------------------------------------- comparison
+
+
+def test_comparison_report(neural_run, tmp_path):
+    record = load_run(neural_run[0].run)
+    pred, _ = predict_run(record, frames=20)
+    window = Trajectory(
+        positions=pred.recorded,
+        mask=np.isfinite(pred.recorded).all(-1),
+        markers=pred.markers,
+        rate=1 / pred.dt,
+    )
+    # a second model along the same recording (same topology: its predictions compile once)
+    other = record.model.with_genome(0.97 * record.model.layout.initial())
+    std = predict(other, window, fit_frames=10)
+    h = record.history
+    shifted = {k: (v * 1.5 if k.endswith(("cost", "rms_mm")) else v) for k, v in h.items()}
+    out = tmp_path / "cmp" / "report.html"
+    out.parent.mkdir()
+    with staged_directory(out.parent / "figures") as figs:
+        conv = plots.convergence(
+            [Series("standard", [h, shifted, h]), Series("neural", [shifted, h])],
+            figs / "convergence",
+        )
+        heat = plots.weight_heatmap(record.model, figs / "weights")
+        table = Table(
+            ["series", "seeds", "best RMS (mm)"], [["standard", 3, 1.5], ["neural", 2, 1.25]]
+        )
+        sections = [
+            Section("Convergence", figures=[Figure(conv[0], "median and IQR")], tables=[table]),
+            Section("Best models", animation=payload([("standard", std), ("neural", pred)])),
+            Section("Neural weights", figures=[heat[0]]),
+        ]
+        path = write_comparison_report(out, "Standard vs neural", sections, subtitle="test")
+    assert path == out and (out.parent / "figures" / "convergence.svg").is_file()
+    text = _html(out)
+    anim = _report_data(text)["animations"][0]
+    assert [m["label"] for m in anim["models"]] == ["standard", "neural"]
+    assert len(anim["recorded"]) == 20
+    assert anim["models"][0]["free_run"] != anim["models"][1]["free_run"]
+    assert text.count('<img src="data:image/png;base64,') == 2
+    assert "Standard vs neural" in text and "https://" not in text
+    with pytest.raises(ValueError, match="different recordings"):
+        payload([("a", pred), ("b", dataclasses.replace(pred, recorded=pred.recorded + 0.01))])
