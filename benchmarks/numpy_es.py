@@ -1,0 +1,458 @@
+"""The package's ES and short-term cost, written in plain NumPy as a careful scientist would.
+
+Same algorithm as ``activebonds.identify.es`` / ``operators`` (tournament parents; multi-parent
+crossover per bond type biased by local cost; one of four mutation variants per child with
+log-normal self-adaptation; elitist, rank-biased selection from parents + children) and the same
+cost as ``activebonds.identify.cost.make_cost`` (restart from the recorded state with a
+backward-difference velocity, semi-implicit Euler or velocity Verlet, H steps; binary
+viscoelastic and mechanical-neural bonds, gravity). Random numbers come from NumPy's PCG64, so
+runs are statistically, not bitwise, equal to the package's.
+
+Everything is vectorised over the population with broadcasting on [N, S, P, D] arrays (N
+individuals, S restart states, P particles, D axes, B binary bonds); there is no Python loop
+over individuals, bonds or genes: the only loops are over integration steps (H x substeps).
+
+    python benchmarks/numpy_es.py --check     # cost == package cost to 1e-9 relative
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+# ---------------------------------------------------------------------------------------------
+# cost
+
+
+class NumpyCost:
+    """``cost(genomes [N, G]) -> (global [N], local [N, P])``, the package's short-term cost."""
+
+    def __init__(self, model, windows, substeps: int = 1, method: str = "euler"):
+        topo, layout = model.topology, model.layout
+        if topo.unary.size or topo.ternary.size:
+            raise NotImplementedError("the NumPy baseline covers binary bonds and gravity only")
+        if method not in ("euler", "verlet"):
+            raise ValueError(method)
+        self.method, self.substeps = method, int(substeps)
+        self.n_genes = layout.n_genes
+        self.log = layout.log
+        self.base = {f: np.asarray(v, np.float64) for f, v in layout.base._asdict().items()}
+        self.index = {f: np.asarray(v) for f, v in layout.index._asdict().items()}
+        self.i, self.j = topo.binary[:, 0], topo.binary[:, 1]
+        self.neural = np.asarray(topo.neural, bool)
+        self.off = 1.0 - np.eye(topo.n_binary)
+        # incidence [P, B]: +1 at the bond's first particle, -1 at its second (force on i is +T u)
+        inc = np.zeros((topo.n_particles, topo.n_binary))
+        inc[self.i, np.arange(topo.n_binary)] += 1.0
+        inc[self.j, np.arange(topo.n_binary)] -= 1.0
+        self.incidence = inc
+        self.x0, self.v0 = windows.x0, windows.v0  # [S, P, D]
+        self.target, self.weight = windows.target, windows.weight  # [S, H, P, D], [S, H, P]
+        self.counts = windows.weight > 0
+        self.dt, self.horizon = windows.dt, windows.horizon
+
+    def decode(self, genomes):
+        """[N, G] search space -> dict of parameter arrays with a leading N axis."""
+        values = np.where(self.log, np.exp(genomes), genomes)
+        padded = np.concatenate([values, np.zeros((len(values), 1))], axis=1)
+        out = {}
+        for field, base in self.base.items():
+            index = self.index[field]
+            if index.size == 0 or (index < 0).all():
+                out[field] = base[None]
+            else:
+                gathered = padded[:, np.where(index >= 0, index, self.n_genes)]
+                out[field] = np.where(index >= 0, gathered, base)
+        return out
+
+    def force(self, p, x, v):
+        """x, v [N, S, P, D] -> F [N, S, P, D]."""
+        f = p["mass"][:, None, :, None] * p["gravity"][:, None, None, :]
+        if self.i.size == 0:
+            return np.broadcast_to(f, x.shape)
+        d = x[:, :, self.j] - x[:, :, self.i]  # [N, S, B, D]
+        length = np.sqrt(np.sum(d * d, axis=-1))
+        u = d / length[..., None]
+        rate = np.sum((v[:, :, self.j] - v[:, :, self.i]) * u, axis=-1)  # [N, S, B]
+        elong = length - p["l0"][:, None]
+        tension = p["k"][:, None] * elong + p["c"][:, None] * rate
+        if self.neural.any():
+            wl = np.swapaxes(p["w_len"] * self.off, -1, -2)  # [N, B(j), B(b)]
+            wr = np.swapaxes(p["w_rate"] * self.off, -1, -2)
+            drive = elong @ wl + rate @ wr  # [N, S, B]
+            act = np.tanh(drive - p["threshold"][:, None])
+            tension = tension + np.where(self.neural, p["gain"][:, None] * act, 0.0)
+        return f + self.incidence @ (tension[..., None] * u)  # [P, B] @ [N, S, B, D]
+
+    def step(self, p, x, v, h):
+        inv_m = 1.0 / p["mass"][:, None, :, None]
+        if self.method == "euler":
+            v = v + h * self.force(p, x, v) * inv_m
+            return x + h * v, v
+        v_half = v + 0.5 * h * self.force(p, x, v) * inv_m
+        x = x + h * v_half
+        return x, v_half + 0.5 * h * self.force(p, x, v_half) * inv_m
+
+    def predict(self, p, n):
+        """Predicted positions [N, S, H, P, D]."""
+        x = np.broadcast_to(self.x0, (n,) + self.x0.shape)
+        v = np.broadcast_to(self.v0, (n,) + self.v0.shape)
+        h = self.dt / self.substeps
+        out = []
+        for _ in range(self.horizon):
+            for _ in range(self.substeps):
+                x, v = self.step(p, x, v, h)
+            out.append(x)
+        return np.stack(out, axis=2)
+
+    def __call__(self, genomes):
+        genomes = np.atleast_2d(genomes)
+        with np.errstate(all="ignore"):
+            pred = self.predict(self.decode(genomes), len(genomes))
+            err2 = np.sum((pred - self.target) ** 2, axis=-1)  # [N, S, H, P]
+            local = np.sum(np.where(self.counts, err2, 0.0), axis=(1, 2))
+            local = np.where(np.isfinite(local), local, np.inf)
+            return local.sum(axis=-1), local
+
+
+# ---------------------------------------------------------------------------------------------
+# ES
+
+
+class Noise(NamedTuple):
+    """The random numbers of one generation (the package's ``operators.Noise``)."""
+
+    parent: np.ndarray  # [2, N] uniforms: tournament candidates for the first parent
+    cross: np.ndarray  # [2, C, T, S] uniforms: local-tournament candidates per slot
+    variant: np.ndarray  # [N, 1] uniforms
+    group: np.ndarray  # [N, 1] uniforms
+    gene: np.ndarray  # [N] uniforms
+    z0: np.ndarray  # [N, 1] normals
+    zi: np.ndarray  # [N, G] normals
+    step: np.ndarray  # [N, G] normals
+    cauchy: np.ndarray  # [N]
+    gumbel: np.ndarray  # [2N]
+
+
+def _index(u, n: int):
+    return np.minimum((u * n).astype(np.int64), n - 1)
+
+
+def choose(u, probs):
+    """One category per row of probs [..., K] by inverse CDF, from uniforms u [..., 1]."""
+    cdf = np.cumsum(probs, axis=-1)
+    return np.minimum(np.sum(cdf < u * cdf[..., -1:], axis=-1), probs.shape[-1] - 1)
+
+
+class NumpyES:
+    """The package's self-adaptive ES (same settings object: ``es.ESSettings``)."""
+
+    def __init__(self, cost, lower, upper, gene_group, group_slots, settings, seed=0):
+        self.cost = cost
+        self.lo, self.hi = np.asarray(lower, float), np.asarray(upper, float)
+        self.span = self.hi - self.lo
+        self.gene_group = np.asarray(gene_group)
+        self.slots = np.asarray(group_slots)
+        self.s = settings
+        self.rng = np.random.default_rng(seed)
+        self.n, self.g = settings.population, len(self.lo)
+        self.n_cross = int(round(settings.crossover_rate * settings.population))
+        self.n_groups = self.slots.shape[0]
+        self.valid = self.slots >= 0
+        self.pslot = np.maximum(self.slots, 0)
+        self.gene_w = self.valid[self.gene_group].astype(float)  # [G, S]: slots of g's group
+        self.gene_norm = self.gene_w.sum(axis=-1)
+        self.gene_cols = np.arange(self.g)[None, :, None]
+        self.tau_global = 1.0 / math.sqrt(2.0 * self.g)
+        self.tau_local = 1.0 / math.sqrt(2.0 * math.sqrt(self.g))
+
+    @classmethod
+    def from_identification(cls, ident, settings, seed=0, cost=None, substeps=1, method="euler"):
+        cost = cost or NumpyCost(ident.model, ident.windows, substeps, method)
+        p = ident.problem
+        return cls(cost, p.lower, p.upper, p.gene_group, p.group_slots, settings, seed)
+
+    def init(self):
+        s = self.s
+        self.genes = self.lo + self.span * self.rng.random((self.n, self.g))
+        self.sigma = np.broadcast_to(s.sigma_init * self.span, self.genes.shape).copy()
+        self.fit, self.local = self.cost(self.genes)
+        self.variant_probs = np.asarray(s.variant_probs, float)
+        self.generation = 0
+        self.history = []
+        return self
+
+    def draw(self) -> Noise:
+        n, c, g, rng = self.n, self.n_cross, self.g, self.rng
+        return Noise(
+            parent=rng.random((2, n)),
+            cross=rng.random((2, c) + self.slots.shape),
+            variant=rng.random((n, 1)),
+            group=rng.random((n, 1)),
+            gene=rng.random(n),
+            z0=rng.standard_normal((n, 1)),
+            zi=rng.standard_normal((n, g)),
+            step=rng.standard_normal((n, g)),
+            cauchy=rng.standard_cauchy(n),
+            gumbel=rng.gumbel(size=2 * n),
+        )
+
+    def _group_bias(self, local):
+        """[N, P] -> [N, T]: probability of each group, proportional to its mean local cost."""
+        per_slot = np.where(self.valid, local[:, self.pslot], 0.0)  # [N, T, S]
+        score = per_slot.sum(-1) / np.maximum(self.valid.sum(-1), 1)
+        score = np.where(np.isfinite(score), score, 0.0)
+        total = score.sum(-1, keepdims=True)
+        return np.where(total > 0, score / np.where(total > 0, total, 1.0), 1.0 / self.n_groups)
+
+    def _crossover(self, u):
+        """Children [0, C): per bond type, the mean of parents picked per extremity particle
+        by a local-cost tournament (mutabilities: geometric mean)."""
+        a, b = _index(u, self.n)  # [C, T, S] each
+        parents = np.where(self.local[b, self.pslot] < self.local[a, self.pslot], b, a)
+        pg = parents[:, self.gene_group]  # [C, G, S]: the parents of each gene's group
+        child = np.sum(self.genes[pg, self.gene_cols] * self.gene_w, axis=-1) / self.gene_norm
+        log_sigma = np.log(self.sigma)[pg, self.gene_cols]
+        return child, np.exp(np.sum(log_sigma * self.gene_w, axis=-1) / self.gene_norm)
+
+    def _mutate(self, nz, genes, sigma, variant, group_prob):
+        g, s = self.g, self.s
+        group = choose(nz.group, group_prob)
+        one_gene = _index(nz.gene, g)
+        v = variant[:, None]
+        in_group = self.gene_group[None, :] == group[:, None]
+        single = np.arange(g)[None, :] == one_gene[:, None]
+        touched = np.where(v == 1, in_group, np.where(v == 3, single, True))
+        adapt = touched & (v <= 1)
+        z0, zi, step = (np.asarray(x, np.float64) for x in (nz.z0, nz.zi, nz.step))
+        new_sigma = np.where(
+            adapt, sigma * np.exp(self.tau_global * z0 + self.tau_local * zi), sigma
+        )
+        new_sigma = np.clip(new_sigma, s.sigma_floor * self.span, self.span)
+        cauchy = np.asarray(nz.cauchy, np.float64)[:, None]
+        delta = np.where(v == 3, new_sigma * cauchy, new_sigma * step)
+        moved = np.where(touched, genes + delta, genes)
+        moved = np.where(moved < self.lo, 2 * self.lo - moved, moved)
+        moved = np.where(moved > self.hi, 2 * self.hi - moved, moved)
+        return np.clip(moved, self.lo, self.hi), new_sigma
+
+    def _select(self, gumbel, cost):
+        """The n_elite best, then Gumbel top-k on -pressure/4 * (standardised log cost)."""
+        s, n = self.s, self.n
+        n_elite = s.n_elite
+        elite = np.argsort(cost, kind="stable")[:n_elite]
+        finite = np.isfinite(cost)
+        log_cost = np.log(np.where(finite, cost, 1.0) + 1e-300)
+        count = max(int(finite.sum()), 1)
+        mean = np.sum(np.where(finite, log_cost, 0.0)) / count
+        var = np.sum(np.where(finite, (log_cost - mean) ** 2, 0.0)) / count
+        z = (log_cost - mean) / np.sqrt(var + 1e-12)
+        gumbel = np.asarray(gumbel, np.float64)
+        logits = np.where(finite, -0.25 * s.selection_pressure * z + gumbel, -1e6 + gumbel)
+        logits[elite] = -np.inf
+        rest = np.argsort(-logits, kind="stable")[: n - n_elite]
+        return np.concatenate([elite, rest])
+
+    def step(self, nz: Noise | None = None):
+        s, n, c = self.s, self.n, self.n_cross
+        nz = nz if nz is not None else self.draw()
+        a, b = _index(nz.parent, n)
+        first = np.where(self.fit[b] < self.fit[a], b, a)
+        genes, sigma = self.genes[first], self.sigma[first]
+        if c > 0:
+            cross_genes, cross_sigma = self._crossover(nz.cross)
+            genes = np.concatenate([cross_genes, genes[c:]])
+            sigma = np.concatenate([cross_sigma, sigma[c:]])
+
+        variant = choose(nz.variant, np.broadcast_to(self.variant_probs, (n, 4)))
+        group_prob = self._group_bias(self.local[first])
+        genes, sigma = self._mutate(nz, genes, sigma, variant, group_prob)
+
+        cost, local = self.cost(genes)
+        finite = np.isfinite(cost)
+        cost = np.where(finite, cost, np.inf)
+        failed = int(n - finite.sum())
+        onehot = variant[:, None] == np.arange(4)
+        trials = onehot.sum(0)
+        successes = (onehot & (cost < self.fit[first])[:, None]).sum(0)
+
+        all_cost = np.concatenate([self.fit, cost])
+        keep = self._select(nz.gumbel, all_cost)
+        self.genes = np.concatenate([self.genes, genes])[keep]
+        self.sigma = np.concatenate([self.sigma, sigma])[keep]
+        self.local = np.concatenate([self.local, local])[keep]
+        self.fit = all_cost[keep]
+        if s.adapt_variants:
+            rate = (successes + 1.0) / (trials + 2.0)
+            probs = 0.9 * self.variant_probs + 0.1 * rate / rate.sum()
+            probs = np.maximum(probs, 0.05)
+            self.variant_probs = probs / probs.sum()
+        self.generation += 1
+        fin = self.fit[np.isfinite(self.fit)]
+        self.history.append(
+            (
+                self.fit.min(),
+                np.median(self.fit),
+                fin.max() if fin.size else np.inf,
+                failed,
+                trials,
+                successes,
+            )
+        )
+
+    def run(self, n_generations: int):
+        for _ in range(n_generations):
+            self.step()
+        return self
+
+    def best(self):
+        i = int(np.argmin(self.fit))
+        return self.genes[i], self.fit[i], self.local[i]
+
+
+# ---------------------------------------------------------------------------------------------
+# self-test
+
+
+def check(verbose: bool = True) -> bool:
+    """Compare NumpyCost with the package's jitted, vmapped make_cost on random genomes."""
+    import jax
+    import jax.numpy as jnp
+
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
+    import problems as P
+    from activebonds.identify.cost import make_cost
+    from activebonds.identify.es import ESSettings
+
+    rng = np.random.default_rng(0)
+    cases = [
+        P.paper_horse("standard"),
+        P.paper_horse("neural"),
+        P.paper_horse("neural", 60, 10),
+        P.full_horse(10),
+        P.mesh(),
+        P.triangle(),
+    ]
+    ok = True
+    worst_all = 0.0
+    for bench in cases:
+        ident = bench.ident
+        for method in ("euler", "verlet"):
+            substeps = 1 if method == "euler" else 2
+            ref = jax.jit(jax.vmap(make_cost(ident.model, ident.windows, substeps, method)))
+            mine = NumpyCost(ident.model, ident.windows, substeps, method)
+            lo, hi = ident.problem.lower, ident.problem.upper
+            genomes = lo + (hi - lo) * rng.random((64, len(lo)))
+            genomes[0] = ident.model.layout.initial()  # the file's values
+            c_ref, l_ref = (np.asarray(a) for a in ref(jnp.asarray(genomes)))
+            c, loc = mine(genomes)
+            same_inf = np.array_equal(np.isinf(c_ref), np.isinf(c)) and np.array_equal(
+                np.isinf(l_ref), np.isinf(loc)
+            )
+            fin = np.isfinite(c_ref) & np.isfinite(c)
+            lfin = np.isfinite(l_ref) & np.isfinite(loc)
+            # relative to the cost, except where the cost is rounding noise (the file's values
+            # on synthetic data give ~1e-30): there relative to the typical cost of the problem
+            floor = 1e-12 * np.median(c_ref[fin])
+            rel = np.abs(c[fin] - c_ref[fin]) / np.maximum(np.abs(c_ref[fin]), floor)
+            lrel = np.abs(loc[lfin] - l_ref[lfin]) / np.maximum(np.abs(l_ref[lfin]), floor)
+            worst = max(rel.max(initial=0.0), lrel.max(initial=0.0))
+            worst_all = max(worst_all, worst)
+            good = same_inf and worst <= 1e-9 and fin.sum() > 0
+            ok &= good
+            if verbose:
+                print(
+                    f"{'ok ' if good else 'BAD'} {bench.name:26s} {method:6s} finite "
+                    f"{int(fin.sum()):2d}/64  max rel diff {worst:.2e}"
+                )
+    # the same generation: the package's random numbers fed to both, state compared
+    for bench, pop in ((P.paper_horse("neural"), 64), (P.triangle(), 40), (P.full_horse(10), 24)):
+        good, worst = check_generations(bench, pop, 5)
+        ok &= good
+        if verbose:
+            print(
+                f"{'ok ' if good else 'BAD'} {bench.name:26s} ES, pop {pop}: 5 generations with "
+                f"the package's random numbers, max rel diff of the state {worst:.1e}"
+            )
+    # the ES on its own random numbers improves the triangle, elitist
+    bench = P.triangle()
+    settings = ESSettings(population=100)
+    es = NumpyES.from_identification(bench.ident, settings, seed=0).init()
+    c0 = es.fit.min()
+    t = time.perf_counter()
+    es.run(300)
+    dt = time.perf_counter() - t
+    c1 = es.fit.min()
+    improved = c1 < 1e-3 * c0 and np.all(np.diff([h[0] for h in es.history]) <= 0)
+    ok &= bool(improved)
+    if verbose:
+        print(
+            f"{'ok ' if improved else 'BAD'} NumpyES triangle pop 100: best cost {c0:.3e} -> "
+            f"{c1:.3e} in 300 generations ({300 / dt:.0f} gen/s), elitist (never rises)"
+        )
+        print(f"{'PASSED' if ok else 'FAILED'} (worst relative cost difference {worst_all:.1e})")
+    return bool(ok)
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    if not np.array_equal(np.isinf(a), np.isinf(b)):
+        return np.inf
+    f = np.isfinite(a)
+    return float((np.abs(a[f] - b[f]) / np.maximum(np.abs(b[f]), 1e-300)).max(initial=0.0))
+
+
+def check_generations(bench, population: int, n_generations: int) -> tuple[bool, float]:
+    """Start both ESs from the package's initial state and feed both the package's random
+    numbers (``es.noise``) for ``n_generations`` generations: the states must stay equal."""
+    from functools import partial
+
+    import jax
+    import jax.numpy as jnp
+
+    from activebonds.identify import es
+
+    settings = bench.settings.model_copy(update={"population": population}).es()
+    problem = bench.problem
+    init_key, gen_key = jax.random.split(jax.random.PRNGKey(3))
+    state = jax.jit(partial(es.init, problem=problem, settings=settings, dtype=jnp.float64))(
+        init_key
+    )
+    mine = NumpyES.from_identification(bench.ident, settings).init()
+    mine.genes, mine.sigma = np.array(state.genes), np.array(state.sigma)
+    mine.fit, mine.local = np.array(state.cost), np.array(state.local)
+    mine.variant_probs = np.array(state.variant_probs, np.float64)
+    one = jax.jit(partial(es.generation, problem=problem, settings=settings))
+    noise = jax.jit(partial(es.noise, problem=problem, settings=settings, dtype=jnp.float32))
+    worst = 0.0
+    for g in range(n_generations):
+        nz = noise(gen_key, jnp.int32(g))
+        state, _ = one(nz, state)
+        mine.step(Noise(**{f: np.asarray(getattr(nz, f)) for f in Noise._fields}))
+        for ours, theirs in (
+            (mine.genes, state.genes),
+            (mine.sigma, state.sigma),
+            (mine.fit, state.cost),
+            (mine.local, state.local),
+        ):
+            worst = max(worst, _rel(ours, theirs))
+    return worst <= 1e-9, worst
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="compare with the package's cost")
+    args = ap.parse_args(argv)
+    if args.check:
+        return 0 if check() else 1
+    ap.print_help()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
