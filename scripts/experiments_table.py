@@ -1,0 +1,43 @@
+"""Print the Markdown tables of docs/EXPERIMENTS.md from the summary.json files written by
+`activebonds reproduce` (usage: python scripts/experiments_table.py OUT/horse OUT/synthetic)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def fmt(x, digits=3):
+    return "n/a" if x is None else f"{x:.{digits}g}"
+
+
+def table(summary: dict) -> str:
+    lines = [
+        f"**{summary['title']}** (scale `{summary['scale']}`, seeds {summary['seeds']}; "
+        f"internal-force floor of the fit error: {fmt(summary.get('internal_force_floor_mm'))} mm)",
+        "",
+        "| configuration | series | fit RMS mm, median [IQR] | one-step RMS mm, next frames "
+        "| free-run RMS mm, next frames | saturated neurons | near-zero weights | wall time |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, c in summary["configs"].items():
+        for series in ("standard", "neural"):
+            r = c["series"][series]
+            a, b = r["test_frames"]
+            lines.append(
+                f"| {name} | {series} | {fmt(r['fit_rms_mm_median'])} "
+                f"[{fmt(r['fit_rms_mm_iqr'][0])}, {fmt(r['fit_rms_mm_iqr'][1])}] "
+                f"| {fmt(r['one_step_rms_mm_median'])} (frames {a}-{b - 1}) "
+                f"| {fmt(r['free_run_rms_mm_median'])} "
+                f"| {fmt(r.get('saturated_share_median'), 2) if series == 'neural' else '-'} "
+                f"| {fmt(r.get('near_zero_weight_share_median'), 2) if series == 'neural' else '-'} "
+                f"| {r['seconds']:.0f} s |"
+            )
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    for folder in sys.argv[1:]:
+        print(table(json.loads((Path(folder) / "summary.json").read_text())))
+        print()
