@@ -113,6 +113,22 @@ def test_free_run_of_the_true_model_reproduces_the_data(triangle):
     assert not pred.extended and pred.one_step_rms_mm_beyond is None
 
 
+def test_missing_markers_are_neither_inputs_nor_counted(triangle):
+    model, traj = triangle
+    pos = traj.positions.copy()
+    pos[0, 2] = np.nan  # frame 0 incomplete: the free run starts from frames 1 and 2
+    pos[50:52, 1] = np.nan
+    gappy = traj.with_positions(pos)
+    pred = predict(model, gappy)
+    unknown = np.flatnonzero(np.isnan(pred.one_step).any(axis=(1, 2)))
+    assert unknown.tolist() == [0, 1, 2, 51, 52, 53]  # an input frame is incomplete
+    assert np.abs(pred.free_run[1:] - traj.positions[1:]).max() < 1e-9
+    assert np.isfinite(pred.one_step_rms_mm).all() and pred.one_step_rms_mm.max() < 1e-9
+    assert np.isfinite(pred.free_run_rms_mm).all() and pred.free_run_rms_mm.max() < 1e-6
+    recorded = payload([("true", pred)])["recorded"]
+    assert recorded[50][1] == [None, None] and None not in recorded[49][1]
+
+
 def test_a_wrong_model_has_errors_and_a_longer_window_is_generalisation(triangle):
     model, traj = triangle
     stiff = model.spec.model_copy(
@@ -125,6 +141,21 @@ def test_a_wrong_model_has_errors_and_a_longer_window_is_generalisation(triangle
         pred.free_run_rms_mm > pred.one_step_rms_mm
     ).all()
     assert pred.one_step_rms_mm_beyond.shape == (3,)
+
+
+def test_a_diverging_free_run_counts_as_an_infinite_error(triangle):
+    model, traj = triangle
+    spec = model.spec.model_copy(
+        update={"bond": [b.model_copy(update={"stiffness": 1e9}) for b in model.spec.bond]}
+    )
+    pred = predict(load_model_from_spec(spec), traj, fit_frames=100)
+    assert pred.diverged_at is not None and 2 < pred.diverged_at < 100
+    assert np.isnan(pred.free_run[pred.diverged_at :]).all()
+    assert np.isinf(pred.free_run_rms_mm).all() and np.isinf(pred.free_run_rms_mm_beyond).all()
+    assert np.isfinite(pred.one_step_rms_mm).all()  # each step starts from the recording
+    data = payload([("stiff", pred)])
+    json.dumps(data, allow_nan=False)  # NaN became null
+    assert data["models"][0]["free_run"][-1][0] == [None, None]
 
 
 def load_model_from_spec(spec):
@@ -296,13 +327,18 @@ def test_figures_folder_is_replaced_whole_and_foreign_files_are_guarded(neural_r
     assert not list(run.glob(".figures*"))
 
 
-def test_run_without_best_model_is_reported_with_the_start_values(neural_run, tmp_path):
-    run = tmp_path / "nobest"
-    shutil.copytree(neural_run[0].run, run)
+def test_a_run_that_failed_at_once_is_still_reported(neural_run, tmp_path):
+    run = tmp_path / "failed"
+    shutil.copytree(neural_run[0].run, run, ignore=shutil.ignore_patterns("report.html", "figures"))
     (run / "best_model.toml").unlink()
+    header = (run / "history.csv").read_text().splitlines()[0]
+    (run / "history.csv").write_text(header + "\n")  # as written when every start failed
     record = load_run(run)
-    assert not record.has_best
-    assert record.model.topology.neural.all()  # the bond variant of the run is applied
+    assert not record.has_best and len(record.history["generation"]) == 0
+    assert record.model.topology.neural.all()  # the run's bond variant, starting values
+    text = _html(write_report(run))
+    assert "(no best model)" in text
+    assert (run / "figures" / "convergence.png").is_file()
 
 
 @pytest.mark.parametrize(

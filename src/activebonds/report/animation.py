@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 from PIL import Image  # noqa: E402
 
 from .plots import AXES, DPI, FREE_RUN, ONE_STEP  # noqa: E402
-from .predict import Prediction  # noqa: E402
+from .predict import Prediction, to_mm  # noqa: E402
 
 MODEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
@@ -94,7 +94,7 @@ def payload(
     sel = list(ax)
 
     def proj(a: np.ndarray) -> np.ndarray:
-        return a[idx][:, :, sel] * 1000.0
+        return to_mm(a[idx][:, :, sel])
 
     rec2 = proj(first.recorded)
     return {
@@ -140,7 +140,7 @@ def write_gif(
     ax_idx = axes or projection_axes(first.recorded)
     idx = _frames(first.n_frames, max_frames)
     sel = list(ax_idx)
-    rec = first.recorded[:, :, sel] * 1000.0
+    rec = to_mm(first.recorded[:, :, sel])
     view = _view(rec)
     bonds = np.asarray(first.bonds, int).reshape(-1, 2)
 
@@ -186,7 +186,7 @@ def write_gif(
                 animated=True,
             )[0]
             bl = lines(color, ls, 1.3, 0.9)
-            layers.append((data[:, :, sel] * 1000.0, pts, bl))
+            layers.append((to_mm(data[:, :, sel]), pts, bl))
             artists += [*bl, pts]
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     caption = fig.text(0.5, 0.965, "", ha="center", va="center", fontsize=9, animated=True)

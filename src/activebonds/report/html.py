@@ -331,10 +331,10 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     extra = []
     if not pred.extended:
         extra.append(
-            "Only the fitted window is shown (the original recording is not available, "
-            "unchanged, or longer)."
+            "Only the fitted window is shown: the original recording is gone, has changed or "
+            "holds no later frame, or no more frames were asked for."
         )
-    elif pred.diverged_at is not None:
+    if pred.diverged_at is not None:
         extra.append(f"The free run went non-finite at frame {pred.diverged_at}.")
     sections = [
         Section(
@@ -361,7 +361,7 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
             ],
             notes=[
                 *extra,
-                f"An animated GIF of the same is written to {gif.name} beside the figures.",
+                f"The same animation is saved as {gif.name} in the figures folder.",
             ],
             anchor="animation",
         ),

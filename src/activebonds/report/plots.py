@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import TwoSlopeNorm  # noqa: E402
 
 from ..model import Model  # noqa: E402
-from .predict import Prediction, neural_weights  # noqa: E402
+from .predict import Prediction, neural_weights, to_mm  # noqa: E402
 from .runs import history_rms_mm  # noqa: E402
 
 RECORDED = "black"
@@ -281,11 +281,11 @@ def trajectories(
     for p in range(n_p):
         for d in range(dim):
             ax = axes[p, d]
-            rec = pred.recorded[:, p, d] * 1000
+            rec = to_mm(pred.recorded[:, p, d])
             ax.plot(t, rec, color=RECORDED, lw=1.5, label="recorded")
             ax.plot(
                 t,
-                pred.one_step[:, p, d] * 1000,
+                to_mm(pred.one_step[:, p, d]),
                 ls="none",
                 marker="o",
                 ms=3,
@@ -293,7 +293,7 @@ def trajectories(
                 label="one-step",
             )
             ax.plot(
-                t, pred.free_run[:, p, d] * 1000, color=FREE_RUN, lw=1.2, ls="--", label="free run"
+                t, to_mm(pred.free_run[:, p, d]), color=FREE_RUN, lw=1.2, ls="--", label="free run"
             )
             if np.isfinite(rec).any():
                 ax.set_ylim(*_limits(rec))

@@ -150,24 +150,33 @@ def _finite_or_nan(a: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(a), a, np.nan)
 
 
+def to_mm(a: np.ndarray) -> np.ndarray:
+    """Metres to millimetres; values too large to show (or non-finite) become NaN."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.asarray(a, np.float64) * 1000.0
+    return np.where(np.abs(out) < 1e12, out, np.nan)
+
+
 def rms_mm(predicted: np.ndarray, recorded: np.ndarray, frames=slice(None)) -> np.ndarray:
     """Per-particle RMS position error (mm) over ``frames`` where both are known, [P].
 
     A particle with nothing to compare gets NaN."""
     p = np.asarray(predicted, dtype=np.float64)[frames]
     r = np.asarray(recorded, dtype=np.float64)[frames]
-    err2 = np.sum((p - r) ** 2, axis=-1)  # [F, P]
-    ok = np.isfinite(err2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        err2 = np.sum((p - r) ** 2, axis=-1)  # [F, P]
+    ok = ~np.isnan(err2)  # a finite prediction too far to square still counts (as inf)
     n = ok.sum(axis=0)
     total = np.where(ok, err2, 0.0).sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         return np.where(n > 0, np.sqrt(total / np.maximum(n, 1)) * 1000.0, np.nan)
 
 
 def error_mm(predicted: np.ndarray, recorded: np.ndarray) -> np.ndarray:
     """Distance between prediction and recording per frame and particle (mm), [F, P]."""
-    d = np.asarray(predicted, np.float64) - np.asarray(recorded, np.float64)
-    return np.sqrt(np.sum(d * d, axis=-1)) * 1000.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.asarray(predicted, np.float64) - np.asarray(recorded, np.float64)
+        return np.sqrt(np.sum(d * d, axis=-1)) * 1000.0
 
 
 def activations(model: Model, xs: np.ndarray, vs: np.ndarray) -> np.ndarray:
@@ -259,7 +268,7 @@ class Prediction:
     saturated_share: float  # NaN without neurons
     saturated_per_neuron: np.ndarray  # [B]
     near_zero_weight_share: float  # NaN without neural weights
-    diverged_at: int | None  # first frame where the free run went non-finite
+    diverged_at: int | None  # first frame where the free run went non-finite (its RMS: inf)
 
     @property
     def n_frames(self) -> int:
@@ -295,11 +304,21 @@ def predict(
     neural = np.asarray(model.topology.neural, bool).reshape(-1)
     sat, per = saturation_share(act, neural)
     complete = np.isfinite(rec).all(axis=(1, 2))
-    first_run = int(np.argmax(complete[1:] & complete[:-1])) + 1 if n > 1 else n
-    started = np.arange(n) > first_run
-    bad = started & ~np.isfinite(xs).all(axis=(1, 2))
-    diverged = int(np.argmax(bad)) if bad.any() else None
-    beyond = slice(fit, None)
+    pairs = complete[1:] & complete[:-1]
+    first_run = int(np.argmax(pairs)) + 1 if pairs.any() else n
+    # predictions that should exist but went non-finite count as infinite errors
+    free_failed = (np.arange(n) > first_run) & ~np.isfinite(xs).all(axis=(1, 2))
+    diverged = int(np.argmax(free_failed)) if free_failed.any() else None
+    one_failed = np.zeros(n, bool)
+    one_failed[2:] = pairs[:-1] & ~np.isfinite(one[2:]).all(axis=(1, 2))
+    free_pred = _model_only(xs, first_run)
+
+    def one_rms(lo, hi):
+        return _counted_rms(one, rec, lo, hi, one_failed)
+
+    def free_rms(lo, hi):
+        return _counted_rms(free_pred, rec, lo, hi, free_failed)
+
     return Prediction(
         names=model.particle_names,
         markers=tuple(traj.markers),
@@ -312,15 +331,24 @@ def predict(
         one_step=one,
         free_run=xs,
         activation=act,
-        one_step_rms_mm=rms_mm(one, rec, slice(0, fit)),
-        free_run_rms_mm=rms_mm(_model_only(xs, first_run), rec, slice(0, fit)),
-        one_step_rms_mm_beyond=rms_mm(one, rec, beyond) if n > fit else None,
-        free_run_rms_mm_beyond=rms_mm(xs, rec, beyond) if n > fit else None,
+        one_step_rms_mm=one_rms(0, fit),
+        free_run_rms_mm=free_rms(0, fit),
+        one_step_rms_mm_beyond=one_rms(fit, n) if n > fit else None,
+        free_run_rms_mm_beyond=free_rms(fit, n) if n > fit else None,
         saturated_share=sat,
         saturated_per_neuron=per,
         near_zero_weight_share=near_zero_share(model),
         diverged_at=diverged,
     )
+
+
+def _counted_rms(pred, rec, lo: int, hi: int, failed: np.ndarray) -> np.ndarray:
+    """RMS over frames [lo, hi); a particle with a recorded target at a failed (non-finite)
+    prediction gets +inf, as in the cost."""
+    out = rms_mm(pred, rec, slice(lo, hi))
+    known = np.isfinite(rec[lo:hi]).all(axis=-1)  # [f, P]
+    out[(failed[lo:hi, None] & known).any(axis=0)] = np.inf
+    return out
 
 
 def _model_only(xs: np.ndarray, first_run: int) -> np.ndarray:

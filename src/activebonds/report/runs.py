@@ -66,12 +66,7 @@ def load_run(run: str | Path) -> RunRecord:
             run / "data.npz",
             f"{window.n_markers} markers for a model of {model.topology.n_particles} particles",
         )
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # a history with a header only is empty
-            history = rundir.read_history(run)
-    except ValueError as err:
-        raise InputError(run / "history.csv", f"unreadable history ({err})") from None
+    history = read_history(run / "history.csv")
     return RunRecord(
         path=run,
         meta=meta,
@@ -82,6 +77,31 @@ def load_run(run: str | Path) -> RunRecord:
         has_best=has_best,
         window=window,
     )
+
+
+def read_history(path: Path) -> dict[str, np.ndarray]:
+    """history.csv as columns by header name; empty columns for a missing file or a header
+    with no row (a run that failed before its first generation)."""
+    empty = {c: np.zeros(0) for c in rundir.HISTORY_COLUMNS}
+    if not path.is_file():
+        return empty
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(path, f"unreadable history ({err})") from None
+    if len(lines) < 2:
+        return empty
+    header = [h.strip() for h in lines[0].split(",")]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    except ValueError as err:
+        raise InputError(path, f"unreadable history ({err})") from None
+    if data.shape[1] != len(header):
+        raise InputError(path, f"{data.shape[1]} values per row for {len(header)} columns")
+    out = {name: data[:, i] for i, name in enumerate(header)}
+    return {**empty, **out}
 
 
 def original_window(record: RunRecord, n_frames: int) -> Trajectory | None:
@@ -117,9 +137,10 @@ def history_rms_mm(history: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     best_mm = np.asarray(history.get("best_rms_mm", []), dtype=np.float64)
     ok = np.isfinite(best_cost) & (best_cost > 0) & np.isfinite(best_mm)
     scale = float(np.median(best_mm[ok] / np.sqrt(best_cost[ok]))) if ok.any() else np.nan
-    out = {"best": best_mm}
+    out = {"best": np.where(np.isfinite(best_mm), best_mm, np.nan)}
     for key in ("median", "worst"):
         cost = np.asarray(history.get(f"{key}_cost", []), dtype=np.float64)
         with np.errstate(invalid="ignore"):
-            out[key] = np.sqrt(cost) * scale
+            rms = np.sqrt(cost) * scale
+        out[key] = np.where(np.isfinite(rms), rms, np.nan)  # inf: failed evaluations
     return out
