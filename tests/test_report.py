@@ -32,6 +32,7 @@ from activebonds.report import (
     predict_run,
     projection_axes,
     staged_directory,
+    summary_table,
     write_comparison_report,
     write_report,
 )
@@ -336,9 +337,12 @@ def test_a_run_that_failed_at_once_is_still_reported(neural_run, tmp_path):
     record = load_run(run)
     assert not record.has_best and len(record.history["generation"]) == 0
     assert record.model.topology.neural.all()  # the run's bond variant, starting values
-    text = _html(write_report(run))
-    assert "(no best model)" in text
-    assert (run / "figures" / "convergence.png").is_file()
+    pred, _ = predict_run(record, frames=20)
+    summary = dict(summary_table(record, pred).rows)
+    assert summary["status"] == "completed (no best model)"
+    figs = tmp_path / "figs"
+    assert plots.convergence([Series("failed", [record.history])], figs / "c")[0].is_file()
+    assert plots.variant_success(record.history, figs / "v")[0].is_file()
 
 
 @pytest.mark.parametrize(

@@ -7,6 +7,7 @@ comparison take the default colour cycle in order.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -158,7 +159,7 @@ def parameters(
     ax.scatter(pos, y, color=np.where(edge, "tab:red", "tab:blue"), zorder=3, s=22)
     for yi, g in zip(y, genes, strict=True):
         ax.text(1.02, yi, f"{g.value:.4g}  [{g.lower:.3g}, {g.upper:.3g}]", va="center", fontsize=7)
-    labels = [f"{g.name}{'  (log)' if g.log else ''}" for g in genes]
+    labels = [f"{gene_label(model, g.name)}{'  (log)' if g.log else ''}" for g in genes]
     ax.set_yticks(y, labels, fontsize=7)
     ax.set_xlim(0, 1.42)
     ax.set_xticks([0, 0.5, 1], ["min", "mid", "max"])
@@ -167,6 +168,15 @@ def parameters(
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
     return save(fig, stem)
+
+
+def gene_label(model: Model, name: str) -> str:
+    """'bond[2].stiffness' -> 'bond[2] mouth–foot: stiffness'; other names unchanged."""
+    m = re.match(r"^bond\[(\d+)\]\.(.*)$", name)
+    if not m or int(m.group(1)) >= len(model.spec.bond):
+        return name
+    bond = model.spec.bond[int(m.group(1))]
+    return f"bond[{m.group(1)}] {'–'.join(bond.particles)}: {m.group(2)}"
 
 
 def bond_labels(model: Model) -> list[str]:
