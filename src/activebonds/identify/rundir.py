@@ -160,7 +160,10 @@ def read_history(run: Path) -> dict[str, np.ndarray]:
     path = run / "history.csv"
     if not path.is_file():
         return {c: np.zeros(0) for c in HISTORY_COLUMNS}
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    lines = path.read_text(encoding="utf-8").splitlines()[1:]
+    if not any(line.strip() for line in lines):
+        return {c: np.zeros(0) for c in HISTORY_COLUMNS}
+    data = np.loadtxt(lines, delimiter=",", ndmin=2)
     return {c: data[:, i] for i, c in enumerate(HISTORY_COLUMNS)}
 
 
