@@ -156,17 +156,6 @@ def history_csv(history: dict[str, np.ndarray]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def read_history(run: Path) -> dict[str, np.ndarray]:
-    path = run / "history.csv"
-    if not path.is_file():
-        return {c: np.zeros(0) for c in HISTORY_COLUMNS}
-    lines = path.read_text(encoding="utf-8").splitlines()[1:]
-    if not any(line.strip() for line in lines):
-        return {c: np.zeros(0) for c in HISTORY_COLUMNS}
-    data = np.loadtxt(lines, delimiter=",", ndmin=2)
-    return {c: data[:, i] for i, c in enumerate(HISTORY_COLUMNS)}
-
-
 def save_checkpoint(run: Path, state: dict[str, np.ndarray], history: dict[str, np.ndarray]):
     """ES state and history up to ``state['generation']``, atomically; keep the two newest."""
     folder = run / "checkpoints"
