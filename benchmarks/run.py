@@ -45,7 +45,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
-from activebonds.identify import es  # noqa: E402
+from activebonds.identify import driver, es  # noqa: E402
 from numpy_es import NumpyES  # noqa: E402
 
 F64 = jnp.float64
@@ -88,9 +88,13 @@ class Ours:
 
     def __init__(self, bench: P.Bench, population: int, chunk: int, seed: int = 0):
         settings = bench.settings.model_copy(update={"population": population})
-        self.population, self.block = population, chunk
         self.problem = bench.problem._replace(evaluate=_cast(bench.problem.evaluate))
         self.es_settings = settings.es()
+        # as the driver sizes its chunks (fewer generations if their random numbers are large)
+        chunk_length = getattr(driver, "chunk_length", None)
+        if chunk_length is not None:
+            chunk = chunk_length(self.problem, self.es_settings, chunk)
+        self.population, self.block = population, chunk
         init_key, self.gen_key = jax.random.split(jax.random.PRNGKey(seed))
         t0 = now()
         init = jax.jit(partial(es.init, problem=self.problem, settings=self.es_settings, dtype=F64))
@@ -332,8 +336,8 @@ def config_row(section, bench, population, res, note="", label="ours") -> dict:
 
 
 def measure_ours(section, bench, population, chunk, opts, note="") -> dict:
-    log(f"{section}: {bench.name} pop {population} (chunk {chunk})")
     runner = Ours(bench, population, chunk)
+    log(f"{section}: {bench.name} pop {population} (chunk {runner.block})")
     row = config_row(section, bench, population, steady(runner, opts.min_s, opts.min_calls), note)
     log(
         f"  {row['gens_per_s']:.1f} gen/s, {row['evals_per_s']:.0f} evals/s, "
@@ -612,6 +616,7 @@ def environment() -> dict:
         "git_commit": sh(["git", "-C", str(repo), "rev-parse", "--short", "HEAD"]),
         "git_dirty_package": bool(sh(["git", "-C", str(repo), "status", "--porcelain", "src"])),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "loadavg_start": os.getloadavg(),
     }
 
 
@@ -633,7 +638,8 @@ def print_report(report: dict) -> None:
         f"[bold]activebonds ES benchmarks[/bold]  {env['date']}  {env['cpu']} x{env['cores']}  "
         f"jax {env['versions'].get('jax')}  commit {env['git_commit']}"
         f"{' (package modified)' if env['git_dirty_package'] else ''}  mode "
-        f"{'quick' if report['quick'] else 'full'}"
+        f"{'quick' if report['quick'] else 'full'}  load average "
+        f"{env['loadavg_start'][0]:.1f} -> {env.get('loadavg_end', [float('nan')])[0]:.1f}"
     )
     t = Table(title="Throughput (steady state; compile reported apart)")
     for col, just in (
@@ -643,6 +649,7 @@ def print_report(report: dict) -> None:
         ("P/B/G", "right"),
         ("S x H", "right"),
         ("pop", "right"),
+        ("chunk", "right"),
         ("gen/s", "right"),
         ("evals/s", "right"),
         ("compile s", "right"),
@@ -658,6 +665,7 @@ def print_report(report: dict) -> None:
             f"{r['particles']}/{r['bonds']}/{r['genes']}",
             f"{r['starts']}x{r['horizon']}",
             str(r["population"]),
+            str(r.get("block", "")),
             _f(r["gens_per_s"]),
             _f(r["evals_per_s"], 0),
             _f(r["compile_s"], 2),
@@ -768,8 +776,8 @@ def main(argv=None) -> int:
         quick=q,
         min_s=0.4 if q else 2.0,
         min_calls=2 if q else 3,
-        pair_s=0.4 if q else 1.5,
-        repeats=2 if q else 3,
+        pair_s=0.4 if q else 1.0,
+        repeats=2 if q else 5,
         ttt_cap=30.0 if q else 120.0,
         long_generations=3000 if q else 50_000,
     )
@@ -789,6 +797,7 @@ def main(argv=None) -> int:
         report["ttt"] = section_ttt(opts)
     if "long" in only:
         report["long"] = section_long(opts)
+    report["environment"]["loadavg_end"] = os.getloadavg()
     report["peak_rss_mb"] = peak_rss_mb()
     report["total_s"] = now() - started
     print_report(report)
