@@ -1,0 +1,105 @@
+"""Shared helpers of the identification tests: paths, small models, and running the CLI."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+TRIANGLE = EXAMPLES / "triangle.toml"
+HORSE_LIMB = EXAMPLES / "horse_limb.toml"
+HORSE_TROT = (
+    ROOT / "src" / "activebonds" / "datasets" / "horse_vhdc" / "Horse1_M1_trot1_kinematics.csv"
+)
+
+# The command installed next to the interpreter running the tests (the venv's console script).
+ACTIVEBONDS = Path(sys.executable).with_name("activebonds")
+
+
+def cli(*args, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run ``activebonds ARGS`` in a fresh process; text stdout/stderr captured."""
+    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
+    return subprocess.run(
+        [str(ACTIVEBONDS), *map(str, args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def cli_popen(*args, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
+    """Start ``activebonds ARGS`` in the background (output to ``log`` or discarded)."""
+    env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
+    out = open(log, "wb") if log is not None else subprocess.DEVNULL  # noqa: SIM115
+    try:
+        return subprocess.Popen(
+            [str(ACTIVEBONDS), *map(str, args)], cwd=cwd, env=env, stdout=out, stderr=out
+        )
+    finally:
+        if log is not None:
+            out.close()
+
+
+# A 3-particle triangle like examples/triangle.toml, every bond mechanical-neural with known,
+# non-zero gains, thresholds and weights (the ground truth of the neural recovery test).
+NEURAL_TRIANGLE = """
+name = "neural_triangle"
+dimension = 3
+
+[[particle]]
+name = "A"
+mass = 1.0
+position = [0.0, 0.0, 0.0]
+velocity = [0.0, 0.3, 0.1]
+
+[[particle]]
+name = "B"
+mass = 1.5
+position = [0.55, 0.0, 0.05]
+velocity = [0.0, -0.2, 0.0]
+
+[[particle]]
+name = "C"
+mass = 2.0
+position = [0.2, 0.45, 0.0]
+velocity = [0.1, 0.0, -0.15]
+
+[[bond]]
+kind = "binary"
+particles = ["A", "B"]
+neural = true
+stiffness = { value = 40.0, min = 1.0, max = 1000.0 }
+rest_length = { value = 0.5, min = 0.25, max = 0.75 }
+damping = { value = 0.5, min = 0.01, max = 10.0 }
+gain = { value = 3.0, min = 0.0, max = 20.0 }
+threshold = { value = 0.1, min = -1.0, max = 1.0 }
+weights = { length = [0.0, 2.0, -1.5], rate = [0.0, 0.5, 0.3], min = -5.0, max = 5.0 }
+
+[[bond]]
+kind = "binary"
+particles = ["B", "C"]
+neural = true
+stiffness = { value = 60.0, min = 1.0, max = 1000.0 }
+rest_length = { value = 0.6, min = 0.3, max = 0.9 }
+damping = { value = 1.0, min = 0.01, max = 10.0 }
+gain = { value = 4.0, min = 0.0, max = 20.0 }
+threshold = { value = -0.2, min = -1.0, max = 1.0 }
+weights = { length = [1.0, 0.0, 2.5], rate = [-0.4, 0.0, 0.2], min = -5.0, max = 5.0 }
+
+[[bond]]
+kind = "binary"
+particles = ["A", "C"]
+neural = true
+stiffness = { value = 80.0, min = 1.0, max = 1000.0 }
+rest_length = { value = 0.45, min = 0.2, max = 0.7 }
+damping = { value = 0.8, min = 0.01, max = 10.0 }
+gain = { value = 2.0, min = 0.0, max = 20.0 }
+threshold = { value = 0.3, min = -1.0, max = 1.0 }
+weights = { length = [-2.0, 1.5, 0.0], rate = [0.3, -0.5, 0.0], min = -5.0, max = 5.0 }
+"""
