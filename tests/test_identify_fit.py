@@ -136,6 +136,23 @@ def test_nan_candidates_are_counted_and_never_survive():
     assert best[-1] < 1e-4
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="package bug: es.init keeps NaN costs and local costs from evaluate (es.generation "
+    "maps a child's non-finite cost to +inf, init does not); in generation 1 a NaN parent then "
+    "wins binary tournaments as first candidate (fitness[b] < NaN is False) and always wins "
+    "local tournaments (argmin picks NaN)",
+)
+def test_init_gives_nan_evaluations_an_infinite_cost():
+    problem = nan_problem()
+    settings = es.ESSettings(population=40)
+    state = jax.jit(partial(es.init, problem=problem, settings=settings))(jax.random.PRNGKey(0))
+    cost, local = np.asarray(state.cost), np.asarray(state.local)
+    assert (~np.isfinite(cost)).any()
+    assert np.all(np.isfinite(cost) | np.isposinf(cost)), "NaN cost in the initial population"
+    assert np.all(np.isfinite(local) | np.isposinf(local)), "NaN local cost"
+
+
 HUGE_STIFFNESS = TRIANGLE.read_text().replace("max = 1000.0", "max = 1e30")
 
 
