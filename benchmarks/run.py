@@ -553,6 +553,10 @@ def task_long(generations: int) -> None:
     result = fit(P.EXAMPLES / "horse_limb.toml", P.HORSE_CSV, settings, progress=progress)
     wall = now() - t0
     mid = min(samples, key=lambda s: abs(s[0] - generations / 2))
+    # RSS swings by tens of MB between chunks (allocator); the floor shows the trend
+    tenth = max(1, len(samples) // 10)
+    floor_first = min(s[2] for s in samples[:tenth])
+    floor_last = min(s[2] for s in samples[-tenth:])
     print(
         json.dumps(
             {
@@ -568,6 +572,10 @@ def task_long(generations: int) -> None:
                 "rss_middle_mb": mid[2],
                 "rss_end_mb": samples[-1][2],
                 "rss_growth_mb": samples[-1][2] - samples[0][2],
+                "rss_floor_first_tenth_mb": floor_first,
+                "rss_floor_last_tenth_mb": floor_last,
+                "rss_floor_growth_mb": floor_last - floor_first,
+                "rss_max_after_first_chunk_mb": max(s[2] for s in samples),
                 "peak_rss_mb": peak_rss_mb(),
                 "best_rms_mm": result.rms_mm,
                 "status": result.status,
@@ -742,7 +750,10 @@ def print_report(report: dict) -> None:
             f"steady {long['steady_gens_per_s']:.0f} gen/s); RSS before fit "
             f"{long['rss_before_fit_mb']:.0f} MB, start/middle/end "
             f"{long['rss_start_mb']:.0f}/{long['rss_middle_mb']:.0f}/{long['rss_end_mb']:.0f} MB "
-            f"(growth {long['rss_growth_mb']:+.1f} MB), peak {long['peak_rss_mb']:.0f} MB; "
+            f"(end - start {long['rss_growth_mb']:+.1f} MB; floor of first/last tenth "
+            f"{long['rss_floor_first_tenth_mb']:.0f}/{long['rss_floor_last_tenth_mb']:.0f} MB, "
+            f"{long['rss_floor_growth_mb']:+.1f} MB; max after first chunk "
+            f"{long['rss_max_after_first_chunk_mb']:.0f} MB), peak {long['peak_rss_mb']:.0f} MB; "
             f"best RMS {long['best_rms_mm']:.2f} mm"
         )
     elif long:
