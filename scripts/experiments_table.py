@@ -12,10 +12,18 @@ def fmt(x, digits=3):
     return "n/a" if x is None else f"{x:.{digits}g}"
 
 
+def floor(summary: dict) -> float:
+    """The internal-force floor, recomputed from the bundled data if the summary predates it."""
+    from activebonds.experiments.paper import EXPERIMENTS, internal_force_floor_mm
+
+    exp = EXPERIMENTS[summary["experiment"]]
+    return internal_force_floor_mm(exp.data().window(*exp.fit_frames), exp.model().params.mass)
+
+
 def table(summary: dict) -> str:
     lines = [
         f"**{summary['title']}** (scale `{summary['scale']}`, seeds {summary['seeds']}; "
-        f"internal-force floor of the fit error: {fmt(summary.get('internal_force_floor_mm'))} mm)",
+        f"internal-force floor of the fit error: {fmt(floor(summary))} mm)",
         "",
         "| configuration | series | fit RMS mm, median [IQR] | one-step RMS mm, next frames "
         "| free-run RMS mm, next frames | saturated neurons | near-zero weights | wall time |",

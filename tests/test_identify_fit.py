@@ -136,13 +136,6 @@ def test_nan_candidates_are_counted_and_never_survive():
     assert best[-1] < 1e-4
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: es.init keeps NaN costs and local costs from evaluate (es.generation "
-    "maps a child's non-finite cost to +inf, init does not); in generation 1 a NaN parent then "
-    "wins binary tournaments as first candidate (fitness[b] < NaN is False) and always wins "
-    "local tournaments (argmin picks NaN)",
-)
 def test_init_gives_nan_evaluations_an_infinite_cost():
     problem = nan_problem()
     settings = es.ESSettings(population=40)

@@ -124,7 +124,7 @@ def run_experiment(
                 exp, model, recording, config, series, seeds, folder, progress
             )
         summary["internal_force_floor_mm"] = internal_force_floor_mm(
-            recording.window(*exp.fit_frames)
+            recording.window(*exp.fit_frames), model.params.mass
         )
         summary["configs"][config.name] = {
             "population": config.population,
@@ -165,15 +165,17 @@ def _run_series(exp, model, recording, config, series, seeds, folder, progress) 
     return result
 
 
-def internal_force_floor_mm(window: Trajectory) -> float:
-    """The lowest one-step RMS error (mm) any model with only internal forces and equal
-    masses can reach on ``window``: such forces sum to zero, so the predicted centre of mass
-    moves at constant velocity, and for every frame sum_p |e_p|^2 >= P |mean_p e_p|^2."""
+def internal_force_floor_mm(window: Trajectory, masses) -> float:
+    """The lowest one-step RMS error (mm) any model with only internal forces can reach on
+    ``window``: such forces satisfy sum_p m_p a_p = 0, so the errors of each frame satisfy
+    sum_p m_p e_p = c, with c the error of the force-free (inertial) prediction weighted by
+    mass; the smallest sum_p |e_p|^2 under that constraint is |c|^2 / sum_p m_p^2."""
+    m = np.asarray(masses, dtype=np.float64)[None, :, None]
     x = window.positions
-    com = x.mean(axis=1)  # [F, D]
-    predicted = com[1:-1] + (com[1:-1] - com[:-2])  # x_t + dt v_t, v by backward difference
-    err = np.sum((com[2:] - predicted) ** 2, axis=-1)
-    return float(np.sqrt(np.nanmean(err)) * 1000.0)
+    inertial = x[1:-1] + (x[1:-1] - x[:-2])  # x_t + dt v_t, v by backward difference
+    c = np.sum(m * (inertial - x[2:]), axis=1)  # [F-2, D]
+    per_frame = np.sum(c**2, axis=-1) / np.sum(m**2)
+    return float(np.sqrt(np.nanmean(per_frame) / m.shape[1]) * 1000.0)
 
 
 def _pooled(rms_per_particle) -> float:
@@ -240,5 +242,5 @@ def _write_curves(folder: Path, config: Config) -> None:
             best = z["best_rms_mm"]
         q25, q50, q75 = np.percentile(best, [25, 50, 75], axis=0)
         for g in range(best.shape[1]):
-            lines.append(f"{g + 1},{series},{q50[g]!r},{q25[g]!r},{q75[g]!r}")
+            lines.append(f"{g + 1},{series},{float(q50[g])!r},{float(q25[g])!r},{float(q75[g])!r}")
     write_text_atomic(folder / "curves.csv", "\n".join(lines) + "\n")

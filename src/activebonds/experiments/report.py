@@ -30,7 +30,7 @@ def _histories(folder: Path, series: str) -> list[dict]:
 def _config_section(name: str, exp, config: str, c: dict, folder: Path, n_seeds: int) -> Section:
     figs = folder / "figures"
     series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
-    title = f"{exp.title}: population {c['population']}, {c['generations']} generations"
+    title = f"{name}: population {c['population']}, {c['generations']:,} generations"
     figures = [Figure(plots.convergence(series, figs / "convergence", title=title)[0])]
     rows = []
     for s in SERIES:

@@ -83,6 +83,13 @@ def _evaluate(problem: Problem, genes):
     return jax.vmap(problem.evaluate)(genes)
 
 
+def _finite_or_inf(cost, local):
+    """A candidate whose simulation went non-finite costs +inf, globally and locally."""
+    bad = ~jnp.isfinite(cost)
+    local = jnp.where(bad[:, None] | ~jnp.isfinite(local), jnp.inf, local)
+    return jnp.where(bad, jnp.inf, cost), local
+
+
 def init(key, problem: Problem, settings: ESSettings, dtype=None) -> ESState:
     """Population drawn uniformly within the bounds (search space), mutabilities at
     ``sigma_init`` of each range."""
@@ -91,7 +98,7 @@ def init(key, problem: Problem, settings: ESSettings, dtype=None) -> ESState:
     n = settings.population
     genes = lo + (hi - lo) * jax.random.uniform(key, (n, lo.shape[0]), dtype)
     sigma = jnp.broadcast_to(settings.sigma_init * (hi - lo), genes.shape)
-    cost, local = _evaluate(problem, genes)
+    cost, local = _finite_or_inf(*_evaluate(problem, genes))
     return ESState(
         genes=genes,
         sigma=sigma,
@@ -138,8 +145,7 @@ def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSett
     )
 
     # 3. evaluation
-    cost, local = _evaluate(problem, genes)
-    cost = jnp.where(jnp.isfinite(cost), cost, jnp.inf)
+    cost, local = _finite_or_inf(*_evaluate(problem, genes))
     failed = jnp.sum(~jnp.isfinite(cost)).astype(jnp.int32)
     onehot = jax.nn.one_hot(variant, ops.N_VARIANTS, dtype=jnp.int32)
     trials = onehot.sum(0)

@@ -1,0 +1,69 @@
+"""The reproduce commands at a tiny scale, and the internal-force floor of the fit error."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from activebonds.data import Trajectory
+from activebonds.experiments.paper import EXPERIMENTS, internal_force_floor_mm
+from activebonds.model import load_model
+from activebonds.simulate import simulate
+from helpers import EXAMPLES
+
+
+def test_floor_is_zero_on_data_made_by_internal_forces():
+    truth = load_model(EXAMPLES / "triangle.toml")  # unequal masses, internal forces only
+    data = simulate(truth, n_frames=40, rate=60.0)
+    assert internal_force_floor_mm(data, truth.params.mass) < 1e-9
+
+
+def test_floor_of_a_uniformly_accelerated_system_is_its_acceleration_step():
+    # Three particles falling with a = 9.81 m/s^2 (no internal force can explain it): every
+    # one-step error of an internal-force model is at least dt^2 a on average.
+    rate, a = 50.0, 9.81
+    t = np.arange(20) / rate
+    x = np.zeros((20, 3, 3))
+    x[:, :, 2] = -0.5 * a * t[:, None] ** 2 + np.array([0.0, 1.0, 2.0])
+    traj = Trajectory(positions=x, mask=np.ones((20, 3), bool), markers=("a", "b", "c"), rate=rate)
+    expected = a / rate**2 * 1000.0
+    assert internal_force_floor_mm(traj, [1.0, 1.0, 1.0]) == pytest.approx(expected, rel=1e-9)
+    # Unequal masses: the constraint sum m_p e_p = M g is met best by e_p proportional to m_p,
+    # leaving sum e_p^2 = M^2 g^2 / sum m_p^2 (Lagrange), less than P g^2.
+    m = np.array([1.0, 2.0, 5.0])
+    unequal = expected * np.sqrt(m.sum() ** 2 / (3 * np.sum(m**2)))
+    assert internal_force_floor_mm(traj, m) == pytest.approx(unequal, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["synthetic", "horse"])
+def test_reproduce_tiny_writes_both_series_curves_and_figures(name, tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "activebonds.cli", "reproduce", name, "--scale", "tiny"]
+    proc = subprocess.run(
+        cmd + ["--seeds", "2", "--out", str(out)], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr
+    config = EXPERIMENTS[name].scales["tiny"][0]
+    folder = out / name / config.name
+    with open(folder / "curves.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["series"] for r in rows} == {"standard", "neural"}
+    assert len(rows) == 2 * config.generations
+    for series in ("standard", "neural"):
+        best = [float(r["best_rms_mm_median"]) for r in rows if r["series"] == series]
+        assert np.all(np.diff(best) <= 1e-12)  # elitism, seed by seed and so in the median
+        assert np.isfinite(best[-1])
+    summary = json.loads((out / name / "summary.json").read_text())
+    result = summary["configs"][config.name]["series"]
+    assert np.isfinite(result["neural"]["fit_rms_mm_median"])
+    assert result["standard"]["seeds"] == [0, 1]
+    assert 0.0 <= result["neural"]["saturated_share_median"] <= 1.0
+    for fig in ("convergence.png", "convergence.svg", "neural_weights.png", "animation.gif"):
+        assert (folder / "figures" / fig).stat().st_size > 1000
+    html = (out / "report.html").read_text()
+    assert "standard" in html and "neural" in html and "http://" not in html
