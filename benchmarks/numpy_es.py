@@ -143,6 +143,13 @@ def _index(u, n: int):
     return np.minimum((u * n).astype(np.int64), n - 1)
 
 
+def _finite_or_inf(cost, local):
+    """A candidate whose simulation went non-finite costs +inf, globally and locally."""
+    bad = ~np.isfinite(cost)
+    local = np.where(bad[:, None] | ~np.isfinite(local), np.inf, local)
+    return np.where(bad, np.inf, cost), local
+
+
 def choose(u, probs):
     """One category per row of probs [..., K] by inverse CDF, from uniforms u [..., 1]."""
     cdf = np.cumsum(probs, axis=-1)
@@ -181,7 +188,7 @@ class NumpyES:
         s = self.s
         self.genes = self.lo + self.span * self.rng.random((self.n, self.g))
         self.sigma = np.broadcast_to(s.sigma_init * self.span, self.genes.shape).copy()
-        self.fit, self.local = self.cost(self.genes)
+        self.fit, self.local = _finite_or_inf(*self.cost(self.genes))
         self.variant_probs = np.asarray(s.variant_probs, float)
         self.generation = 0
         self.history = []
@@ -273,10 +280,8 @@ class NumpyES:
         group_prob = self._group_bias(self.local[first])
         genes, sigma = self._mutate(nz, genes, sigma, variant, group_prob)
 
-        cost, local = self.cost(genes)
-        finite = np.isfinite(cost)
-        cost = np.where(finite, cost, np.inf)
-        failed = int(n - finite.sum())
+        cost, local = _finite_or_inf(*self.cost(genes))
+        failed = int(n - np.isfinite(cost).sum())
         onehot = variant[:, None] == np.arange(4)
         trials = onehot.sum(0)
         successes = (onehot & (cost < self.fit[first])[:, None]).sum(0)
