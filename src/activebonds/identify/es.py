@@ -176,10 +176,11 @@ def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSett
         failed_total=state.failed_total + failed,
     )
     finite = jnp.isfinite(new_cost)
-    ordered = -jax.lax.top_k(-new_cost, n // 2 + 1)[0]
+    # the median from float32 top-k (fast path on CPU), gathered back in full precision
+    half = new_cost[jax.lax.top_k(-new_cost.astype(jnp.float32), n // 2 + 1)[1]]
     row = GenerationRow(
-        best=ordered[0],
-        median=ordered[(n - 1) // 2] if n % 2 else 0.5 * (ordered[n // 2 - 1] + ordered[n // 2]),
+        best=jnp.min(new_cost),
+        median=half[(n - 1) // 2] if n % 2 else 0.5 * (half[n // 2 - 1] + half[n // 2]),
         worst=jnp.max(jnp.where(finite, new_cost, -jnp.inf)),
         failed=failed,
         trials=trials,
