@@ -195,8 +195,27 @@ def _summary(result) -> None:
         out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
 
 
+def _compilation_cache() -> None:
+    """Keep compiled programs between runs (a repeated fit of the same shapes starts at
+    once). ACTIVEBONDS_CACHE=off disables it; ACTIVEBONDS_CACHE=DIR moves it."""
+    import os
+
+    where = os.environ.get("ACTIVEBONDS_CACHE", "")
+    if where.lower() in ("off", "0", "no"):
+        return
+    folder = Path(where or Path.home() / ".cache" / "activebonds" / "jax")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+
+
 def main() -> None:
     """Entry point: usage errors become one line and exit code 2."""
+    _compilation_cache()
     try:
         code = app(standalone_mode=False)
     except typer.Exit as e:
