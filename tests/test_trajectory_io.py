@@ -451,7 +451,7 @@ def test_cut_after_a_separator_is_reported(tmp_path):
 
 
 def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch):
-    import activebonds.data.writers as writers
+    import activebonds.atomic as writers
 
     target = tmp_path / "t.npz"
     target.write_bytes(b"previous")

@@ -13,14 +13,20 @@ TMP_PREFIX = ".tmp-"
 
 
 def write_atomic(path: str | Path, write: Callable[[IO[bytes]], None]) -> Path:
+    """Write through ``write(fh)`` into a temporary sibling, fsync, then rename over ``path``
+    (keeping the mode of a file it replaces). On any error the target is left untouched."""
     path = Path(path)
+    try:
+        mode = path.stat().st_mode & 0o777
+    except OSError:
+        mode = 0o666 & ~_umask()
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f"{TMP_PREFIX}{path.name}.")
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -21,15 +21,13 @@ from __future__ import annotations
 
 import csv
 import io
-import os
-import tempfile
 import warnings
 from collections.abc import Callable
-from contextlib import suppress
 from pathlib import Path
 
 import numpy as np
 
+from activebonds.atomic import write_atomic
 from activebonds.data._common import check_output_path
 from activebonds.data.read_csv import AXIS_SEPARATORS
 from activebonds.data.trajectory import Trajectory
@@ -161,28 +159,12 @@ WRITERS: dict[str, Callable[[Trajectory, Path], bytes]] = {
 
 
 def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file next to ``path``, then rename it into place."""
+    """Write ``data`` atomically (:func:`activebonds.atomic.write_atomic`); OS errors become
+    one-line input errors and leave the target untouched."""
     try:
-        mode = path.stat().st_mode & 0o777
-    except OSError:
-        mode = 0o644
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".tmp-{path.name}.")
+        write_atomic(path, lambda handle: handle.write(data))
     except OSError as exc:
         raise InputError(path, f"cannot write file ({exc.strerror or exc})") from None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        with suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise InputError(path, f"cannot write file ({exc.strerror or exc})") from None
-        raise
 
 
 def write_trajectory(traj: Trajectory, path: str | Path) -> Path:
