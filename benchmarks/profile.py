@@ -174,6 +174,27 @@ def _table(lines, start):
     return out
 
 
+def _chain(frame_id, frames, locs, files, funcs) -> list[tuple[str, str, int]]:
+    """Source locations (file, function, line) from the op's own frame up to the outermost.
+
+    In the HLO text's StackFrames table (jax 0.10 / XLA), a frame's printed
+    ``parent_frame_id`` is the parent's 1-based index plus one (1 = no parent): read that way,
+    every chain runs op -> helper -> operator -> es.generation -> es.run -> caller."""
+    out, seen = [], set()
+    while frame_id in frames and frame_id not in seen and len(out) < 64:
+        seen.add(frame_id)
+        loc = locs.get(frames[frame_id].get("file_location_id"), {})
+        out.append(
+            (
+                files.get(loc.get("file_name_id"), "?"),
+                funcs.get(loc.get("function_name_id"), "?"),
+                loc.get("line", 0),
+            )
+        )
+        frame_id = frames[frame_id].get("parent_frame_id", 0) - 1
+    return out
+
+
 def parse_hlo(text: str) -> dict:
     lines = text.splitlines()
     heads = {
@@ -220,17 +241,11 @@ def parse_hlo(text: str) -> dict:
         sf = re.search(r"stack_frame_id=(\d+)", rest)
         calls = re.search(r"calls=%([\w.\-]+)", rest)
         opcode = re.search(r"(?<![\w.%\-])([a-z][a-z0-9\-]*)\(", rest)
-        src = None
-        if sf and int(sf.group(1)) in frames:
-            loc = locs.get(frames[int(sf.group(1))].get("file_location_id"), {})
-            src = (
-                files.get(loc.get("file_name_id"), "?"),
-                funcs.get(loc.get("function_name_id"), "?"),
-                loc.get("line", 0),
-            )
+        chain = _chain(int(sf.group(1)), frames, locs, files, funcs) if sf else []
         info = {
             "op_name": op.group(1) if op else "",
-            "src": src,
+            "src": chain[0] if chain else None,
+            "chain": chain,
             "calls": calls.group(1) if calls else None,
             "opcode": opcode.group(1) if opcode else "",
             "computation": comp,
@@ -271,10 +286,9 @@ def _generation_sections() -> list[tuple[int, str]]:
 _SECTIONS = None
 
 
-def category(src) -> str:
+def _frame_category(src) -> str | None:
+    """The category of one source location, or None if it says nothing (a helper)."""
     global _SECTIONS
-    if src is None:
-        return "other"
     file, func, line = src
     base = Path(file).name
     top = func.split(".<locals>")[0].split(".")[-1]
@@ -294,7 +308,32 @@ def category(src) -> str:
             if line >= start:
                 cat = name
         return cat
+    return None
+
+
+def category(chain) -> str:
+    """The first frame, from the op up, that names a category (helpers such as _top_k or
+    _index take their caller's)."""
+    if chain and isinstance(chain[0], str):
+        chain = [chain]  # a single location
+    for src in chain or ():
+        cat = _frame_category(src)
+        if cat is not None:
+            return cat
     return "other"
+
+
+def _where(chain) -> str:
+    """'file:line function' of the op, and of the caller that gave its category if the op is
+    in a helper."""
+    if not chain:
+        return ""
+    text = f"{Path(chain[0][0]).name}:{chain[0][2]} {chain[0][1]}"
+    if _frame_category(chain[0]) is None:
+        caller = next((c for c in chain[1:] if _frame_category(c) is not None), None)
+        if caller:
+            text += f" <- {Path(caller[0]).name}:{caller[2]} {caller[1]}"
+    return text
 
 
 def fused_categories(hlo, name) -> collections.Counter:
@@ -305,7 +344,7 @@ def fused_categories(hlo, name) -> collections.Counter:
     for sub in hlo["computations"].get(info["calls"], []):
         si = hlo["instructions"][sub]
         if si["src"] is not None and si["opcode"] not in ("parameter", "constant", "bitcast"):
-            out[category(si["src"])] += 1
+            out[category(si["chain"])] += 1
     return out
 
 
@@ -349,10 +388,9 @@ def profile_trace(bench, population, chunk, n_calls, top, trace_dir) -> dict:
         info = hlo["instructions"].get(name)
         if info is None or info["opcode"] in containers or name.startswith(containers):
             continue  # Python-side events, executor wrappers, loop containers
-        cat = category(info["src"])
+        cat = category(info["chain"])
         fused = fused_categories(hlo, name)
         also = sorted(c for c in fused if c != cat)
-        src = info["src"]
         rows.append(
             {
                 "name": name,
@@ -361,7 +399,7 @@ def profile_trace(bench, population, chunk, n_calls, top, trace_dir) -> dict:
                 "category": cat,
                 "also_fuses": also,
                 "op_name": info["op_name"],
-                "source": f"{Path(src[0]).name}:{src[2]} {src[1]}" if src else "",
+                "source": _where(info["chain"]),
             }
         )
     rows.sort(key=lambda r: -r["us_per_generation"])
