@@ -451,7 +451,7 @@ def test_cut_after_a_separator_is_reported(tmp_path):
 
 
 def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch):
-    import activebonds.atomic as writers
+    import activebonds.atomic as atomic
 
     target = tmp_path / "t.npz"
     target.write_bytes(b"previous")
@@ -459,7 +459,7 @@ def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch):
     def broken_replace(src, dst):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(writers.os, "replace", broken_replace)
+    monkeypatch.setattr(atomic.os, "replace", broken_replace)
     with pytest.raises(InputError, match="No space left on device"):
         write_trajectory(synthetic(), target)
     assert target.read_bytes() == b"previous"
