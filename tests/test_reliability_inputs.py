@@ -10,8 +10,8 @@
 * ``activebonds simulate BAD.toml --frames 5 --rate 60 --out x.csv`` on a sample of the
   refused files in subprocesses (8 by default, 30 with ``-m slow``): exit 2, one line on
   stderr naming the file, no traceback, no x.csv (nor any temporary file).
-* ``activebonds info --json``: every missing-marker convention (blank CSV fields, "NaN" and
-  "nan" in CSV and TRC, blank TRC fields, NaN in .npz, an .npz mask, C3D residual -1)
+* ``activebonds info --json``: every missing-marker convention (blank CSV fields, "NaN" in
+  CSV, blank TRC fields, NaN in .npz, an .npz mask, C3D residual -1)
   gives the same summary (gap counts per marker); a declared sample rate disagreeing with
   the time column is reported in one line with exit 2. The readers' own tests
   (test_trajectory_io.py) compare the masks themselves; this checks the command line.
@@ -357,9 +357,7 @@ def test_info_json_same_gaps_for_every_missing_marker_convention(tmp_path):
     files = {
         "blank.csv": _csv(""),
         "NaN.csv": _csv("NaN"),
-        "nan.csv": _csv("nan"),
         "blank.trc": _trc(""),
-        "nan.trc": _trc("nan"),
         # declared rates disagreeing with the time column (100 Hz)
         "rate_comment.csv": "# rate: 50\n" + _csv(""),
         "rate_header.trc": _trc("", rate="120.00"),
@@ -382,7 +380,7 @@ def test_info_json_same_gaps_for_every_missing_marker_convention(tmp_path):
         units="mm",
     )
     _c3d(tmp_path / "residual.c3d")
-    names = ["blank.csv", "NaN.csv", "nan.csv", "blank.trc", "nan.trc", "nan.npz", "mask.npz"]
+    names = ["blank.csv", "NaN.csv", "blank.trc", "nan.npz", "mask.npz"]
     names += ["residual.c3d", "rate_comment.csv", "rate_header.trc"]
     procs = dict(
         zip(names, cli_many([("info", tmp_path / n, "--json") for n in names]), strict=True)
