@@ -174,10 +174,12 @@ def select(gumbel, cost, n_keep: int, n_elite: int, pressure: float):
     every finite one and are only drawn when fewer finite candidates than places exist.
     cost [M] -> indices [n_keep]."""
     cost = jnp.where(jnp.isnan(cost), jnp.inf, cost)  # NaN ranks as the worst
-    elite = _top_k(-cost, n_elite)
-    # float32 ranking may swap near-ties: make sure the exact best is among the elite.
-    best = jnp.argmin(cost).astype(elite.dtype)
-    elite = jnp.where(jnp.any(elite == best), elite, elite.at[-1].set(best))
+    # The exact best first (float32 ranking may swap near-ties), then the next best.
+    best = jnp.argmin(cost)
+    others = _top_k(-cost.at[best].set(jnp.inf), n_elite - 1) if n_elite > 1 else None
+    elite = best[None].astype(jnp.int32)
+    if others is not None:
+        elite = jnp.concatenate([elite, others.astype(jnp.int32)])
     finite = jnp.isfinite(cost)
     log_cost = jnp.log(jnp.where(finite, cost, 1.0) + 1e-300)
     count = jnp.maximum(finite.sum(), 1)
