@@ -233,20 +233,14 @@ def test_fuzzed_model_files_load_round_trip_or_fail_in_one_line(fuzzed):
     assert outcomes["ok"] >= 0.15 * len(fuzzed) and outcomes["error"] >= 0.3 * len(fuzzed)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: a free parameter given without min/max gets default bounds from its "
-    "value (model/layout.py _DEFAULT_BOUNDS, e.g. stiffness (v/100, v*100)); for "
-    "`stiffness = { value = 1e308 }` the upper bound overflows to inf (log search space: "
-    "upper = inf), the file loads without error and every fit of it 'fails' with "
-    "non-finite candidates instead of a one-line InputError naming bond[0].stiffness",
-)
 def test_loaded_models_have_finite_search_bounds(fuzzed):
     text = (EXAMPLES / "triangle.toml").read_text()
     huge = text.replace(
         "stiffness = { value = 40.0, min = 1.0, max = 1000.0 }", "stiffness = { value = 1e308 }"
     )
-    models = [loads_model(huge, "huge.toml")]
+    with pytest.raises(InputError, match=r"huge.toml: bond\[0\]\.stiffness.*finite search bounds"):
+        loads_model(huge, "huge.toml")
+    models = []
     for path in fuzzed:
         try:
             models.append(load_model(path))

@@ -315,12 +315,6 @@ def test_torn_or_truncated_checkpoints_are_never_loaded(tmp_path, tmp_path_facto
     assert "no complete checkpoint" in line and newest_name in line and older_name in line, line
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: rundir.load_checkpoint opens each checkpoint with np.load(path); when "
-    "the archive is corrupt np.load raises before its NpzFile exists and the file handle is "
-    "never closed (ResourceWarning: unclosed file); read_npz avoids this by loading bytes",
-)
 def test_a_corrupt_checkpoint_does_not_leak_its_file_handle(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -335,13 +329,6 @@ def test_a_corrupt_checkpoint_does_not_leak_its_file_handle(tmp_path, tmp_path_f
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: resume removes .tmp-* leftovers only in RUN/checkpoints "
-    "(rundir.load_checkpoint -> remove_leftovers(folder)); a kill while history.csv or "
-    "status.json is written leaves RUN/.tmp-history.csv.* / RUN/.tmp-status.json.*, and "
-    "model.io.save_model's temporary best model is named .best_model.toml.*.tmp",
-)
 def test_resume_removes_leftovers_in_the_run_folder(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -354,14 +341,6 @@ def test_resume_removes_leftovers_in_the_run_folder(tmp_path, tmp_path_factory):
     assert leftovers(run) == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: a run killed after rundir.create but before its first checkpoint "
-    "(the generation-0 one, written after the initial population is compiled and evaluated; "
-    "1-4 s on this machine) cannot be resumed: driver.resume raises 'no complete checkpoint "
-    "to resume from' although run.json, model.toml and data.npz hold everything needed to "
-    "start at generation 0, and `fit --out RUN` then refuses the existing RUN",
-)
 def test_resume_of_a_run_killed_before_its_first_checkpoint(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -473,11 +452,6 @@ def test_resume_forced_after_every_kind_of_change(tmp_path, tmp_path_factory):
     _check_forced(cases, list(cases), reference(tmp_path_factory), cache)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package gap: driver._check_unchanged reports 'settings changed since the run "
-    "started' without naming the setting (seed 3 -> 4 here)",
-)
 def test_refusal_names_the_changed_setting(tmp_path, tmp_path_factory):
     run = copy_run(reference(tmp_path_factory), tmp_path / "run")
     edit_meta(run, lambda m: m["settings"].update(seed=4))

@@ -123,13 +123,6 @@ def test_planted_pickles_are_never_unpickled(tmp_path, tmp_path_factory):
     assert not marker.exists()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: rundir.save_checkpoint keeps 'the two newest' by file name "
-    "(sorted(glob('gen-*.npz'))[:-2] are deleted), including unreadable or foreign files: "
-    "with two such files named after a higher generation (gen-000999998/9.npz) every real "
-    "checkpoint is deleted right after it is written, and the run can no longer be resumed",
-)
 def test_foreign_checkpoint_files_do_not_evict_real_ones(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -210,19 +203,13 @@ def test_fit_with_bad_data_leaves_no_run_directory(tmp_path, tmp_path_factory):
     assert after == before, "a failed fit left something behind"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: driver._create_run renames RUN into place (rundir.create) before "
-    "it writes RUN/data.npz; if that write fails, or the process is killed in between, a "
-    "RUN without data.npz remains: resume cannot read it and fit refuses the existing RUN",
-)
 def test_run_directory_appears_only_when_complete(tmp_path, monkeypatch, tmp_path_factory):
     ws = workspace(tmp_path_factory)
 
-    def failing_write(traj, path):
+    def failing_render(traj, path):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(driver, "write_trajectory", failing_write)
+    monkeypatch.setattr(driver, "render_npz", failing_render)
     with pytest.raises(OSError):
         driver.fit(
             ws["base"] / "triangle.toml",
@@ -255,12 +242,6 @@ def test_an_existing_run_is_only_replaced_with_overwrite(tmp_path, tmp_path_fact
     assert sorted(p.name for p in tmp_path.iterdir()) == ["RUN"]  # no .RUN.old-*/.partial-*
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: rundir.create with overwrite=True replaces ANY existing path: "
-    "`fit --out DIR --overwrite` deletes a folder that is not a run directory (no run.json), "
-    "with all its files, and `--out FILE --overwrite` deletes a file",
-)
 @pytest.mark.parametrize("kind", ["folder", "file"])
 def test_overwrite_only_replaces_a_run_directory(tmp_path, kind):
     target = tmp_path / "thesis"
@@ -292,12 +273,6 @@ def test_fit_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
     assert list((tmp_path / "sub").iterdir()) == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: `activebonds simulate --out sub/../x.csv` is accepted and written "
-    "(data.writers.write_trajectory / check_output_path do not refuse '..'; only run "
-    "directories are checked, in rundir._safe_run_path)",
-)
 def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
     (tmp_path / "sub").mkdir()
     (proc,) = cli_many(
@@ -313,12 +288,6 @@ def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="package bug: model.io.save_model writes best_model.toml through tempfile.mkstemp "
-    "(mode 0600) and never applies the umask like atomic.write_atomic does, so the best model "
-    "is the only file of a run directory other users cannot read",
-)
 def test_best_model_has_the_permissions_of_the_other_run_files(tmp_path_factory):
     run = reference(tmp_path_factory)
     modes = {p.name: p.stat().st_mode & 0o777 for p in run.iterdir() if p.is_file()}

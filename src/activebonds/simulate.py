@@ -87,6 +87,8 @@ def check_finite(model: Model, xs: np.ndarray, rate: float) -> None:
 def simulate_to_file(
     model_path, n_frames, rate, out, start_path=None, substeps=1, integrator="euler"
 ):
+    if ".." in Path(out).parts:
+        raise InputError(out, "an output path may not contain '..'")
     model = load_model(model_path)
     start = read_trajectory(start_path) if start_path is not None else None
     traj = simulate(model, n_frames, rate, start, substeps, integrator)

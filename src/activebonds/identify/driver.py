@@ -20,7 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..atomic import write_text_atomic
-from ..data import Trajectory, read_trajectory, write_trajectory
+from ..data import Trajectory, read_trajectory
+from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model, loads_model, save_model
 from . import es, rundir
@@ -101,9 +102,8 @@ def _create_run(out, model_text, ident, settings, model_path, data_path, overwri
         "command": rundir.python_command(),
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    run = rundir.create(out, {"model.toml": model_text}, meta, overwrite)
-    write_trajectory(ident.data, run / "data.npz")
-    return run
+    files = {"model.toml": model_text, "data.npz": render_npz(ident.data, Path("data.npz"))}
+    return rundir.create(out, files, meta, overwrite)
 
 
 def _stored_identification(run: Path, settings: FitSettings) -> Identification:
@@ -143,8 +143,9 @@ def resume(
     p = ident.model.topology.n_particles
     shapes = {"genes": (n, g), "sigma": (n, g), "cost": (n,), "local": (n, p)}
     state, history, skipped = rundir.load_checkpoint(run, shapes)
-    if state is None:
+    if state is None and skipped:
         raise InputError(run, "no complete checkpoint to resume from" + _skipped(skipped))
+    # No checkpoint at all: the run was stopped before its first one; start it afresh.
     return _evolve(ident, settings, run, state, history, progress)
 
 
@@ -172,10 +173,13 @@ def _check_unchanged(run: Path, meta: dict) -> None:
                 f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway",
             )
     stored = rundir.read_status(run).get("job")
-    if stored is not None and stored != FitSettings(**meta["settings"]).job():
+    current = FitSettings(**meta["settings"]).job()
+    if stored is not None and stored != current:
+        changed = sorted(k for k in set(stored) | set(current) if stored.get(k) != current.get(k))
+        detail = ", ".join(f"{k} {stored.get(k)!r} -> {current.get(k)!r}" for k in changed)
         raise InputError(
             run / "run.json",
-            "settings changed since the run started; pass --force to continue anyway",
+            f"settings changed since the run started ({detail}); pass --force to continue anyway",
         )
 
 

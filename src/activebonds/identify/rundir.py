@@ -92,6 +92,8 @@ def create(out: str | Path, files: dict[str, bytes], meta: dict, overwrite: bool
     out = _safe_run_path(out)
     if out.exists() and not overwrite:
         raise InputError(out, "already exists; choose another --out or pass --overwrite")
+    if out.exists() and not (out.is_dir() and (out / "run.json").is_file()):
+        raise InputError(out, "exists and is not a run directory; --overwrite only replaces runs")
     parent = out.absolute().parent
     if not parent.is_dir():
         raise InputError(out, f"the parent folder {parent} does not exist")
@@ -165,8 +167,22 @@ def save_checkpoint(run: Path, state: dict[str, np.ndarray], history: dict[str, 
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     write_atomic(folder / f"gen-{gen:09d}.npz", lambda fh: fh.write(buf.getvalue()))
-    for old in sorted(folder.glob("gen-*.npz"))[:-KEEP_CHECKPOINTS]:
+    # Keep this one and the newest older one; files of later generations (foreign or from a
+    # run that went further before an overwrite) are left alone.
+    older = [
+        p
+        for p in folder.glob("gen-*.npz")
+        if _generation_of(p) is not None and _generation_of(p) < gen
+    ]
+    for old in sorted(older, key=_generation_of)[: -(KEEP_CHECKPOINTS - 1)]:
         old.unlink(missing_ok=True)
+
+
+def _generation_of(path: Path) -> int | None:
+    try:
+        return int(path.stem.removeprefix("gen-"))
+    except ValueError:
+        return None
 
 
 def load_checkpoint(run: Path, shapes: dict[str, tuple]):
@@ -174,10 +190,14 @@ def load_checkpoint(run: Path, shapes: dict[str, tuple]):
     truncated or foreign files are skipped (and reported), leftovers of writes removed."""
     folder = run / "checkpoints"
     remove_leftovers(folder)
+    remove_leftovers(run)
+    for stray in run.glob(".*.tmp"):  # left by an interrupted save_model of an older version
+        stray.unlink(missing_ok=True)
     skipped = []
     for path in sorted(folder.glob("gen-*.npz"), reverse=True):
         try:
-            with np.load(path, allow_pickle=False) as z:
+            raw = path.read_bytes()  # np.load on a path leaks the handle of a corrupt file
+            with np.load(io.BytesIO(raw), allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
             state = {k: arrays[f"state_{k}"] for k in STATE_KEYS}
             history = {k: arrays[f"history_{k}"] for k in HISTORY_COLUMNS}

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import os
 import re
-import tempfile
 import tomllib
 from pathlib import Path
 
 import tomli_w
 from pydantic import ValidationError
 
+from ..atomic import write_text_atomic
 from ..errors import InputError
 from .model import Model, build
 from .schema import ModelSpec
@@ -67,7 +66,10 @@ def parse_model(data: dict, source: str = "<model>") -> Model:
         spec = ModelSpec.model_validate(data)
     except ValidationError as err:
         raise _explain(err, source) from None
-    return build(spec)
+    try:
+        return build(spec)
+    except ValueError as err:
+        raise InputError(source, str(err)) from None
 
 
 def loads_model(text: str, source: str = "<model>") -> Model:
@@ -103,16 +105,6 @@ def dumps_model(model: Model | ModelSpec) -> str:
 def save_model(model: Model | ModelSpec, path: str | Path) -> None:
     """Write atomically: a temporary file in the same folder, then rename."""
     path = Path(path)
-    text = dumps_model(model)
     if not path.parent.exists():
         raise InputError(path, "the folder does not exist")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, dumps_model(model))

@@ -141,6 +141,11 @@ def build(spec: ModelSpec) -> Model:
             lo = lo if lower is None else lower
             hi = hi if upper is None else upper
             lo, hi = min(lo, value), max(hi, value)
+            if not (np.isfinite(lo) and np.isfinite(hi)):
+                raise ValueError(
+                    f"{groups[g]}.{key}: value {value} gives no finite search bounds; "
+                    "give min and max"
+                )
             use_log = pick_log(lo, hi, log)
             gene_of[(g, key)] = len(genes)
             genes.append(Gene(f"{groups[g]}.{key}", g, lo, hi, use_log, value))
