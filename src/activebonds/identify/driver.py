@@ -250,6 +250,8 @@ def _evolve(ident, settings: FitSettings, run, state_np, history, progress) -> F
     if run is not None and state_np is None:
         _checkpoint(run, ident, settings, state, history, "running")
     started = time.time()
+    if progress is not None and gen > 0 and len(history["best_rms_mm"]):
+        progress(gen, total, float(history["best_rms_mm"][-1]))  # a resumed run starts here
     try:
         while gen < total:
             state, (rows, active) = chunk(gen_key, state, stop=total)
