@@ -18,6 +18,8 @@ from rich.progress import (
 
 @contextmanager
 def fit_progress(total: int, console: Console):
+    """A progress bar that appears with the first finished chunk: input errors found before
+    then stay a single line."""
     columns = (
         TextColumn("[bold]generation"),
         MofNCompleteColumn(),
@@ -28,18 +30,26 @@ def fit_progress(total: int, console: Console):
         TextColumn("ETA"),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, console=console, transient=False) as bar:
-        task = bar.add_task("fit", total=total, rms="-", speed="-")
-        start = {"t": None, "g": 0}
+    bar = Progress(*columns, console=console, transient=False)
+    state: dict = {"task": None, "t": None, "g": 0}
 
-        def update(generation: int, total_now: int, rms: float) -> None:
-            now = time.time()
-            if start["t"] is None:  # the first chunk includes compilation: rate from here on
-                start["t"], start["g"] = now, generation
-                speed = "-"
-            else:
-                dt = max(now - start["t"], 1e-9)
-                speed = f"{(generation - start['g']) / dt:,.0f}"
-            bar.update(task, completed=generation, total=total_now, rms=f"{rms:.4g}", speed=speed)
+    def update(generation: int, total_now: int, rms: float) -> None:
+        now = time.time()
+        if state["task"] is None:
+            bar.start()
+            state["task"] = bar.add_task("fit", total=total_now, rms="-", speed="-")
+        if state["t"] is None:  # the first chunk includes compilation: rate from here on
+            state["t"], state["g"] = now, generation
+            speed = "-"
+        else:
+            dt = max(now - state["t"], 1e-9)
+            speed = f"{(generation - state['g']) / dt:,.0f}"
+        bar.update(
+            state["task"], completed=generation, total=total_now, rms=f"{rms:.4g}", speed=speed
+        )
 
+    try:
         yield update
+    finally:
+        if state["task"] is not None:
+            bar.stop()

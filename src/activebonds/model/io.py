@@ -15,6 +15,18 @@ from .model import Model, build
 from .schema import ModelSpec
 
 _NOISE = {"float_type", "float_parsing", "list_type", "model_type", "dict_type", "is_instance_of"}
+_EXPECTED = {
+    "anchor": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
+    "weights": "expected a table { length = .., rate = .., min = .., max = .. }",
+    "length": "expected a number or a list of numbers (one per binary bond)",
+    "rate": "expected a number or a list of numbers (one per binary bond)",
+    "gravity": "expected a list of numbers",
+    "position": "expected a list of numbers",
+    "velocity": "expected a list of numbers",
+}
+_PARAMETER = "expected a number or a table { value = .., min = .., max = .., fixed = .. }"
+for _name in ("mass", "stiffness", "rest_length", "damping", "rest_angle", "gain", "threshold"):
+    _EXPECTED[_name] = _PARAMETER
 _LEADING_FIELD = re.compile(r"^([A-Za-z_][\w\[\]\.]*): (.*)$", re.S)
 
 
@@ -55,6 +67,8 @@ def _explain(err: ValidationError, source: str) -> InputError:
             r == where or r.startswith(where + ".") or r.startswith(where + "[") for r in real
         ):
             continue
+        if noise:  # every alternative of a union failed: say what the field takes
+            msg = _EXPECTED.get(where.rsplit(".", 1)[-1].split("[")[0], msg)
         text = f"{where}: {msg}" if where else msg
         if text not in problems:
             problems.append(text)
