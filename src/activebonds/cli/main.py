@@ -25,8 +25,9 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-out = Console()
-err = Console(stderr=True)
+# Not a terminal (a log, a pipe): no 80-column wrapping of paths and summaries.
+out = Console() if sys.stdout.isatty() else Console(width=160, soft_wrap=True)
+err = Console(stderr=True, width=10_000, soft_wrap=True)
 
 
 def fail(error: InputError | str, code: int = 2):
