@@ -7,6 +7,7 @@ one after another on a CPU.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -40,8 +41,6 @@ def run_seeds(
     progress: Callable[[int, int], None] | None = None,
     chunk: int = 250,
 ) -> SeedRuns:
-    import time
-
     jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64
     problem = ident.problem

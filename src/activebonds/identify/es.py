@@ -196,10 +196,8 @@ def run(base_key, state: ESState, problem: Problem, settings: ESSettings, n_gene
     The random numbers of the whole chunk are drawn first, in bulk (vectorised over
     generations), then read by the scan; each generation's numbers depend only on the seed
     key and the generation index, so results do not depend on the chunk length."""
-    dtype = state.genes.dtype
     indices = state.generation + jnp.arange(n_generations, dtype=jnp.int32)
     noises = jax.vmap(lambda g: noise(base_key, g, problem, settings, jnp.float32))(indices)
-    del dtype
 
     def body(s, nz):
         new, row = generation(nz, s, problem, settings)
