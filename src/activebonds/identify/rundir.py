@@ -18,18 +18,15 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import _umask, remove_leftovers, write_atomic, write_text_atomic
+from ..atomic import remove_leftovers, staged_directory, write_atomic, write_text_atomic
 from ..errors import InputError
 
 FORMAT = 1
@@ -97,23 +94,11 @@ def create(out: str | Path, files: dict[str, bytes], meta: dict, overwrite: bool
     parent = out.absolute().parent
     if not parent.is_dir():
         raise InputError(out, f"the parent folder {parent} does not exist")
-    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}.partial-"))
-    try:
-        os.chmod(tmp, 0o777 & ~_umask())
+    with staged_directory(out) as tmp:
         (tmp / "checkpoints").mkdir()
         for name, data in files.items():
             (tmp / name).write_bytes(data)
         (tmp / "run.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}.old-"))
-            os.replace(out, trash / "run")
-            os.replace(tmp, out)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out
 
 

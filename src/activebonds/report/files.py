@@ -3,14 +3,12 @@ file written to a temporary file then renamed."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..atomic import _umask, write_text_atomic
+from .. import atomic
+from ..atomic import write_text_atomic
 from ..errors import InputError
 
 FIGURE_SUFFIXES = {".png", ".svg", ".gif", ".json"}
@@ -40,20 +38,8 @@ def staged_directory(target: str | Path) -> Iterator[Path]:
     if not parent.is_dir():
         raise InputError(target, f"the folder {parent} does not exist")
     check_replaceable(target)
-    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.partial-"))
-    try:
-        os.chmod(tmp, 0o777 & ~_umask())
+    with atomic.staged_directory(target) as tmp:
         yield tmp
-        if target.exists():
-            trash = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.old-"))
-            os.replace(target, trash / "old")
-            os.replace(tmp, target)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def write_html(path: str | Path, text: str) -> Path:
