@@ -209,9 +209,10 @@ class NumpyES:
             gumbel=rng.gumbel(size=2 * n),
         )
 
-    def _group_bias(self, local):
-        """[N, P] -> [N, T]: probability of each group, proportional to its mean local cost."""
-        per_slot = np.where(self.valid, local[:, self.pslot], 0.0)  # [N, T, S]
+    def _group_bias(self, per_slot):
+        """[N, T, S] (the parent's local cost at each slot's particle) -> [N, T]: probability
+        of each group, proportional to its mean local cost."""
+        per_slot = np.where(self.valid, per_slot, 0.0)
         score = per_slot.sum(-1) / np.maximum(self.valid.sum(-1), 1)
         score = np.where(np.isfinite(score), score, 0.0)
         total = score.sum(-1, keepdims=True)
@@ -225,7 +226,8 @@ class NumpyES:
         pg = parents[:, self.gene_group]  # [C, G, S]: the parents of each gene's group
         child = np.sum(self.genes[pg, self.gene_cols] * self.gene_w, axis=-1) / self.gene_norm
         log_sigma = np.log(self.sigma)[pg, self.gene_cols]
-        return child, np.exp(np.sum(log_sigma * self.gene_w, axis=-1) / self.gene_norm)
+        child_sigma = np.exp(np.sum(log_sigma * self.gene_w, axis=-1) / self.gene_norm)
+        return child, child_sigma, parents
 
     def _mutate(self, nz, genes, sigma, variant, group_prob):
         g, s = self.g, self.s
@@ -235,7 +237,7 @@ class NumpyES:
         in_group = self.gene_group[None, :] == group[:, None]
         single = np.arange(g)[None, :] == one_gene[:, None]
         touched = np.where(v == 1, in_group, np.where(v == 3, single, True))
-        adapt = touched & (v <= 1)
+        adapt = np.broadcast_to(v != 2, touched.shape)
         z0, zi, step = (np.asarray(x, np.float64) for x in (nz.z0, nz.zi, nz.step))
         new_sigma = np.where(
             adapt, sigma * np.exp(self.tau_global * z0 + self.tau_local * zi), sigma
@@ -278,20 +280,25 @@ class NumpyES:
         a, b = _index(nz.parent, n)
         first = np.where(self.fit[b] < self.fit[a], b, a)
         genes, sigma = self.genes[first], self.sigma[first]
+        per_slot = self.local[first][:, self.pslot]  # [N, T, S]
+        reference = self.fit[first]
         if c > 0:
-            cross_genes, cross_sigma = self._crossover(nz.cross)
+            cross_genes, cross_sigma, parents = self._crossover(nz.cross)
             genes = np.concatenate([cross_genes, genes[c:]])
             sigma = np.concatenate([cross_sigma, sigma[c:]])
+            per_slot = np.concatenate([self.local[parents, self.pslot], per_slot[c:]])
+            cross_ref = np.min(np.where(self.valid, self.fit[parents], np.inf), axis=(1, 2))
+            reference = np.concatenate([cross_ref, reference[c:]])
 
         variant = choose(nz.variant, np.broadcast_to(self.variant_probs, (n, 4)))
-        group_prob = self._group_bias(self.local[first])
+        group_prob = self._group_bias(per_slot)
         genes, sigma = self._mutate(nz, genes, sigma, variant, group_prob)
 
         cost, local = _finite_or_inf(*self.cost(genes))
         failed = int(n - np.isfinite(cost).sum())
         onehot = variant[:, None] == np.arange(4)
         trials = onehot.sum(0)
-        successes = (onehot & (cost < self.fit[first])[:, None]).sum(0)
+        successes = (onehot & (cost < reference)[:, None]).sum(0)
 
         all_cost = np.concatenate([self.fit, cost])
         self.pool_cost = all_cost  # parents + children, for the self-test's tie detection

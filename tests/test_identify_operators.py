@@ -294,8 +294,11 @@ def test_crossover_forced_tournament_averages_winners_per_group():
     pairs[:, 0, 1, 1] = (1, 2)  # particle 3: parent 1 (7.0) beats parent 2 (9.0)
     pairs[:, 0, 2, 0] = (0, 3)  # particle 3: parent 3 (0.4) beats parent 0 (2.0)
     pairs[:, 0, 2, 1] = (1, 1)  # padding: must not count
-    child, child_sigma = run_crossover(pairs)
+    child, child_sigma, parents = run_crossover(pairs)
     child, child_sigma = np.asarray(child)[0], np.asarray(child_sigma)[0]
+    # the parents returned are the winners per slot (the padding slot as drawn)
+    assert np.asarray(parents)[0, :, 0].tolist() == [0, 2, 3]
+    assert np.asarray(parents)[0, :2, 1].tolist() == [3, 1]
     # group 0 from parents {0, 3}, group 1 from parents {2, 1}, group 2 from parent 3 only
     np.testing.assert_allclose(child[:2], (GENES[0, :2] + GENES[3, :2]) / 2, rtol=1e-6)
     np.testing.assert_allclose(child[2:5], (GENES[2, 2:5] + GENES[1, 2:5]) / 2, rtol=1e-6)
@@ -311,7 +314,7 @@ def test_crossover_forced_tournament_averages_winners_per_group():
 def test_crossover_matches_hand_reference_for_random_pairs():
     rng = np.random.default_rng(4)
     pairs = rng.integers(0, 4, size=(2, 64, 3, 2))
-    child, child_sigma = run_crossover(pairs)
+    child, child_sigma, _ = run_crossover(pairs)
     ref, ref_sigma = crossover_reference(pairs)
     np.testing.assert_allclose(np.asarray(child), ref, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(child_sigma), ref_sigma, rtol=1e-6)
@@ -353,7 +356,8 @@ def test_local_tournament_bias_follows_the_slot_particle():
 
 def test_group_bias_prefers_badly_fitted_groups():
     local = jnp.array([[1.0, 2.0, 3.0, 10.0], [0.0, 0.0, 0.0, 0.0], [5.0, 5.0, 1.0, 1.0]])
-    prob = np.asarray(group_bias(local, jnp.asarray(SLOTS), 3))
+    per_slot = ops.slot_costs(local, jnp.asarray(SLOTS))
+    prob = np.asarray(group_bias(per_slot, jnp.asarray(SLOTS), 3))
     # mean local cost of each group's particles: (1+2)/2, (3+10)/2, 10 -> /18
     np.testing.assert_allclose(prob[0], np.array([1.5, 6.5, 10.0]) / 18.0, rtol=1e-12)
     np.testing.assert_allclose(prob[1], [1 / 3] * 3)  # nothing to prefer: uniform
@@ -417,7 +421,7 @@ def test_variant_2_moves_only_the_chosen_group():
     genes, sigma, new_genes, new_sigma = run_mutate(1, group_prob=[0.0, 1.0, 0.0])
     changed = new_genes != genes
     assert np.all(changed[:, groups[1]]) and not changed[:, np.r_[groups[0], groups[2]]].any()
-    assert np.array_equal(new_sigma != sigma, changed)
+    assert np.all(new_sigma != sigma)  # the whole strategy vector self-adapts
     # drawn with the given probabilities; always exactly one whole group
     prob = np.array([0.2, 0.3, 0.5])
     genes, sigma, new_genes, new_sigma = run_mutate(1, group_prob=prob, seed=1)
@@ -441,11 +445,22 @@ def test_variant_4_moves_exactly_one_gene_with_a_cauchy_step():
     genes, sigma, new_genes, new_sigma = run_mutate(3)
     changed = new_genes != genes
     assert np.all(changed.sum(axis=1) == 1)
-    assert np.array_equal(new_sigma, sigma)
+    # self-adaptation: every mutability adapts, though one gene moves
+    assert np.all(new_sigma != sigma)
     np.testing.assert_allclose(changed.mean(axis=0), 1 / 6, atol=0.03)  # uniform gene
-    # heavy tail: |step| / sigma has median 1 (Cauchy), not 0.674 (normal)
-    ratio = np.abs(new_genes - genes)[changed] / sigma[changed]
+    # heavy tail: |step| / sigma' has median 1 (Cauchy), not 0.674 (normal)
+    ratio = np.abs(new_genes - genes)[changed] / new_sigma[changed]
     assert 0.9 < np.median(ratio) < 1.1
+
+
+@pytest.mark.parametrize("variant", [0, 1, 3])
+def test_every_mutating_variant_but_the_frozen_one_adapts(variant):
+    """Self-adaptation needs every variant but the frozen one (3) to adapt the whole strategy
+    vector; otherwise the selected individuals' mutabilities stay near their initial size
+    and fits stall (the audit: 1.5e-3 mm where 1e-9 mm is reachable)."""
+    genes, sigma, new_genes, new_sigma = run_mutate(variant, group_prob=[0.0, 1.0, 0.0])
+    assert (new_genes != genes).any(axis=1).all()
+    assert np.all(new_sigma != sigma)
 
 
 def test_self_adaptation_is_log_normal_and_precedes_the_step():
@@ -552,3 +567,57 @@ def test_select_random_part_favours_good_candidates():
     assert np.all(np.diff(np.convolve(rest, np.ones(5) / 5, "valid")) < 0.02)  # monotone trend
     # without pressure the draw is uniform: 18 of 38 places
     np.testing.assert_allclose(uniform[n_elite:] / 300, 18 / 38, atol=0.1)
+
+
+# --------------------------------------------------------------------------------------------
+# A crossover child is judged against its own parents
+# --------------------------------------------------------------------------------------------
+
+
+def test_crossover_children_refer_to_their_own_parents():
+    """Individual 0 wins every global tournament (the copy parent) but loses every local one,
+    so the crossover children are made from individuals 1 and 2 only. Their success count and
+    variant-2 bias must use those parents, not the unrelated tournament winner."""
+    from activebonds.identify import es
+
+    n, g = 4, 2
+    settings = es.ESSettings(population=n, crossover_rate=1.0, elite_fraction=0.25)
+    slots = np.array([[0, 1]], dtype=np.int32)
+    problem = es.Problem(
+        evaluate=lambda x: (jnp.sum(x), jnp.stack([x[0], x[1]])),
+        lower=np.zeros(g),
+        upper=np.full(g, 10.0),
+        gene_group=np.zeros(g, np.int32),
+        group_slots=slots,
+    )
+    state = es.ESState(
+        genes=jnp.array([[1.0, 1.0], [5.0, 5.0], [5.0, 5.0], [5.0, 5.0]]),
+        sigma=jnp.ones((n, g)),
+        cost=jnp.array([2.0, 10.0, 10.0, 10.0]),
+        local=jnp.array([[100.0, 100.0], [1.0, 1.0], [1.0, 1.0], [1.0, 1.0]]),
+        variant_probs=jnp.full(4, 0.25),
+        generation=jnp.asarray(0, jnp.int32),
+        failed_total=jnp.asarray(0, jnp.int32),
+    )
+    f = jnp.float64
+    nz = ops.Noise(
+        parent=jnp.full((2, n), 0.1, f),  # both candidates: individual 0
+        cross=jnp.stack([jnp.full((n, 1, 2), 0.3, f), jnp.full((n, 1, 2), 0.6, f)]),  # 1 vs 2
+        variant=jnp.full((n, 1), 0.1, f),  # variant (1): all genes
+        group=jnp.full((n, 1), 0.5, f),
+        gene=jnp.full((n,), 0.5, f),
+        z0=jnp.zeros((n, 1), f),
+        zi=jnp.zeros((n, g), f),
+        step=jnp.full((n, g), -1.0, f),  # every child moves from (5, 5) to (4, 4): cost 8
+        cauchy=jnp.zeros((n,), f),
+        gumbel=jnp.zeros((2 * n,), f),
+    )
+    _, row = jax.jit(lambda nz, s: es.generation(nz, s, problem, settings))(nz, state)
+    assert int(row.trials[0]) == n
+    # cost 8 beats its parents (10) though not the tournament winner (2): all successes
+    assert int(row.successes[0]) == n
+    # the per-slot costs a crossover child's variant-2 bias reads are its parents' (1.0)
+    parents = jnp.array([[[1, 2]]])
+    per_slot = ops.crossover_slot_costs(state.local, parents, jnp.asarray(slots))
+    np.testing.assert_array_equal(np.asarray(per_slot), [[[1.0, 1.0]]])
+    assert float(ops.crossover_reference(state.cost, parents, jnp.asarray(slots))[0]) == 10.0

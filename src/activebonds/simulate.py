@@ -11,7 +11,7 @@ import numpy as np
 from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
 from .model import Model, load_model
-from .physics import rollout
+from .physics import rollout, start_velocity
 
 
 def simulate(
@@ -23,7 +23,8 @@ def simulate(
     integrator: str = "euler",
 ) -> Trajectory:
     """Positions of ``n_frames`` frames at ``rate`` Hz, from the model's initial state or from
-    the first two frames of ``start`` (position of frame 1, backward-difference velocity)."""
+    the first two frames of ``start`` (position of frame 1, and the velocity the integrator
+    carries there given frames 0 and 1: see :func:`~activebonds.physics.start_velocity`)."""
     if not (np.isfinite(rate) and rate > 0):
         raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
     if integrator not in ("euler", "verlet"):
@@ -39,7 +40,15 @@ def simulate(
             raise InputError(start.source, "the first two frames must hold every model marker")
         first = data.positions[0]
         x0 = data.positions[1]
-        v0 = (data.positions[1] - data.positions[0]) * rate
+        v0 = start_velocity(
+            model.params,
+            model.topology,
+            jnp.asarray(first),
+            jnp.asarray(x0),
+            dt,
+            substeps,
+            integrator,
+        )
     n_run = n_frames if first is None else n_frames - 1
     xs = np.asarray(
         rollout(

@@ -114,6 +114,13 @@ def fit(
     adapt_variants: Annotated[
         bool, typer.Option(help="Adapt the mutation-variant rates to their success.")
     ] = False,
+    init: Annotated[
+        str,
+        typer.Option(
+            help="uniform (within the bounds) or lsq (one individual at the exact "
+            "least-squares optimum of the linear parameters, neural gains 0)."
+        ),
+    ] = "uniform",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
@@ -135,6 +142,7 @@ def fit(
             checkpoint_every=checkpoint_every,
             precision=precision,
             adapt_variants=adapt_variants,
+            init=init,
         )
         with _progress(generations) as progress:
             result = run_fit(

@@ -1,7 +1,9 @@
 """The short-term cost of the paper (§3.2), with local costs per particle and a horizon H.
 
-DESIGN.md §3: velocities come from backward differences ``v_t = (x_t - x_{t-1}) / dt`` so a
-prediction never sees the frame it predicts. From the *real* state at a start frame s, the model
+DESIGN.md §3: velocities come from the two recorded positions before a start (the backward
+difference ``(x_t - x_{t-1}) / dt``, made consistent with the integrator and substep count by
+:func:`~activebonds.physics.integrate.start_velocity`), so a prediction never sees the frame it
+predicts. From the *real* state at a start frame s, the model
 is integrated H steps; every predicted position is compared with the recorded one. Starts are
 s = 1, 1 + H, 1 + 2H, ... so H = 1 is the paper's one-step cost and H = window length a free run.
 The local cost of particle p is its own share; the global cost is their sum. A prediction whose
@@ -17,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.model import Model
-from ..physics.integrate import advance, rollout_states
+from ..physics.integrate import advance, rollout_states, start_velocity
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,6 +27,7 @@ class Windows:
     """Restart states and targets cut from a recorded trajectory (NumPy, float64)."""
 
     x0: np.ndarray  # [S, P, D] real positions at each start
+    x_prev: np.ndarray  # [S, P, D] real positions one frame before each start
     v0: np.ndarray  # [S, P, D] backward-difference velocities at each start
     target: np.ndarray  # [S, H, P, D] recorded positions to predict (0 where missing)
     weight: np.ndarray  # [S, H, P] 1.0 where the term counts
@@ -55,7 +58,7 @@ def make_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: in
     frames_c = np.minimum(frames, n_frames - 1)
     target = x[frames_c]
     weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
-    return Windows(x0=x0, v0=v0, target=target, weight=weight, dt=float(dt))
+    return Windows(x0=x0, x_prev=x[starts - 1], v0=v0, target=target, weight=weight, dt=float(dt))
 
 
 def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
@@ -65,17 +68,26 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     """
     topo, layout = model.topology, model.layout
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
+    x_prev = jnp.asarray(windows.x_prev)
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
     dt, horizon = windows.dt, windows.horizon
+    exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
+
+    def velocities(params):
+        if exact_backward:
+            return v0
+        start = jax.vmap(lambda a, b: start_velocity(params, topo, a, b, dt, substeps, method))
+        return start(x_prev, x0)
 
     def predict(params):
+        v = velocities(params)
         if horizon == 1:
             step = jax.vmap(lambda x, v: advance(params, topo, x, v, dt, substeps, method)[0])
-            return step(x0, v0)[:, None]
+            return step(x0, v)[:, None]
         run = jax.vmap(
             lambda x, v: rollout_states(params, topo, x, v, dt, horizon, substeps, method)[0]
         )
-        return run(x0, v0)
+        return run(x0, v)
 
     def cost(genome):
         params = layout.decode(genome)

@@ -58,6 +58,7 @@ class Problem(NamedTuple):
     upper: np.ndarray
     gene_group: np.ndarray  # [G] bond-type group of each gene
     group_slots: np.ndarray  # [T, S] extremity particles of each group, -1 padded
+    start: np.ndarray | None = None  # [K, G] genomes placed first in the initial population
 
 
 class ESState(NamedTuple):
@@ -76,7 +77,7 @@ class GenerationRow(NamedTuple):
     worst: jax.Array  # worst finite cost among survivors
     failed: jax.Array  # children whose simulation went non-finite
     trials: jax.Array  # [4] children per variant
-    successes: jax.Array  # [4] children better than their first parent
+    successes: jax.Array  # [4] children better than their own parent(s)
 
 
 def _evaluate(problem: Problem, genes):
@@ -91,12 +92,15 @@ def _finite_or_inf(cost, local):
 
 
 def init(key, problem: Problem, settings: ESSettings, dtype=None) -> ESState:
-    """Population drawn uniformly within the bounds (search space), mutabilities at
-    ``sigma_init`` of each range."""
+    """Population drawn uniformly within the bounds (search space), the problem's ``start``
+    genomes (if any) in its first places; mutabilities at ``sigma_init`` of each range."""
     dtype = dtype or jnp.result_type(float)
     lo, hi = jnp.asarray(problem.lower, dtype), jnp.asarray(problem.upper, dtype)
     n = settings.population
     genes = lo + (hi - lo) * jax.random.uniform(key, (n, lo.shape[0]), dtype)
+    if problem.start is not None:
+        start = jnp.clip(jnp.asarray(problem.start, dtype)[:n], lo, hi)
+        genes = genes.at[: start.shape[0]].set(start)
     sigma = jnp.broadcast_to(settings.sigma_init * (hi - lo), genes.shape)
     cost, local = _finite_or_inf(*_evaluate(problem, genes))
     return ESState(
@@ -126,20 +130,29 @@ def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSett
     slots = jnp.asarray(problem.group_slots)
 
     # 1. parents, crossover per bond type
-    # children [0, C) by crossover, [C, N) copies of their first parent
+    # children [0, C) by crossover, [C, N) copies of their first parent. Each child's
+    # variant-2 bias and success count refer to its own parents: the copied parent, or for a
+    # crossover child the parents chosen per slot (their local cost at the slot's particle;
+    # a success beats the best of them).
     first = ops.tournament(nz.parent, state.cost)
     c = settings.n_cross
     genes, sigma = state.genes[first], state.sigma[first]
+    per_slot = ops.slot_costs(state.local[first], slots)
+    reference = state.cost[first]
     if c > 0:
-        cross_genes, cross_sigma = ops.crossover(
+        cross_genes, cross_sigma, parents = ops.crossover(
             nz.cross, state.genes, state.sigma, state.local, slots, gene_group
         )
         genes = jnp.concatenate([cross_genes, genes[c:]])
         sigma = jnp.concatenate([cross_sigma, sigma[c:]])
+        cross_slot = ops.crossover_slot_costs(state.local, parents, slots)
+        per_slot = jnp.concatenate([cross_slot, per_slot[c:]])
+        cross_ref = ops.crossover_reference(state.cost, parents, slots)
+        reference = jnp.concatenate([cross_ref, reference[c:]])
 
     # 2. mutation: one variant per child
     variant = ops.choose(nz.variant, jnp.broadcast_to(state.variant_probs, (n, ops.N_VARIANTS)))
-    group_prob = ops.group_bias(state.local[first], slots, slots.shape[0])
+    group_prob = ops.group_bias(per_slot, slots, slots.shape[0])
     genes, sigma = ops.mutate(
         nz, genes, sigma, variant, group_prob, gene_group, bounds, settings.sigma_floor
     )
@@ -149,7 +162,7 @@ def generation(nz: ops.Noise, state: ESState, problem: Problem, settings: ESSett
     failed = jnp.sum(~jnp.isfinite(cost)).astype(jnp.int32)
     onehot = jax.nn.one_hot(variant, ops.N_VARIANTS, dtype=jnp.int32)
     trials = onehot.sum(0)
-    successes = (onehot * (cost < state.cost[first])[:, None]).sum(0)
+    successes = (onehot * (cost < reference)[:, None]).sum(0)
 
     # 4. selection from parents + children
     all_cost = jnp.concatenate([state.cost, cost])

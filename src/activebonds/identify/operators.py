@@ -6,7 +6,8 @@ particles, T bond-type groups, S extremity slots per group.
 
 The paper names four concurrent mutation variants without defining them; the four below are
 ours (DESIGN.md §3): (1) all genes, (2) one bond type's genes, biased to the worst local cost,
-(3) all genes with mutabilities frozen, (4) a Cauchy jump of a single gene.
+(3) all genes with mutabilities frozen, (4) a Cauchy jump of a single gene. All but (3)
+self-adapt every mutability first.
 """
 
 from __future__ import annotations
@@ -97,7 +98,8 @@ def crossover(u, genes, sigma, local, slots, gene_group):
     For each bond type, for each occurrence, for each particle at its extremity, a parent is
     picked with a bias to parents whose local cost at that particle is low; the child's genes
     of that bond type are the mean of the chosen parents' genes (mutabilities: geometric mean).
-    Returns child genes and mutabilities [N, G].
+    Returns child genes and mutabilities [N, G] and the parent chosen for each group and slot
+    [N, T, S] (the child's own parents, for its variant-2 bias and its success count).
     """
     parents = local_tournament(u, local, slots)  # [N, T, S]
     valid = (slots >= 0).astype(genes.dtype)  # [T, S]
@@ -107,14 +109,35 @@ def crossover(u, genes, sigma, local, slots, gene_group):
     norm = w.sum(axis=-1)
     child = jnp.sum(genes[per_gene, gidx] * w, axis=-1) / norm
     child_sigma = jnp.exp(jnp.sum(jnp.log(sigma)[per_gene, gidx] * w, axis=-1) / norm)
-    return child, child_sigma
+    return child, child_sigma, parents
 
 
-def group_bias(local, slots, n_groups):
+def slot_costs(local, slots):
+    """The local cost of each child's parent at each group slot's particle: local [N, P]
+    (the parent's local costs, one row per child) -> [N, T, S]."""
+    return local[:, jnp.maximum(slots, 0)]
+
+
+def crossover_slot_costs(local, parents, slots):
+    """For crossover children: at each slot, the local cost of the parent chosen *for that
+    slot* at the slot's particle. local [M, P] (population), parents [N, T, S] -> [N, T, S]."""
+    return local[parents, jnp.maximum(slots, 0)[None]]
+
+
+def crossover_reference(cost, parents, slots):
+    """The cost a crossover child must beat to count as a success: the best (lowest) global
+    cost among its own parents. cost [M], parents [N, T, S] -> [N]."""
+    valid = (slots >= 0)[None]
+    return jnp.min(jnp.where(valid, cost[parents], jnp.inf), axis=(1, 2))
+
+
+def group_bias(per_slot, slots, n_groups):
     """Probability of each bond type for variant (2): proportional to the mean local cost of
-    its particles, so badly fitted parts of the body get mutated more. local [N, P] -> [N, T]."""
+    its particles in the child's parent(s) (``per_slot`` [N, T, S], from :func:`slot_costs`
+    or :func:`crossover_slot_costs`), so badly fitted parts of the body get mutated more.
+    -> [N, T]."""
     valid = slots >= 0
-    per_slot = jnp.where(valid[None], local[:, jnp.maximum(slots, 0)], 0.0)
+    per_slot = jnp.where(valid[None], per_slot, 0.0)
     score = per_slot.sum(-1) / jnp.maximum(valid.sum(-1), 1)[None]
     score = jnp.where(jnp.isfinite(score), score, 0.0)
     total = score.sum(-1, keepdims=True)
@@ -139,9 +162,13 @@ def mutate(
     in_group = gene_group[None, :] == group[:, None]  # [N, G]
     single = jnp.arange(g)[None, :] == one_gene[:, None]
     v = variant[:, None]
-    # Which genes each variant touches, and whether it adapts the mutabilities there.
+    # Which genes each variant moves, and whether it adapts the mutabilities. As in Schwefel's
+    # scheme, the whole strategy vector self-adapts before the genes move, in every variant
+    # but (3), whose mutabilities are frozen: (2) and (4) restrict which genes *move*, not
+    # which mutabilities adapt. (Adapting only (1) and (2), or only the moved genes, leaves
+    # the selected individuals' mutabilities near their initial size: fits stall.)
     touched = jnp.where(v == 1, in_group, jnp.where(v == 3, single, True))
-    adapt = touched & ((v == 0) | (v == 1))
+    adapt = jnp.broadcast_to(v != 2, touched.shape)
 
     span = bounds.upper - bounds.lower
     z0, zi, step = (x.astype(genes.dtype) for x in (noise.z0, noise.zi, noise.step))

@@ -11,6 +11,7 @@ from ..errors import InputError
 from ..model import Model, as_neural, as_standard
 from .cost import Windows, make_cost, make_windows
 from .es import Problem
+from .lsq import least_squares
 from .settings import FitSettings
 
 
@@ -63,11 +64,19 @@ def identification(model: Model, traj: Trajectory, settings: FitSettings) -> Ide
         raise InputError(traj.source, "no frame of the window can be predicted (gaps everywhere)")
     cost = make_cost(model, windows, settings.substeps, settings.integrator)
     layout = model.layout
+    start = None
+    if settings.init == "lsq":
+        one_step = make_windows(data.positions, data.mask, data.dt, 1)
+        try:
+            start = least_squares(model, one_step).genome[None, :]
+        except InputError as err:
+            raise InputError("--init lsq", err.message) from None
     problem = Problem(
         evaluate=cost,
         lower=layout.lower,
         upper=layout.upper,
         gene_group=layout.gene_group,
         group_slots=np.asarray(layout.group_slots),
+        start=start,
     )
     return Identification(model=model, data=data, windows=windows, problem=problem)

@@ -28,6 +28,7 @@ class FitSettings(BaseModel):
     selection_pressure: float = Field(4.0, ge=0)
     sigma_init: float = Field(0.1, gt=0, le=1)
     adapt_variants: bool = False
+    init: Literal["uniform", "lsq"] = "uniform"  # lsq: one individual at the linear optimum
     chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
     precision: Literal["float32", "float64"] = "float64"

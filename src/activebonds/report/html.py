@@ -19,6 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
+from ..identify.cost import make_windows
+from ..identify.lsq import least_squares
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
@@ -264,6 +267,61 @@ def errors_table(pred: Prediction, caption: str = "RMS position error per partic
     return Table(columns=cols, rows=rows, caption=caption)
 
 
+def baselines_table(record: RunRecord, pred: Prediction) -> Table:
+    """The fit beside what judges it (RMS one-step error, mm): the zero-force
+    (constant-velocity) predictor on the same frames, the momentum floor of internal-force
+    models and the exact least-squares optimum of the linear parameters, where they apply."""
+    rec, dt, fit = pred.recorded, pred.dt, pred.fit_frames
+    mask = np.isfinite(rec).all(axis=-1)
+    s = record.settings
+    beyond = pred.extended and pred.n_frames - fit >= 1
+
+    def window(lo, hi):
+        return np.where(mask[lo:hi, :, None], rec[lo:hi], np.nan), mask[lo:hi]
+
+    def zero(lo, hi):
+        return zero_force_rms_mm(*window(lo, hi), dt)
+
+    model_fit = float(np.sqrt(np.nanmean(pred.one_step_rms_mm**2)))
+    model_beyond = float(np.sqrt(np.nanmean(pred.one_step_rms_mm_beyond**2))) if beyond else None
+    rows = [
+        ("this model", model_fit, model_beyond),
+        (
+            "zero force (constant velocity)",
+            zero(0, fit),
+            zero(fit - 2, pred.n_frames) if beyond else None,
+        ),
+    ]
+    plain = s.horizon == 1 and s.substeps == 1 and s.integrator == "euler"
+    if plain:
+        floor = model_floor_rms_mm(record.model, *window(0, fit), dt)
+        rows.append(("momentum floor (internal forces)", floor, None))
+        try:
+            lsq = least_squares(record.model, make_windows(*window(0, fit), dt, 1))
+            if not _nonlinear_genes(record.model):
+                rows.append(("exact least squares (this model's family)", lsq.rms_mm, None))
+        except InputError:
+            pass
+    rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
+    return Table(
+        ("one-step RMS (mm)", "fitted frames", "frames beyond"),
+        rows,
+        "The fit beside its baselines. A model that does not beat the zero-force predictor on "
+        "frames it never saw has learnt nothing that generalises; no model of internal "
+        "forces can go below the momentum floor.",
+    )
+
+
+def _nonlinear_genes(model) -> bool:
+    """Whether a gene lies outside the linear families (then least squares is no optimum)."""
+    linear = {"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"}
+    return any(
+        (np.asarray(idx) >= 0).any()
+        for f, idx in model.layout.index._asdict().items()
+        if f not in linear
+    )
+
+
 def parameters_table(record: RunRecord) -> Table:
     rows = [
         (g.name, float(g.value), float(g.lower), float(g.upper), g.log)
@@ -338,7 +396,9 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         extra.append(f"The free run went non-finite at frame {pred.diverged_at}.")
     sections = [
         Section(
-            "Summary", tables=[summary_table(record, pred), errors_table(pred)], anchor="summary"
+            "Summary",
+            tables=[summary_table(record, pred), baselines_table(record, pred), errors_table(pred)],
+            anchor="summary",
         ),
         Section(
             "Convergence",

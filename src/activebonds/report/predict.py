@@ -1,8 +1,9 @@
 """What an identified model predicts: one-step predictions, a free run, errors, neurons.
 
 One-step predictions are made as the cost makes them (DESIGN.md §3): frame t is predicted
-from the *recorded* state at t - 1, with the backward-difference velocity
-``(x[t-1] - x[t-2]) / dt``. The free run starts from the first two recorded frames and never
+from the *recorded* state at t - 1, with the velocity the integrator carries there given
+``x[t-2]`` and ``x[t-1]`` (:func:`~activebonds.physics.integrate.start_velocity`; the
+backward difference for one-substep Euler). The free run starts from the first two recorded frames and never
 looks at the data again. Everything is float64 NumPy; NaN marks what cannot be predicted
 (missing inputs, before the start, or after a free run went non-finite).
 """
@@ -19,7 +20,7 @@ import numpy as np
 
 from ..data import Trajectory
 from ..model import Model, Params, Topology
-from ..physics import advance, neuron_activity, rollout_states
+from ..physics import advance, neuron_activity, rollout_states, start_velocity
 from .runs import RunRecord, load_run, original_window
 
 SATURATION = 0.95  # |a| above this: a saturated neuron
@@ -54,14 +55,19 @@ def _params(model: Model) -> Params:
 
 
 @partial(jax.jit, static_argnames=("topo", "substeps", "method"))
-def _one_step(params, x0, v0, dt, topo: _Topo, substeps: int, method: str):
-    step = jax.vmap(lambda a, b: advance(params, topo.topo, a, b, dt, substeps, method)[0])
-    return step(x0, v0)
+def _one_step(params, x_prev, x0, dt, topo: _Topo, substeps: int, method: str):
+    def step(a, b):
+        v = start_velocity(params, topo.topo, a, b, dt, substeps, method)
+        return advance(params, topo.topo, b, v, dt, substeps, method)[0]
+
+    return jax.vmap(step)(x_prev, x0)
 
 
 @partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
-def _free_run(params, x0, v0, dt, topo: _Topo, n_steps: int, substeps: int, method: str):
-    return rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method)
+def _free_run(params, x_prev, x0, dt, topo: _Topo, n_steps: int, substeps: int, method: str):
+    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method)
+    xs, vs = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method)
+    return v0, xs, vs
 
 
 @partial(jax.jit, static_argnames=("topo",))
@@ -83,11 +89,11 @@ def one_step(
     prev, prev2 = x[1:-1], x[:-2]
     ok = np.isfinite(prev).all(axis=(1, 2)) & np.isfinite(prev2).all(axis=(1, 2))
     x0 = np.where(ok[:, None, None], prev, 0.0)
-    v0 = np.where(ok[:, None, None], (prev - prev2) / dt, 0.0)
+    x_prev = np.where(ok[:, None, None], prev2, 0.0)
     pred = _one_step(
         _params(model),
+        jnp.asarray(x_prev),
         jnp.asarray(x0),
-        jnp.asarray(v0),
         float(dt),
         topo=_Topo(model.topology),
         substeps=int(substeps),
@@ -123,20 +129,20 @@ def free_run(
         return xs, vs
     s = int(starts[0])
     xs[: s + 1] = x[: s + 1]
-    vs[s] = (x[s] - x[s - 1]) / dt
+    run = _free_run(
+        _params(model),
+        jnp.asarray(x[s - 1]),
+        jnp.asarray(x[s]),
+        float(dt),
+        topo=_Topo(model.topology),
+        n_steps=max(n - s - 1, 1),
+        substeps=int(substeps),
+        method=method,
+    )
+    vs[s] = np.asarray(run[0], dtype=np.float64)
     if n - s - 1 > 0:
-        run = _free_run(
-            _params(model),
-            jnp.asarray(xs[s]),
-            jnp.asarray(vs[s]),
-            float(dt),
-            topo=_Topo(model.topology),
-            n_steps=n - s - 1,
-            substeps=int(substeps),
-            method=method,
-        )
-        xs[s + 1 :] = np.array(run[0], dtype=np.float64)
-        vs[s + 1 :] = np.asarray(run[1], dtype=np.float64)
+        xs[s + 1 :] = np.array(run[1], dtype=np.float64)
+        vs[s + 1 :] = np.asarray(run[2], dtype=np.float64)
     bad = ~(np.isfinite(xs).all(axis=(1, 2)) & np.isfinite(vs).all(axis=(1, 2)))
     bad[: s + 1] = False
     if bad.any():

@@ -1,0 +1,397 @@
+"""Exact least squares for the parameters that enter the one-step prediction linearly.
+
+With one-substep semi-implicit Euler and horizon 1, the prediction of frame t + 1 is
+``x_t + dt v_t + dt^2 F(x_t, v_t) / m`` (``v_t`` the backward difference), and the forces of
+the *linear families* are linear in a reparametrisation of their parameters:
+
+* binary bonds (the passive part): tension ``k L - (k l0) + c Ldot``, unknowns ``(k, k l0, c)``;
+* unary springs and dampers: ``-k x + (k a) - c v``, unknowns ``(k, k a, c)``.
+
+The rest (fixed parameters, the uniform field, fixed flexion springs) is a known offset; the
+bounds ``l0 in [lo, hi]`` become the linear constraints ``k lo <= k l0 <= k hi``. So the best
+parameters of such a model are a convex, linearly constrained least-squares problem, solved
+exactly here (scipy): the optimum the ES should reach, a floor for any model of these
+families, and a starting individual for the ES (``--init lsq``).
+
+Masses, which enter as ``m a = F``, are identified in the *equation-error* form (the force
+balance at each recorded frame, linear in masses and parameters jointly) when a total mass
+or one particle's mass fixes the scale: :func:`equation_error_fit`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.optimize import LinearConstraint, lsq_linear, minimize
+
+from ..errors import InputError
+from ..model import Model
+from ..model.params import Params
+from ..physics.forces import total_force
+from .cost import Windows
+
+
+@dataclass(frozen=True)
+class LinearProblem:
+    """Columns of the linear unknowns (one row per predicted coordinate that counts)."""
+
+    columns: np.ndarray  # [R, K] displacement per unit of each unknown
+    offset: np.ndarray  # [R] displacement of the known forces
+    target: np.ndarray  # [R] recorded minus force-free prediction
+    names: tuple[str, ...]  # unknown k: "gene:i" (a gene itself) or "product:i*j" (gene i x j)
+    lower: np.ndarray  # [K] natural units
+    upper: np.ndarray
+    pairs: tuple[tuple[int, int, float, float], ...]  # (k of K, k of K*x, x_lo, x_hi)
+    n_terms: int  # predicted particle positions (the cost's terms)
+
+
+@dataclass(frozen=True)
+class LinearFit:
+    """The bounded least-squares optimum over a model's linear genes."""
+
+    values: dict[int, float]  # gene index -> natural value
+    genome: np.ndarray  # [G] search space; non-linear genes at the file's values, gains at 0
+    cost: float  # summed squared one-step error (m^2), as the ES's cost
+    rms_mm: float
+    exact: bool  # True: optimum of the convex problem (False: the solver's best point)
+
+
+def _gene(index, where) -> int:
+    return int(np.asarray(index)[where])
+
+
+def _switched_off(model: Model) -> tuple[Params, list[int]]:
+    """Model parameters with every linear unknown's term removed, neural gains at 0; and the
+    genes that are not linear (left at the file's values)."""
+    layout, topo = model.layout, model.topology
+    base, index = layout.base, layout.index
+    p = {f: np.array(v, np.float64, copy=True) for f, v in base._asdict().items()}
+    linear_fields = {"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"}
+    nonlinear = sorted(
+        {
+            int(g)
+            for f, idx in index._asdict().items()
+            if f not in linear_fields
+            for g in np.asarray(idx).ravel()
+            if g >= 0
+        }
+    )
+    for f in ("mass", "tern_k", "tern_angle"):
+        if (np.asarray(getattr(index, f)) >= 0).any():
+            what = "masses (use equation_error_fit)" if f == "mass" else "flexion springs"
+            raise InputError(model.name, f"least squares: free {what} do not enter linearly")
+    neural = np.asarray(topo.neural, bool)
+    if neural.any():
+        gain_free = np.asarray(index.gain) >= 0
+        lows = np.array([layout.genes[g].lower if g >= 0 else 0.0 for g in index.gain])
+        fixed_on = neural & ~gain_free & (np.asarray(base.gain) != 0)
+        if fixed_on.any() or (neural & gain_free & (lows > 0)).any():
+            raise InputError(
+                model.name,
+                "least squares: a neural bond's gain must be able to be 0 (the neurons are "
+                "switched off; their terms do not enter linearly)",
+            )
+        p["gain"] = np.where(neural, 0.0, p["gain"])
+    for b in range(topo.n_binary):
+        p["k"][b] = p["c"][b] = 0.0
+    for u in range(topo.unary.size):
+        p["unary_k"][u] = p["unary_c"][u] = 0.0
+    return Params(**p), nonlinear
+
+
+def linear_problem(model: Model, windows: Windows) -> LinearProblem:
+    """The one-step cost of ``windows`` (horizon 1) as ``|columns @ theta + offset - target|^2``
+    over the model's linear unknowns."""
+    if windows.horizon != 1:
+        raise InputError("--horizon", "least squares needs the one-step cost (horizon 1)")
+    jax.config.update("jax_enable_x64", True)
+    layout, topo = model.layout, model.topology
+    base, index = layout.base, layout.index
+    off_params, _ = _switched_off(model)
+    x, v, dt = windows.x0, windows.v0, windows.dt
+    n_s, n_p, d = x.shape
+    known = jax.vmap(lambda a, b: total_force(off_params, topo, a, b))(jnp.asarray(x), v)
+    known = np.asarray(known, np.float64)  # [S, P, D]
+
+    cols: dict[str, np.ndarray] = {}
+    bounds: dict[str, tuple[float, float]] = {}
+    pairs: list[tuple[str, str, float, float]] = []
+
+    def gene_var(g: int) -> str:
+        name = f"gene:{g}"
+        if name not in cols:
+            cols[name] = np.zeros((n_s, n_p, d))
+            bounds[name] = (layout.genes[g].lower, layout.genes[g].upper)
+        return name
+
+    def product_var(gk: int, gx: int) -> str:
+        name = f"product:{gk}*{gx}"
+        if name not in cols:
+            klo, khi = layout.genes[gk].lower, layout.genes[gk].upper
+            xlo, xhi = layout.genes[gx].lower, layout.genes[gx].upper
+            corners = [a * b for a in (klo, khi) for b in (xlo, xhi)]
+            cols[name] = np.zeros((n_s, n_p, d))
+            bounds[name] = (min(corners), max(corners))
+            pairs.append((gene_var(gk), name, xlo, xhi))
+        return name
+
+    # binary bonds: F_i += f u, F_j -= f u with f = k (L - l0) + c Ldot
+    i, j = topo.binary[:, 0], topo.binary[:, 1]
+    for b in range(topo.n_binary):
+        dvec = x[:, j[b]] - x[:, i[b]]
+        length = np.linalg.norm(dvec, axis=-1)[:, None]
+        u = dvec / length
+        rate = np.sum((v[:, j[b]] - v[:, i[b]]) * u, axis=-1)[:, None]
+        gk, gl, gc = _gene(index.k, b), _gene(index.l0, b), _gene(index.c, b)
+        k, l0, c = float(base.k[b]), float(base.l0[b]), float(base.c[b])
+        terms = []  # (unknown or None, tension per unit)
+        if gk >= 0 and gl >= 0:
+            terms += [(gene_var(gk), length), (product_var(gk, gl), -np.ones_like(length))]
+        elif gk >= 0:
+            terms += [(gene_var(gk), length - l0)]
+        elif gl >= 0:
+            terms += [(None, k * length), (gene_var(gl), -k * np.ones_like(length))]
+        else:
+            terms += [(None, k * (length - l0))]
+        terms += [(gene_var(gc), rate)] if gc >= 0 else [(None, c * rate)]
+        for var, tension in terms:
+            target = known if var is None else cols[var]
+            target[:, i[b]] += tension * u
+            target[:, j[b]] -= tension * u
+
+    # unary springs and dampers: F_p += -k (x_p - a) - c v_p
+    for n, p in enumerate(np.asarray(topo.unary)):
+        gk, gc = _gene(index.unary_k, n), _gene(index.unary_c, n)
+        k, c = float(base.unary_k[n]), float(base.unary_c[n])
+        ga = [_gene(index.unary_anchor, (n, a)) for a in range(d)]
+        anchor = np.asarray(base.unary_anchor[n], np.float64)
+        if gk >= 0:
+            cols[gene_var(gk)][:, p] -= x[:, p]
+        else:
+            known[:, p] -= k * x[:, p]
+        for a in range(d):
+            if ga[a] >= 0 and gk >= 0:
+                cols[product_var(gk, ga[a])][:, p, a] += 1.0
+            elif ga[a] >= 0:
+                cols[gene_var(ga[a])][:, p, a] += k
+            elif gk >= 0:
+                cols[gene_var(gk)][:, p, a] += anchor[a]
+            else:
+                known[:, p, a] += k * anchor[a]
+        if gc >= 0:
+            cols[gene_var(gc)][:, p] -= v[:, p]
+        else:
+            known[:, p] -= c * v[:, p]
+
+    rows = np.repeat(windows.weight[:, 0] > 0, d, axis=-1).reshape(n_s, n_p, d).ravel()
+    scale = dt**2 / np.asarray(base.mass, np.float64)[None, :, None]
+    names = tuple(cols)
+    columns = np.stack([(cols[n] * scale).ravel()[rows] for n in names], axis=1)
+    columns = columns.reshape(int(rows.sum()), len(names))
+    target = (windows.target[:, 0] - (x + dt * v)).ravel()[rows]
+    position = {n: k for k, n in enumerate(names)}
+    return LinearProblem(
+        columns=columns,
+        offset=(known * scale).ravel()[rows],
+        target=target,
+        names=names,
+        lower=np.array([bounds[n][0] for n in names]),
+        upper=np.array([bounds[n][1] for n in names]),
+        pairs=tuple((position[a], position[b], lo, hi) for a, b, lo, hi in pairs),
+        n_terms=windows.n_terms,
+    )
+
+
+def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, bool]:
+    """The least-squares unknowns (natural units) and whether the optimum is exact.
+
+    The box problem (product bounds relaxed to their corners) is solved first; if its
+    solution breaks a product constraint, the constrained convex problem is solved by SLSQP
+    from there. Either point then fixes the active set (unknowns at a bound, products at
+    ``k lo`` or ``k hi``), on which the equality-constrained problem is solved directly:
+    the optimum to machine precision, kept if feasible and no worse."""
+    a = problem.columns
+    rhs = problem.target - problem.offset
+    if a.shape[1] == 0:
+        return np.zeros(0), True
+    norm = np.linalg.norm(a, axis=0)
+    norm = np.where(norm > 0, norm, 1.0)
+    a_s = a / norm
+    if not bounded:
+        theta, *_ = np.linalg.lstsq(a_s, rhs, rcond=None)
+        return theta / norm, True
+    lo, hi = problem.lower * norm, problem.upper * norm
+    box = lsq_linear(a_s, rhs, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
+    theta = box.x / norm
+    if _violation(problem, theta) > 1e-12:
+        theta = _constrained(problem, a_s, rhs, norm, theta)
+    polished = _polish(problem, a, rhs, theta)
+    cost = lambda t: float(np.sum((a @ t - rhs) ** 2))  # noqa: E731
+    if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12):
+        return polished, True
+    return theta, False
+
+
+def _violation(problem: LinearProblem, t: np.ndarray) -> float:
+    """Largest relative breach of a product constraint ``k lo <= p <= k hi``."""
+    worst = 0.0
+    for k, p, xlo, xhi in problem.pairs:
+        scale = max(abs(t[k]) * max(xhi - xlo, abs(xhi), abs(xlo)), 1e-300)
+        worst = max(worst, (t[k] * xlo - t[p]) / scale, (t[p] - t[k] * xhi) / scale)
+    return worst
+
+
+def _constrained(problem, a_s, rhs, norm, theta):
+    lo, hi = problem.lower * norm, problem.upper * norm
+    rows = []
+    for k, p, xlo, xhi in problem.pairs:
+        r1, r2 = np.zeros(len(norm)), np.zeros(len(norm))
+        r1[p], r1[k] = 1.0 / norm[p], -xlo / norm[k]
+        r2[p], r2[k] = -1.0 / norm[p], xhi / norm[k]
+        rows += [r1, r2]
+    h, g = a_s.T @ a_s, a_s.T @ rhs
+    res = minimize(
+        lambda z: 0.5 * z @ h @ z - g @ z,
+        np.clip(theta * norm, lo, hi),
+        jac=lambda z: h @ z - g,
+        method="SLSQP",
+        bounds=list(zip(lo, hi, strict=True)),
+        constraints=[LinearConstraint(np.asarray(rows), 0.0, np.inf)],
+        options={"ftol": 1e-16, "maxiter": 1000},
+    )
+    return res.x / norm
+
+
+def _polish(problem: LinearProblem, a, rhs, theta, tol: float = 1e-7):
+    """The equality-constrained optimum on ``theta``'s active set, or None if infeasible."""
+    n = len(theta)
+    lo, hi = problem.lower, problem.upper
+    span = np.maximum(hi - lo, 1e-300)
+    fixed = np.full(n, np.nan)
+    fixed[np.abs(theta - lo) <= tol * span] = lo[np.abs(theta - lo) <= tol * span]
+    fixed[np.abs(theta - hi) <= tol * span] = hi[np.abs(theta - hi) <= tol * span]
+    ratio = {}  # product unknown -> (its k unknown, pinned x)
+    for k, p, xlo, xhi in problem.pairs:
+        x = theta[p] / theta[k] if theta[k] != 0 else np.nan
+        for bound in (xlo, xhi):
+            if np.isfinite(x) and abs(x - bound) <= tol * max(xhi - xlo, 1e-300):
+                ratio[p] = (k, bound)
+    # theta = base + t_map @ psi over the free unknowns psi
+    free = [i for i in range(n) if np.isnan(fixed[i]) and i not in ratio]
+    t_map = np.zeros((n, len(free)))
+    base = np.where(np.isnan(fixed), 0.0, fixed)
+    for col, i in enumerate(free):
+        t_map[i, col] = 1.0
+    for p, (k, x) in ratio.items():
+        base[p] = x * base[k] if not np.isnan(fixed[k]) else 0.0
+        t_map[p] = x * t_map[k]
+    out = base.copy()
+    if free:
+        m = a @ t_map
+        scale = np.linalg.norm(m, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        psi, *_ = np.linalg.lstsq(m / scale, rhs - a @ base, rcond=None)
+        out = base + t_map @ (psi / scale)
+    feasible = np.all(out >= lo - 1e-12 * span) and np.all(out <= hi + 1e-12 * span)
+    return out if feasible and _violation(problem, out) <= 1e-12 else None
+
+
+def least_squares(model: Model, windows: Windows, bounded: bool = True) -> LinearFit:
+    """The exact (bounded) least-squares optimum of ``model``'s linear genes on ``windows``
+    (one-substep Euler, horizon 1), neural gains at 0, other genes at the file's values."""
+    problem = linear_problem(model, windows)
+    theta, exact = solve(problem, bounded)
+    layout = model.layout
+    values = _gene_values(problem, theta, layout)
+    natural = layout.natural(layout.initial())
+    for g, gene in enumerate(layout.genes):
+        if g in values:
+            natural[g] = min(max(values[g], gene.lower), gene.upper)
+    _, nonlinear = _switched_off(model)
+    for g in nonlinear:
+        if layout.genes[g].name.endswith(".gain"):
+            natural[g] = 0.0
+    genome = np.where(layout.log, np.log(np.maximum(natural, 1e-300)), natural)
+    resid = problem.columns @ theta + problem.offset - problem.target
+    cost = float(resid @ resid)
+    rms = float(np.sqrt(cost / max(problem.n_terms, 1)) * 1000.0)
+    return LinearFit(values=values, genome=genome, cost=cost, rms_mm=rms, exact=exact)
+
+
+@dataclass(frozen=True)
+class EquationErrorFit:
+    masses: np.ndarray  # [P] kg
+    values: dict[int, float]  # linear gene index -> natural value (unbounded)
+    rms_force: float  # RMS force-balance residual (N)
+
+
+def equation_error_fit(
+    model: Model, windows: Windows, total_mass: float | None = None
+) -> EquationErrorFit:
+    """Masses and linear parameters from the force balance ``m_p a_p = F_p`` at each frame,
+    with ``a_p = (x_{t+1} - 2 x_t + x_{t-1}) / dt^2`` (exact for one-substep Euler): linear and
+    homogeneous in (masses, parameters), so the scale comes from the fixed masses or from
+    ``total_mass`` (sum of all masses). Unbounded; every term of the balance counts alike."""
+    layout = model.layout
+    free_mass = np.asarray(layout.index.mass) >= 0
+    if not free_mass.any():
+        raise InputError(model.name, "equation_error_fit: no free mass")
+    if free_mass.all() and total_mass is None:
+        raise InputError(model.name, "every mass is free: give the total mass")
+    from ..model.model import build
+
+    particles = [p.model_copy(update={"mass": 1.0}) for p in model.spec.particle]
+    unit = build(model.spec.model_copy(update={"particle": particles}))
+    problem = linear_problem(unit, windows)  # masses 1: columns and offset are forces * dt^2
+    dt = windows.dt
+    n_s, n_p, d = windows.x0.shape
+    rows = np.repeat(windows.weight[:, 0] > 0, d, axis=-1).reshape(n_s, n_p, d).ravel()
+    # the field acts as m g, so it joins the mass columns: m_p (a_p - g) = F_internal
+    gravity = np.asarray(layout.base.gravity, np.float64)
+    field = dt**2 * np.broadcast_to(gravity, (n_s, n_p, d)).ravel()[rows]
+    internal_known = problem.offset - field
+    particle = np.broadcast_to(np.arange(n_p)[None, :, None], (n_s, n_p, d)).ravel()[rows]
+    mass_cols = np.stack(
+        [np.where(particle == p, problem.target - field, 0.0) for p in range(n_p)], axis=1
+    )
+    masses = np.asarray(layout.base.mass, np.float64).copy()
+    # mass_cols @ m - columns @ theta = internal_known
+    rhs = internal_known - mass_cols[:, ~free_mass] @ masses[~free_mass]
+    a = np.concatenate([mass_cols[:, free_mass], -problem.columns], axis=1)
+    n_free = int(free_mass.sum())
+    if total_mass is not None:
+        # the free masses sum to the total less the fixed ones: eliminate the last free mass
+        rest = float(total_mass) - masses[~free_mass].sum()
+        last = a[:, n_free - 1].copy()
+        reduced = np.delete(a, n_free - 1, axis=1)
+        reduced[:, : n_free - 1] -= last[:, None]
+        sol, *_ = np.linalg.lstsq(reduced, rhs - last * rest, rcond=None)
+        sol = np.insert(sol, n_free - 1, rest - sol[: n_free - 1].sum())
+    else:
+        sol, *_ = np.linalg.lstsq(a, rhs, rcond=None)
+    masses[free_mass] = sol[:n_free]
+    theta = sol[n_free:]
+    resid = (a @ sol - rhs) / dt**2
+    by_name = {g.name: i for i, g in enumerate(layout.genes)}
+    unit_values = _gene_values(problem, theta, unit.layout)
+    values = {by_name[unit.layout.genes[g].name]: v for g, v in unit_values.items()}
+    return EquationErrorFit(
+        masses=masses, values=values, rms_force=float(np.sqrt(np.mean(resid**2)))
+    )
+
+
+def _gene_values(problem: LinearProblem, theta: np.ndarray, layout) -> dict[int, float]:
+    """Gene index -> natural value from the unknowns (``k l0`` divided back by ``k``)."""
+    values: dict[int, float] = {}
+    for n, t in zip(problem.names, theta, strict=True):
+        if n.startswith("gene:"):
+            values[int(n[5:])] = float(t)
+    for n, t in zip(problem.names, theta, strict=True):
+        if n.startswith("product:"):
+            gk, gx = (int(s) for s in n[8:].split("*"))
+            k = values[gk]
+            values[gx] = float(t / k) if k != 0 else float(layout.genes[gx].value)
+    return values

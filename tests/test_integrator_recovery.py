@@ -1,0 +1,104 @@
+"""Every integrator and substep count identifies the forces that generated the data.
+
+The audit's case: a 4-particle, 6-bond viscoelastic tetrahedron (18 free parameters), 150
+frames at 50 Hz, simulated with the same integrator and substeps as the fit. The start
+velocity of each one-step prediction must be the one the integrator carries at the recorded
+frame (``physics.start_velocity``); with the plain backward difference, Verlet inflated every
+force by about 2 and N Euler substeps by about 2N/(N+1), while the fit error stayed tiny.
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+from activebonds.identify import fit
+from activebonds.identify.cost import make_cost, make_windows, rms_mm
+from activebonds.model import load_model
+from activebonds.physics import advance, start_velocity
+from activebonds.simulate import simulate
+from helpers import ROOT
+
+TETRA = ROOT / "tests" / "models" / "tetra.toml"
+CASES = [("euler", 1), ("euler", 4), ("euler", 10), ("verlet", 1), ("verlet", 4), ("verlet", 10)]
+
+
+@pytest.fixture(scope="module")
+def truth():
+    jax.config.update("jax_enable_x64", True)
+    return load_model(TETRA)
+
+
+def recording(model, method, substeps):
+    return simulate(model, 150, 50.0, substeps=substeps, integrator=method)
+
+
+@pytest.mark.parametrize(("method", "substeps"), CASES)
+def test_start_velocity_is_the_integrators_own(truth, method, substeps):
+    """From two frames of a simulated recording, start_velocity returns the velocity the
+    simulation carried at the second one (the backward difference lags by half a frame)."""
+    p, topo = truth.params, truth.topology
+    x0, v0 = (np.asarray(a) for a in truth.initial_state())
+    dt = 0.02
+    states = [(x0, v0)]
+    for _ in range(3):
+        x, v = advance(p, topo, *states[-1], dt, substeps, method)
+        states.append((np.asarray(x), np.asarray(v)))
+    (x1, _), (x2, v2) = states[1], states[2]
+    v = np.asarray(start_velocity(p, topo, x1, x2, dt, substeps, method))
+    scale = np.abs(v2).max()
+    np.testing.assert_allclose(v, v2, rtol=0, atol=1e-7 * scale)
+    lag = np.abs((x2 - x1) / dt - v2).max()
+    if (method, substeps) != ("euler", 1):
+        assert lag > 1e-4 * scale  # the naive estimate is measurably wrong here
+
+
+@pytest.mark.parametrize(("method", "substeps"), CASES)
+def test_cost_vanishes_at_the_truth(truth, method, substeps):
+    """On data the same scheme generated, the true parameters predict every frame (to the
+    fixed-point tolerance: 1e-6 of the RMS second difference; the plain backward difference
+    leaves errors of order 1e-1 of it)."""
+    data = recording(truth, method, substeps)
+    windows = make_windows(data.positions, data.mask, data.dt, 1)
+    cost = jax.jit(make_cost(truth, windows, substeps, method))
+    rms = float(rms_mm(cost(truth.layout.initial())[0], windows.n_terms))
+    signal = np.sqrt(np.mean(np.sum(np.diff(data.positions, 2, axis=0) ** 2, -1))) * 1000
+    assert rms < 1e-6 * signal, (rms, signal)
+
+
+def _recovery(truth, method, substeps):
+    data = recording(truth, method, substeps)
+    result = fit(
+        truth,
+        data,
+        bonds="model",
+        population=300,
+        generations=4000,
+        seed=0,
+        substeps=substeps,
+        integrator=method,
+    )
+    got = result.model.layout.natural(result.genome)
+    want = truth.layout.natural(truth.layout.initial())
+    return np.abs(got / want - 1.0), result
+
+
+RECOVERY = [
+    pytest.param("euler", 1, 1e-3, id="euler-1"),
+    pytest.param("verlet", 1, 5e-3, id="verlet-1"),
+    pytest.param("euler", 4, 5e-3, id="euler-4", marks=pytest.mark.slow),
+    pytest.param("verlet", 4, 5e-3, id="verlet-4", marks=pytest.mark.slow),
+    pytest.param("euler", 10, 5e-3, id="euler-10", marks=pytest.mark.slow),
+    pytest.param("verlet", 10, 5e-3, id="verlet-10", marks=pytest.mark.slow),
+]
+
+
+@pytest.mark.timeout(1800)
+@pytest.mark.parametrize(("method", "substeps", "tolerance"), RECOVERY)
+def test_fit_recovers_every_parameter(truth, method, substeps, tolerance):
+    """The audit's recovery (population 300, 4,000 generations, from a uniform start within
+    the bounds): every one of the 18 parameters within 0.1 % (Euler, one substep) or 0.5 %
+    (the others); before the start-velocity fix Verlet gave +98 % stiffness."""
+    rel, result = _recovery(truth, method, substeps)
+    assert rel.max() < tolerance, dict(zip(result.model.layout.genes, rel, strict=True))
