@@ -12,18 +12,23 @@ def fmt(x, digits=3):
     return "n/a" if x is None else f"{x:.{digits}g}"
 
 
-def floor(summary: dict) -> float:
-    """The internal-force floor, recomputed from the bundled data if the summary predates it."""
-    from activebonds.experiments.paper import EXPERIMENTS, internal_force_floor_mm
+def baselines(summary: dict) -> dict:
+    """The baselines, recomputed from the bundled data if the summary predates them."""
+    if "baselines" in summary:
+        return summary["baselines"]
+    from activebonds.experiments.paper import EXPERIMENTS
+    from activebonds.experiments.paper import baselines as compute
 
     exp = EXPERIMENTS[summary["experiment"]]
-    return internal_force_floor_mm(exp.data().window(*exp.fit_frames), exp.model().params.mass)
+    return compute(exp, exp.model(), exp.data())
 
 
 def table(summary: dict) -> str:
+    base = baselines(summary)
+    a, b = base["test_frames"]
     lines = [
         f"**{summary['title']}** (scale `{summary['scale']}`, seeds {summary['seeds']}; "
-        f"internal-force floor of the fit error: {fmt(floor(summary))} mm)",
+        f"momentum floor of the fit error: {fmt(base['momentum_floor_mm'], 4)} mm)",
         "",
         "| configuration | series | fit RMS mm, median [IQR] | one-step RMS mm, next frames "
         "| free-run RMS mm, next frames | saturated neurons | near-zero weights | wall time |",
@@ -42,6 +47,16 @@ def table(summary: dict) -> str:
                 f"| {fmt(r.get('near_zero_weight_share_median'), 2) if series == 'neural' else '-'} "
                 f"| {r['seconds']:.0f} s |"
             )
+    lines.append(
+        f"| baseline | zero force (constant velocity) | {fmt(base['zero_force_fit_rms_mm'])} "
+        f"| {fmt(base['zero_force_test_rms_mm'])} (frames {a}-{b - 1}) | - | - | - | - |"
+    )
+    lines.append(
+        f"| baseline | exact least squares, standard bonds "
+        f"| {fmt(base['lsq_standard_fit_rms_mm'], 5)} "
+        f"| {fmt(base['lsq_standard_test_rms_mm'])} (frames {a}-{b - 1}) "
+        f"| {fmt(base['lsq_standard_free_run_rms_mm'])} | - | - | - |"
+    )
     return "\n".join(lines)
 
 

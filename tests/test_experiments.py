@@ -1,4 +1,4 @@
-"""The reproduce commands at a tiny scale, and the internal-force floor of the fit error."""
+"""The reproduce commands at a tiny scale, and the momentum floor of the fit error."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory
-from activebonds.experiments.paper import EXPERIMENTS, internal_force_floor_mm
+from activebonds.experiments.baselines import momentum_floor_rms_mm
+from activebonds.experiments.paper import EXPERIMENTS
 from activebonds.model import load_model
 from activebonds.simulate import simulate
 from helpers import EXAMPLES
@@ -20,7 +21,7 @@ from helpers import EXAMPLES
 def test_floor_is_zero_on_data_made_by_internal_forces():
     truth = load_model(EXAMPLES / "triangle.toml")  # unequal masses, internal forces only
     data = simulate(truth, n_frames=40, rate=60.0)
-    assert internal_force_floor_mm(data, truth.params.mass) < 1e-9
+    assert momentum_floor_rms_mm(data.positions, data.mask, data.dt, truth.params.mass) < 1e-9
 
 
 def test_floor_of_a_uniformly_accelerated_system_is_its_acceleration_step():
@@ -32,12 +33,17 @@ def test_floor_of_a_uniformly_accelerated_system_is_its_acceleration_step():
     x[:, :, 2] = -0.5 * a * t[:, None] ** 2 + np.array([0.0, 1.0, 2.0])
     traj = Trajectory(positions=x, mask=np.ones((20, 3), bool), markers=("a", "b", "c"), rate=rate)
     expected = a / rate**2 * 1000.0
-    assert internal_force_floor_mm(traj, [1.0, 1.0, 1.0]) == pytest.approx(expected, rel=1e-9)
+    floor = momentum_floor_rms_mm(traj.positions, traj.mask, traj.dt, [1.0, 1.0, 1.0])
+    assert floor == pytest.approx(expected, rel=1e-9)
     # Unequal masses: the constraint sum m_p e_p = M g is met best by e_p proportional to m_p,
     # leaving sum e_p^2 = M^2 g^2 / sum m_p^2 (Lagrange), less than P g^2.
     m = np.array([1.0, 2.0, 5.0])
     unequal = expected * np.sqrt(m.sum() ** 2 / (3 * np.sum(m**2)))
-    assert internal_force_floor_mm(traj, m) == pytest.approx(unequal, rel=1e-9)
+    linear = momentum_floor_rms_mm(traj.positions, traj.mask, traj.dt, m, angular=False)
+    assert linear == pytest.approx(unequal, rel=1e-9)
+    # the particles are on one vertical line, so the torque constraint adds nothing here
+    floor = momentum_floor_rms_mm(traj.positions, traj.mask, traj.dt, m)
+    assert floor == pytest.approx(unequal, rel=1e-9)
 
 
 @pytest.mark.parametrize("name", ["synthetic", "horse"])
@@ -67,3 +73,13 @@ def test_reproduce_tiny_writes_both_series_curves_and_figures(name, tmp_path):
         assert (folder / "figures" / fig).stat().st_size > 1000
     html = (out / "report.html").read_text()
     assert "standard" in html and "neural" in html and "http://" not in html
+    assert "zero force" in html
+    base = summary["baselines"]
+    if name == "horse":  # the audit's figures: floor 4.107, optimum 4.2026, zero force 6.51
+        assert base["momentum_floor_mm"] == pytest.approx(4.1066, abs=1e-3)
+        assert base["lsq_standard_fit_rms_mm"] == pytest.approx(4.2026, abs=1e-3)
+        assert base["zero_force_test_rms_mm"] == pytest.approx(6.5096, abs=1e-3)
+        assert base["test_frames"] == [10, 53]
+    else:  # data made by a standard model: both reach zero
+        assert base["momentum_floor_mm"] < 1e-9
+        assert base["lsq_standard_fit_rms_mm"] < 1e-9

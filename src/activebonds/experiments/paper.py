@@ -24,12 +24,15 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
+from ..identify.cost import make_windows
 from ..identify.es import ESSettings
+from ..identify.lsq import least_squares
 from ..identify.problem import identification
 from ..identify.settings import FitSettings
 from ..model import Model, as_neural, as_standard, load_model, save_model
 from ..report.predict import predict
 from ..simulate import simulate
+from .baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from .resources import example, horse_trot
 from .seeds import SeedRuns, run_seeds
 
@@ -114,6 +117,7 @@ def run_experiment(
     model = exp.model()
     recording = exp.data()
     summary: dict = {"experiment": name, "title": exp.title, "scale": scale, "seeds": seeds}
+    summary["baselines"] = baselines(exp, model, recording)
     summary["configs"] = {}
     for config in exp.scales[scale]:
         folder = out / config.name
@@ -123,9 +127,6 @@ def run_experiment(
             results[series] = _run_series(
                 exp, model, recording, config, series, seeds, folder, progress
             )
-        summary["internal_force_floor_mm"] = internal_force_floor_mm(
-            recording.window(*exp.fit_frames), model.params.mass
-        )
         summary["configs"][config.name] = {
             "population": config.population,
             "generations": config.generations,
@@ -165,17 +166,32 @@ def _run_series(exp, model, recording, config, series, seeds, folder, progress) 
     return result
 
 
-def internal_force_floor_mm(window: Trajectory, masses) -> float:
-    """The lowest one-step RMS error (mm) any model with only internal forces can reach on
-    ``window``: such forces satisfy sum_p m_p a_p = 0, so the errors of each frame satisfy
-    sum_p m_p e_p = c, with c the error of the force-free (inertial) prediction weighted by
-    mass; the smallest sum_p |e_p|^2 under that constraint is |c|^2 / sum_p m_p^2."""
-    m = np.asarray(masses, dtype=np.float64)[None, :, None]
-    x = window.positions
-    inertial = x[1:-1] + (x[1:-1] - x[:-2])  # x_t + dt v_t, v by backward difference
-    c = np.sum(m * (inertial - x[2:]), axis=1)  # [F-2, D]
-    per_frame = np.sum(c**2, axis=-1) / np.sum(m**2)
-    return float(np.sqrt(np.nanmean(per_frame) / m.shape[1]) * 1000.0)
+def baselines(exp: Experiment, model: Model, recording: Trajectory) -> dict:
+    """What the fits are judged against, on the fitted and the held-out frames (one-step RMS,
+    mm): the zero-force (constant-velocity) predictor; the exact momentum floor of any
+    internal-force model (fit frames); the exact least-squares optimum of the standard series
+    and how that optimum predicts the held-out frames."""
+    fit = recording.window(*exp.fit_frames)
+    stop = min(exp.test_stop, recording.n_frames)
+    held = recording.window(exp.fit_frames[1] - 2, stop)  # predictions of frames fit..stop-1
+    standard = as_standard(model)
+    windows = make_windows(fit.positions, fit.mask, fit.dt, 1)
+    optimum = least_squares(standard, windows)
+    best = standard.with_genome(optimum.genome)
+    pred = predict(best, recording.window(0, stop), fit_frames=exp.fit_frames[1])
+    return {
+        "zero_force_fit_rms_mm": zero_force_rms_mm(fit.positions, fit.mask, fit.dt),
+        "zero_force_test_rms_mm": zero_force_rms_mm(held.positions, held.mask, held.dt),
+        "momentum_floor_mm": model_floor_rms_mm(model, fit.positions, fit.mask, fit.dt),
+        "linear_momentum_floor_mm": momentum_floor_rms_mm(
+            fit.positions, fit.mask, fit.dt, model.params.mass, angular=False
+        ),
+        "lsq_standard_fit_rms_mm": optimum.rms_mm,
+        "lsq_standard_exact": optimum.exact,
+        "lsq_standard_test_rms_mm": _pooled(pred.one_step_rms_mm_beyond),
+        "lsq_standard_free_run_rms_mm": _pooled(pred.free_run_rms_mm_beyond),
+        "test_frames": [exp.fit_frames[1], stop],
+    }
 
 
 def _pooled(rms_per_particle) -> float:

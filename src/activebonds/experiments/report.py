@@ -27,7 +27,32 @@ def _histories(folder: Path, series: str) -> list[dict]:
     ]
 
 
-def _config_section(name: str, exp, config: str, c: dict, folder: Path, n_seeds: int) -> Section:
+def _baseline_rows(base: dict | None) -> list[list[str]]:
+    """The rows every fit is judged against (same frames): zero force, exact least squares."""
+    if not base:
+        return []
+    dash = ["-"] * 4
+    return [
+        [
+            "zero force (constant velocity)",
+            fmt(base["zero_force_fit_rms_mm"], 3),
+            fmt(base["zero_force_test_rms_mm"], 3),
+            "-",
+            *dash,
+        ],
+        [
+            "exact least squares, standard bonds",
+            fmt(base["lsq_standard_fit_rms_mm"], 3),
+            fmt(base["lsq_standard_test_rms_mm"], 3),
+            fmt(base["lsq_standard_free_run_rms_mm"], 3),
+            *dash,
+        ],
+    ]
+
+
+def _config_section(
+    name: str, exp, config: str, c: dict, folder: Path, n_seeds: int, base: dict | None = None
+) -> Section:
     figs = folder / "figures"
     series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
     title = f"{name}: population {c['population']}, {c['generations']:,} generations"
@@ -48,7 +73,16 @@ def _config_section(name: str, exp, config: str, c: dict, folder: Path, n_seeds:
                 f"{r['seconds']:.0f} s",
             ]
         )
+    rows += _baseline_rows(base)
     a, b = c["series"]["standard"]["test_frames"]
+    floor = (
+        ""
+        if not base or base.get("momentum_floor_mm") is None
+        else (
+            f" No model of internal forces can go below {fmt(base['momentum_floor_mm'], 4)} mm on "
+            "the fitted frames (momentum floor: linear and angular momentum are conserved)."
+        )
+    )
     table = Table(
         columns=[
             "series",
@@ -62,7 +96,9 @@ def _config_section(name: str, exp, config: str, c: dict, folder: Path, n_seeds:
         ],
         rows=rows,
         caption=f"Medians over {n_seeds} seeds. Fit: frames {exp.fit_frames[0]}-"
-        f"{exp.fit_frames[1] - 1}; the following frames were never seen by the fit.",
+        f"{exp.fit_frames[1] - 1}; the following frames were never seen by the fit. The last "
+        "two rows are baselines on the same frames: the predictor with no force, and the "
+        "exact bounded least-squares optimum of the standard model." + floor,
     )
     recording = exp.data().window(0, b)
     preds = []
@@ -92,8 +128,9 @@ def write_experiments_report(summaries: dict, out: Path) -> Path:
     for name, s in summaries.items():
         exp = EXPERIMENTS[name]
         for config, c in s["configs"].items():
+            folder = out / name / config
             sections.append(
-                _config_section(name, exp, config, c, out / name / config, len(s["seeds"]))
+                _config_section(name, exp, config, c, folder, len(s["seeds"]), s.get("baselines"))
             )
     return write_comparison_report(
         out / "report.html",
