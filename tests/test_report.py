@@ -417,3 +417,27 @@ def test_comparison_report(neural_run, tmp_path):
     assert "Standard vs neural" in text and "https://" not in text
     with pytest.raises(ValueError, match="different recordings"):
         payload([("a", pred), ("b", dataclasses.replace(pred, recorded=pred.recorded + 0.01))])
+
+
+def test_report_shows_the_fit_beside_its_baselines(neural_run):
+    """The zero-force predictor and the momentum floor on the same frames, with their
+    numbers recomputed independently here (the fit window is the horse's frames 0-9)."""
+    from activebonds.experiments.baselines import momentum_floor_rms_mm, zero_force_rms_mm
+    from activebonds.report.html import baselines_table
+
+    result, report, _ = neural_run
+    pred, record = predict_run(result.run, frames=20)
+    rows = {r[0]: r[1:] for r in baselines_table(record, pred).rows}
+    w = record.window
+    assert rows["zero force (constant velocity)"][0] == pytest.approx(
+        zero_force_rms_mm(w.positions, w.mask, w.dt), rel=1e-12
+    )
+    assert rows["zero force (constant velocity)"][0] == pytest.approx(5.6205, abs=1e-3)
+    floor = momentum_floor_rms_mm(w.positions, w.mask, w.dt, record.model.params.mass)
+    assert rows["momentum floor (internal forces)"][0] == pytest.approx(floor, rel=1e-12)
+    assert rows["this model"][0] == pytest.approx(result.rms_mm, rel=1e-9)
+    assert rows["this model"][0] >= floor  # no internal-force model beats the floor
+    # neural terms are not linear: no least-squares optimum claimed for this family
+    assert not any(k.startswith("exact least squares") for k in rows)
+    text = _html(report)
+    assert "zero force (constant velocity)" in text and "momentum floor" in text
