@@ -14,4 +14,4 @@ _YNN = "xla_cpu_experimental_ynn_fusion_type"
 if _YNN not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + f" --{_YNN}=").strip()
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
