@@ -228,3 +228,23 @@ def test_init_lsq_refuses_a_non_linear_model_in_one_line(tmp_path):
     assert "--init lsq" in proc.stderr and "mass" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "run").exists()
+
+
+def test_baselines_command_prints_the_references(horse):
+    import json
+
+    model, data, windows = horse
+    proc = cli(
+        "baselines", HORSE_LIMB, HORSE_TROT, "--markers", "Head,Withers,HFL",
+        "--frames", "0:10", "--bonds", "standard", "--json",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout)
+    assert got["frames"] == [0, 10]
+    assert got["zero_force_rms_mm"] == pytest.approx(
+        zero_force_rms_mm(data.positions, data.mask, data.dt)
+    )
+    assert got["momentum_floor_mm"] == pytest.approx(4.1066, abs=1e-3)
+    assert got["least_squares_rms_mm"] == pytest.approx(least_squares(model, windows).rms_mm)
+    bad = cli("baselines", HORSE_LIMB, "missing.csv")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

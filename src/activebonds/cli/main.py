@@ -245,6 +245,7 @@ def main() -> None:
 
 
 # Commands defined in their own modules register themselves on import.
+from . import baselines_cmd as _baselines_cmd  # noqa: E402,F401
 from . import experiments_cmd as _experiments_cmd  # noqa: E402,F401
 from .report_cmd import report as _report  # noqa: E402
 

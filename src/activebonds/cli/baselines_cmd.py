@@ -1,0 +1,83 @@
+"""``activebonds baselines``: what any fit of a model to a recording is judged against."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from ..errors import InputError
+from .main import _frames, app, fail, out
+
+
+@app.command()
+def baselines(
+    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    markers: Annotated[
+        str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
+    ] = None,
+    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = "model",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+):
+    """One-step RMS errors (mm) on the frames: the zero-force (constant-velocity) predictor,
+    the momentum floor of internal-force models, and the exact bounded least-squares optimum of
+    the model's linear parameters (neural gains at 0)."""
+    from ..data import read_trajectory
+    from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
+    from ..identify.cost import make_windows
+    from ..identify.lsq import least_squares
+    from ..identify.problem import select_data, variant
+    from ..identify.settings import parse_frames
+    from ..model import load_model
+    from .options import settings_from_options
+
+    try:
+        settings = settings_from_options(
+            markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
+            frames=_frames(frames, parse_frames),
+            bonds=bonds,
+        )
+        m = variant(load_model(model), settings.bonds)
+        data = select_data(m, read_trajectory(traj), settings)
+        windows = make_windows(data.positions, data.mask, data.dt, 1)
+        result = {
+            "frames": [settings.frames[0], settings.frames[0] + data.n_frames],
+            "zero_force_rms_mm": zero_force_rms_mm(data.positions, data.mask, data.dt),
+            "momentum_floor_mm": model_floor_rms_mm(m, data.positions, data.mask, data.dt),
+        }
+        try:
+            lsq = least_squares(m, windows)
+            result["least_squares_rms_mm"] = lsq.rms_mm
+            result["least_squares_exact"] = lsq.exact
+            result["least_squares"] = {m.layout.genes[g].name: v for g, v in lsq.values.items()}
+        except InputError as e:
+            result["least_squares_rms_mm"] = None
+            result["least_squares_why_not"] = e.message
+    except InputError as e:
+        fail(e)
+    if as_json:
+        print(json.dumps(result, indent=2))
+        return
+    a, b = result["frames"]
+    table = Table(title=f"{model} on {traj}, frames {a}:{b} (one-step RMS error)")
+    table.add_column("reference")
+    table.add_column("mm", justify="right")
+    table.add_row("zero force (constant velocity)", f"{result['zero_force_rms_mm']:.6g}")
+    floor = result["momentum_floor_mm"]
+    table.add_row(
+        "momentum floor (internal forces)",
+        "n/a (external forces)" if floor is None else f"{floor:.6g}",
+    )
+    lsq_rms = result["least_squares_rms_mm"]
+    table.add_row(
+        "exact least squares (linear parameters)",
+        result.get("least_squares_why_not", "") if lsq_rms is None else f"{lsq_rms:.6g}",
+    )
+    out.print(table)
+    for name, value in result.get("least_squares", {}).items():
+        out.print(f"  {name} = {value:.6g}")
