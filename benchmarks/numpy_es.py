@@ -123,7 +123,10 @@ class NumpyCost:
             x_end, _ = self.advance(p, xp, v)
             v = v + (x - x_end) / self.dt
         x_end, v_end = self.advance(p, xp, v)
-        return v_end + (x - x_end) / self.dt
+        residual = np.sqrt(np.sum((x - x_end) ** 2, axis=(-2, -1)))
+        scale = np.sqrt(np.sum((x - xp) ** 2, axis=(-2, -1))) + 1e-12
+        ok = (residual <= 1e-6 * scale)[..., None, None]
+        return np.where(ok, v_end + (x - x_end) / self.dt, np.nan)
 
     def predict(self, p, n):
         """Predicted positions [N, S, H, P, D]."""

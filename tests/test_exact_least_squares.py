@@ -14,6 +14,7 @@ import pytest
 from scipy.optimize import minimize
 
 from activebonds.data import read_trajectory
+from activebonds.errors import InputError
 from activebonds.experiments.baselines import (
     model_floor_rms_mm,
     momentum_floor_rms_mm,
@@ -248,3 +249,43 @@ def test_baselines_command_prints_the_references(horse):
     assert got["least_squares_rms_mm"] == pytest.approx(least_squares(model, windows).rms_mm)
     bad = cli("baselines", HORSE_LIMB, "missing.csv")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_fixed_stiffness_and_damping_are_known_offsets(tetra):
+    """Bonds with fixed stiffness (rest length free) and fixed damping: the fixed terms are a
+    known offset, the rest is still recovered exactly."""
+    model, _, windows = tetra
+    text = TETRA.read_text()
+    text = text.replace("stiffness = { value = 40.0, min = 1.0, max = 1000.0 }", "stiffness = 40.0")
+    text = text.replace("damping = { value = 0.8, min = 0.01, max = 10.0 }", "damping = 0.8")
+    partly = loads_model(text)
+    result = least_squares(partly, windows)
+    truth = dict(zip([g.name for g in model.layout.genes], truth_values(model), strict=True))
+    got = partly.layout.natural(result.genome)
+    for gene, value in zip(partly.layout.genes, got, strict=True):
+        assert value == pytest.approx(truth[gene.name], rel=1e-9), gene.name
+    assert result.exact and result.rms_mm < 1e-9
+
+
+def test_a_type_mixing_free_and_fixed_stiffness_is_refused(tetra):
+    """Two bonds of one type share their rest length; with the stiffness free in one and fixed
+    in the other the rest length enters bilinearly: refused, not solved wrongly."""
+    model, _, windows = tetra
+    text = TETRA.read_text().replace(
+        'particles = ["A", "B"]\n', 'particles = ["A", "B"]\ntype = "t"\n', 1
+    )
+    text = text.replace(
+        'particles = ["A", "C"]\nstiffness = { value = 25.0, min = 1.0, max = 1000.0 }',
+        'particles = ["A", "C"]\ntype = "t"\nstiffness = 40.0',
+    )
+    mixed = loads_model(text)
+    with pytest.raises(InputError, match="not linear"):
+        least_squares(mixed, windows)
+
+
+def test_no_floor_is_claimed_for_free_masses(tetra):
+    model, data, _ = tetra
+    text = TETRA.read_text().replace(
+        "mass = 1.5\n", "mass = { value = 1.0, min = 0.1, max = 10 }\n"
+    )
+    assert model_floor_rms_mm(loads_model(text), data.positions, data.mask, data.dt) is None

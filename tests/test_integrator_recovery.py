@@ -102,3 +102,18 @@ def test_fit_recovers_every_parameter(truth, method, substeps, tolerance):
     (the others); before the start-velocity fix Verlet gave +98 % stiffness."""
     rel, result = _recovery(truth, method, substeps)
     assert rel.max() < tolerance, dict(zip(result.model.layout.genes, rel, strict=True))
+
+
+def test_an_unsolvable_start_is_a_failed_candidate_not_a_biased_one(truth):
+    """Stiff, heavily damped parameters for the frame interval: the fixed point of the start
+    state does not converge in its rounds, so the velocity is NaN (the candidate costs +inf
+    and is counted as failed) instead of silently wrong."""
+    p = truth.params._replace(k=np.full(6, 5000.0), c=np.full(6, 60.0))
+    x0, v0 = (np.asarray(a) for a in truth.initial_state())
+    x1, _ = advance(p, truth.topology, x0, v0, 0.02, 2, "euler")
+    v = np.asarray(start_velocity(p, truth.topology, x0, np.asarray(x1), 0.02, 2, "euler"))
+    assert np.isnan(v).all()
+    # the same parameters with one substep need no solve: exact, finite
+    x1, v1 = advance(p, truth.topology, x0, v0, 0.02, 1, "euler")
+    v = np.asarray(start_velocity(p, truth.topology, x0, np.asarray(x1), 0.02, 1, "euler"))
+    np.testing.assert_allclose(v, np.asarray(v1), rtol=1e-12, atol=1e-12)

@@ -8,7 +8,7 @@
   accelerations ``a`` of a frame satisfy ``sum_p m_p a_p = 0`` and ``sum_p m_p x_p x a_p = 0``
   (positions at the frame the forces act on). The smallest one-step error any such model can
   reach is, frame by frame, the least-squares residual of the force-free prediction's error
-  outside that subspace. A known uniform field only shifts the prediction.
+  outside that subspace. The uniform field (fixed in the model file) only shifts the prediction.
 
 Both use the cost's conventions (one-substep semi-implicit Euler, horizon 1, masked gaps) and
 are RMS position errors in mm over the same terms as the fit cost.
@@ -99,11 +99,10 @@ def momentum_floor_rms_mm(
 
 
 def model_floor_rms_mm(model: Model, positions: np.ndarray, mask: np.ndarray, dt: float):
-    """The momentum floor for ``model``'s family, or None where it does not apply (a unary
-    bond or a free uniform field makes forces external: nothing is conserved)."""
-    topo = model.topology
-    free_gravity = (np.asarray(model.layout.index.gravity) >= 0).any()
-    if topo.unary.size or free_gravity:
+    """The momentum floor for ``model``'s family, or None where it does not apply: a unary
+    bond makes forces external (nothing is conserved), and free masses make the reachable
+    accelerations depend on them (the floor of the file's masses is no floor of the family)."""
+    if model.topology.unary.size or (np.asarray(model.layout.index.mass) >= 0).any():
         return None
     gravity = np.asarray(model.params.gravity, np.float64)
     return momentum_floor_rms_mm(positions, mask, dt, model.params.mass, gravity)

@@ -184,7 +184,12 @@ def baselines(exp: Experiment, model: Model, recording: Trajectory) -> dict:
         "zero_force_test_rms_mm": zero_force_rms_mm(held.positions, held.mask, held.dt),
         "momentum_floor_mm": model_floor_rms_mm(model, fit.positions, fit.mask, fit.dt),
         "linear_momentum_floor_mm": momentum_floor_rms_mm(
-            fit.positions, fit.mask, fit.dt, model.params.mass, angular=False
+            fit.positions,
+            fit.mask,
+            fit.dt,
+            model.params.mass,
+            model.params.gravity,
+            angular=False,
         ),
         "lsq_standard_fit_rms_mm": optimum.rms_mm,
         "lsq_standard_exact": optimum.exact,

@@ -87,8 +87,10 @@ def _switched_off(model: Model) -> tuple[Params, list[int]]:
     if neural.any():
         gain_free = np.asarray(index.gain) >= 0
         lows = np.array([layout.genes[g].lower if g >= 0 else 0.0 for g in index.gain])
+        highs = np.array([layout.genes[g].upper if g >= 0 else 0.0 for g in index.gain])
         fixed_on = neural & ~gain_free & (np.asarray(base.gain) != 0)
-        if fixed_on.any() or (neural & gain_free & (lows > 0)).any():
+        no_zero = neural & gain_free & ((lows > 0) | (highs < 0))
+        if fixed_on.any() or no_zero.any():
             raise InputError(
                 model.name,
                 "least squares: a neural bond's gain must be able to be 0 (the neurons are "
@@ -107,14 +109,14 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     over the model's linear unknowns."""
     if windows.horizon != 1:
         raise InputError("--horizon", "least squares needs the one-step cost (horizon 1)")
-    jax.config.update("jax_enable_x64", True)
     layout, topo = model.layout, model.topology
     base, index = layout.base, layout.index
     off_params, _ = _switched_off(model)
     x, v, dt = windows.x0, windows.v0, windows.dt
     n_s, n_p, d = x.shape
-    known = jax.vmap(lambda a, b: total_force(off_params, topo, a, b))(jnp.asarray(x), v)
-    known = np.asarray(known, np.float64)  # [S, P, D]
+    with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
+        known = jax.vmap(lambda a, b: total_force(off_params, topo, a, b))(jnp.asarray(x), v)
+        known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
     cols: dict[str, np.ndarray] = {}
     bounds: dict[str, tuple[float, float]] = {}
@@ -131,6 +133,12 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
         name = f"product:{gk}*{gx}"
         if name not in cols:
             klo, khi = layout.genes[gk].lower, layout.genes[gk].upper
+            if klo < 0:
+                raise InputError(
+                    model.name,
+                    f"least squares: {layout.genes[gk].name} may be negative (min {klo}); "
+                    "the bounds of k x need k >= 0",
+                )
             xlo, xhi = layout.genes[gx].lower, layout.genes[gx].upper
             corners = [a * b for a in (klo, khi) for b in (xlo, xhi)]
             cols[name] = np.zeros((n_s, n_p, d))
@@ -186,6 +194,17 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
         else:
             known[:, p] -= c * v[:, p]
 
+    # A gene that multiplies a free stiffness in one bond and a fixed one in another (bonds of
+    # one type may mix free and fixed stiffness) enters bilinearly: not this solver's problem.
+    partners = {int(n.split("*")[1]) for n in cols if n.startswith("product:")}
+    plain = {int(n[5:]) for n in cols if n.startswith("gene:")}
+    if partners & plain:
+        g = layout.genes[min(partners & plain)]
+        raise InputError(
+            model.name,
+            f"least squares: {g.name} multiplies a free stiffness in one bond and a fixed one "
+            "in another (not linear); make the stiffness free or fixed in every bond of the type",
+        )
     rows = np.repeat(windows.weight[:, 0] > 0, d, axis=-1).reshape(n_s, n_p, d).ravel()
     scale = dt**2 / np.asarray(base.mass, np.float64)[None, :, None]
     names = tuple(cols)

@@ -48,6 +48,7 @@ def advance(
 
 
 START_ITERATIONS = 3  # fixed-point iterations of start_velocity (substeps > 1)
+START_TOLERANCE = 1e-6  # largest last residual, relative to the frame's displacement
 
 
 def start_velocity(
@@ -77,7 +78,10 @@ def start_velocity(
       ``dt * (c/m + dt k/m)`` per round, started from the constant-acceleration estimate)
       and the velocity that step ends with is returned (corrected to first order by the last
       residual). On data the same scheme generated, this recovers the true state to
-      ``~ contraction^(iterations+1)``.
+      ``~ contraction^(iterations+1)``. Where it has not converged (a last residual above
+      ``START_TOLERANCE`` of the frame's displacement: stiff or heavily damped parameters for
+      the frame interval) the velocity is NaN, so such a candidate costs +inf and is counted
+      as failed rather than silently biased.
     """
     v_b = (x - x_prev) / dt
     if substeps == 1 and method == "euler":
@@ -93,7 +97,10 @@ def start_velocity(
         x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method)
         v = v + (x - x_end) / dt
     x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method)
-    return v_end + (x - x_end) / dt
+    residual = jnp.sqrt(jnp.sum((x - x_end) ** 2))
+    scale = jnp.sqrt(jnp.sum((x - x_prev) ** 2)) + 1e-12
+    converged = residual <= START_TOLERANCE * scale
+    return jnp.where(converged, v_end + (x - x_end) / dt, jnp.nan)
 
 
 def rollout(
