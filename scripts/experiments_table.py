@@ -39,8 +39,8 @@ def table(summary: dict) -> str:
             r = c["series"][series]
             a, b = r["test_frames"]
             lines.append(
-                f"| {name} | {series} | {fmt(r['fit_rms_mm_median'])} "
-                f"[{fmt(r['fit_rms_mm_iqr'][0])}, {fmt(r['fit_rms_mm_iqr'][1])}] "
+                f"| {name} | {series} | {fmt(r['fit_rms_mm_median'], 4)} "
+                f"[{fmt(r['fit_rms_mm_iqr'][0], 4)}, {fmt(r['fit_rms_mm_iqr'][1], 4)}] "
                 f"| {fmt(r['one_step_rms_mm_median'])} (frames {a}-{b - 1}) "
                 f"| {fmt(r['free_run_rms_mm_median'])} "
                 f"| {fmt(r.get('saturated_share_median'), 2) if series == 'neural' else '-'} "

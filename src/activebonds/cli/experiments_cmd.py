@@ -55,6 +55,15 @@ def _finish(summaries: dict, folder: Path, started: float) -> Path:
                 f"standard {st['fit_rms_mm_median']:.3g} mm, neural {ne['fit_rms_mm_median']:.3g} mm; "
                 f"next frames one-step {st['one_step_rms_mm_median']:.3g} vs {ne['one_step_rms_mm_median']:.3g} mm"
             )
+        b = s.get("baselines")
+        if b:
+            floor = b["momentum_floor_mm"]
+            out.print(
+                f"{name} baselines: zero force {b['zero_force_fit_rms_mm']:.3g} mm (fit), "
+                f"{b['zero_force_test_rms_mm']:.3g} mm (next frames); exact least squares "
+                f"(standard) {b['lsq_standard_fit_rms_mm']:.5g} mm; momentum floor "
+                + ("n/a" if floor is None else f"{floor:.4g} mm")
+            )
     out.print(f"done in {time.time() - started:.0f} s; report: [bold]{report}[/]")
     return report
 

@@ -56,7 +56,15 @@ def _config_section(
     figs = folder / "figures"
     series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
     title = f"{name}: population {c['population']}, {c['generations']:,} generations"
-    figures = [Figure(plots.convergence(series, figs / "convergence", title=title)[0])]
+    refs = []
+    if base:
+        refs = [
+            ("zero force", base.get("zero_force_fit_rms_mm")),
+            ("exact least squares, standard", base.get("lsq_standard_fit_rms_mm")),
+            ("momentum floor", base.get("momentum_floor_mm")),
+        ]
+    conv = plots.convergence(series, figs / "convergence", title=title, references=refs)
+    figures = [Figure(conv[0])]
     rows = []
     for s in SERIES:
         r = c["series"][s]

@@ -271,6 +271,19 @@ def baselines_table(record: RunRecord, pred: Prediction) -> Table:
     """The fit beside what judges it (RMS one-step error, mm): the zero-force
     (constant-velocity) predictor on the same frames, the momentum floor of internal-force
     models and the exact least-squares optimum of the linear parameters, where they apply."""
+    rows = baseline_rows(record, pred)
+    rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
+    return Table(
+        ("one-step RMS (mm)", "fitted frames", "frames beyond"),
+        rows,
+        "The fit beside its baselines. A model that does not beat the zero-force predictor on "
+        "frames it never saw has learnt nothing that generalises; no model of internal "
+        "forces can go below the momentum floor.",
+    )
+
+
+def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
+    """(name, fitted-window RMS mm, beyond RMS mm or None) of the model and its baselines."""
     rec, dt, fit = pred.recorded, pred.dt, pred.fit_frames
     mask = np.isfinite(rec).all(axis=-1)
     s = record.settings
@@ -302,14 +315,7 @@ def baselines_table(record: RunRecord, pred: Prediction) -> Table:
                 rows.append(("exact least squares (this model's family)", lsq.rms_mm, None))
         except InputError:
             pass
-    rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
-    return Table(
-        ("one-step RMS (mm)", "fitted frames", "frames beyond"),
-        rows,
-        "The fit beside its baselines. A model that does not beat the zero-force predictor on "
-        "frames it never saw has learnt nothing that generalises; no model of internal "
-        "forces can go below the momentum floor.",
-    )
+    return rows
 
 
 def _nonlinear_genes(model) -> bool:
@@ -379,8 +385,9 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     """The sections of a one-run report; figures are written into ``fig_dir``."""
     model = record.model
     labels = plots.bond_labels(model)
+    refs = [(name, fitted) for name, fitted, _ in baseline_rows(record, pred)[1:]]
     conv = plots.convergence(
-        [plots.Series(record.label, [record.history])], fig_dir / "convergence"
+        [plots.Series(record.label, [record.history])], fig_dir / "convergence", references=refs
     )
     traj = plots.trajectories(pred, fig_dir / "trajectories")
     params = plots.parameters(model, fig_dir / "parameters")

@@ -81,11 +81,13 @@ def convergence(
     *,
     band: bool | None = None,
     title: str = "Convergence",
+    references: Sequence[tuple[str, float | None]] = (),
 ) -> list[Path]:
     """Best (solid) and population-median (dashed) cost as RMS error (mm) per generation,
     log scale. With several runs in a series and ``band`` (default: when any series has more
     than one run), the lines are medians across runs and the best cost's interquartile range
-    is shaded."""
+    is shaded. ``references``: (label, RMS mm) drawn as horizontal lines (e.g. the zero-force
+    baseline, an exact optimum, a floor) where they fall within 100x of the curves."""
     fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     if band is None:
@@ -121,6 +123,15 @@ def convergence(
         drawn = True
     if drawn:
         ax.set_yscale("log")
+        lo, hi = ax.get_ylim()
+        styles = [":", "-.", (0, (5, 2, 1, 2)), (0, (1, 3))]
+        for k, (label, value) in enumerate(references):
+            if value is None or not np.isfinite(value) or not lo / 100 <= value <= hi * 100:
+                continue
+            ax.axhline(
+                value, color="0.35", lw=1.1, ls=styles[k % len(styles)],
+                label=f"{label}: {value:.4g} mm",
+            )  # fmt: skip
         plain = mticker.FuncFormatter(lambda v, _: f"{v:g}")
         ax.yaxis.set_major_formatter(plain)
         lo, hi = ax.get_ylim()
