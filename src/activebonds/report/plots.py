@@ -245,8 +245,9 @@ def weight_heatmap(
 def variant_success(
     history: dict[str, np.ndarray], stem: str | Path, *, title: str = "Mutation variants"
 ) -> list[Path]:
-    """Share of the children of each mutation variant that beat their first parent, per
-    generation (moving sums over about 2 % of the run), and each variant's share of trials."""
+    """Share of the children of each mutation variant that beat their own parent (a crossover
+    child: the best of its parents), per generation (moving sums over about 2 % of the run),
+    and each variant's share of trials."""
     gens = np.asarray(history.get("generation", []), np.float64)
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(7.5, 4.8), sharex=True, layout="constrained")
     if gens.size == 0:
