@@ -24,7 +24,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
-import activebonds  # noqa: F401  (before any JAX computation: it sets XLA flags for the backend)
+from activebonds.runtime import fast_cpu_flags
+
+fast_cpu_flags()  # before any JAX computation: the XLA flags of the command line
 
 jax.config.update("jax_enable_x64", True)  # the package's default precision is float64
 

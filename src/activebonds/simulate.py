@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -12,8 +11,10 @@ from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
 from .model import Model, load_model
 from .physics import rollout, start_velocity
+from .runtime import float64
 
 
+@float64
 def simulate(
     model: Model,
     n_frames: int,
@@ -29,7 +30,6 @@ def simulate(
         raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
     if integrator not in ("euler", "verlet"):
         raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
-    jax.config.update("jax_enable_x64", True)
     dt = 1.0 / rate
     if start is None:
         x0, v0 = model.initial_state()

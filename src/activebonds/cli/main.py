@@ -224,6 +224,9 @@ def _compilation_cache() -> None:
 
 def main() -> None:
     """Entry point: usage errors become one line and exit code 2."""
+    from ..runtime import fast_cpu_flags
+
+    fast_cpu_flags()
     _compilation_cache()
     try:
         code = app(standalone_mode=False)

@@ -31,6 +31,7 @@ from ..identify.problem import identification
 from ..identify.settings import FitSettings
 from ..model import Model, as_neural, as_standard, load_model, save_model
 from ..report.predict import predict
+from ..runtime import float64
 from ..simulate import simulate
 from .baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from .resources import example, horse_trot
@@ -103,6 +104,7 @@ EXPERIMENTS = {
 }
 
 
+@float64
 def run_experiment(
     name: str,
     scale: str,

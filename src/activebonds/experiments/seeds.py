@@ -20,6 +20,7 @@ from ..identify import es
 from ..identify.cost import rms_mm
 from ..identify.driver import chunk_length
 from ..identify.problem import Identification
+from ..runtime import float64
 
 
 @dataclass
@@ -33,6 +34,7 @@ class SeedRuns:
     seconds: float
 
 
+@float64
 def run_seeds(
     ident: Identification,
     settings: es.ESSettings,
@@ -41,7 +43,6 @@ def run_seeds(
     progress: Callable[[int, int], None] | None = None,
     chunk: int = 250,
 ) -> SeedRuns:
-    jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64
     problem = ident.problem
     keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])

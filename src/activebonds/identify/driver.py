@@ -48,9 +48,9 @@ class FitResult:
     run: Path | None = None
 
 
-def _apply_precision(settings: FitSettings) -> None:
-    if settings.precision == "float64":
-        jax.config.update("jax_enable_x64", True)
+def _precision(settings: FitSettings):
+    """JAX's 64-bit mode for the run's precision, scoped to the call."""
+    return jax.enable_x64(settings.precision == "float64")
 
 
 def _dtype(settings: FitSettings):
@@ -74,7 +74,11 @@ def fit(
     (settings, hashes, history, checkpoints, best model) and the run can be resumed.
     """
     settings = settings or FitSettings(**options)
-    _apply_precision(settings)
+    with _precision(settings):
+        return _fit(model, data, settings, out, overwrite, progress)
+
+
+def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress) -> FitResult:
     model_path = Path(model) if isinstance(model, str | Path) else None
     data_path = Path(data) if isinstance(data, str | Path) else None
     model_obj = load_model(model_path) if model_path else model
@@ -137,7 +141,11 @@ def resume(
         if generations < 1:
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
-    _apply_precision(settings)
+    with _precision(settings):
+        return _resume(run, settings, progress)
+
+
+def _resume(run: Path, settings: FitSettings, progress) -> FitResult:
     ident = _stored_identification(run, settings)
     n, g = settings.population, ident.model.layout.n_genes
     p = ident.model.topology.n_particles

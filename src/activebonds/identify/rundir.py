@@ -69,7 +69,7 @@ def backend() -> dict:
     return {
         "backend": jax.default_backend(),
         "device": str(dev.device_kind),
-        "x64": bool(jax.config.read("jax_enable_x64")),
+        "x64": bool(jax.config.jax_enable_x64),
         "platform": f"{platform.system()} {platform.machine()}",
     }
 

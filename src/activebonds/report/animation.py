@@ -11,16 +11,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from PIL import Image
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from PIL import Image  # noqa: E402
-
-from .plots import AXES, DPI, FREE_RUN, ONE_STEP  # noqa: E402
-from .predict import Prediction, to_mm  # noqa: E402
+from .plots import AXES, DPI, FREE_RUN, ONE_STEP
+from .predict import Prediction, to_mm
 
 MODEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
@@ -144,7 +141,9 @@ def write_gif(
     view = _view(rec)
     bonds = np.asarray(first.bonds, int).reshape(-1, 2)
 
-    fig, ax = plt.subplots(figsize=(7.2, 4.8), dpi=DPI * 0.8)
+    fig = Figure(figsize=(7.2, 4.8), dpi=DPI * 0.8)
+    FigureCanvasAgg(fig)  # the object API: no pyplot state, the backend left alone
+    ax = fig.subplots()
     fig.subplots_adjust(left=0.12, right=0.74, bottom=0.1, top=0.92)
     ax.set_xlim(view[0], view[1])
     ax.set_ylim(view[2], view[3])
@@ -223,7 +222,6 @@ def write_gif(
                 colors=64, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
             )
         )
-    plt.close(fig)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(

@@ -1,4 +1,4 @@
-"""Report figures (matplotlib, Agg): each function writes ``STEM.png`` and ``STEM.svg`` and
+"""Report figures (matplotlib's object API, drawn by Agg; the backend is left alone): each function writes ``STEM.png`` and ``STEM.svg`` and
 returns both paths, PNG first.
 
 Colours: the recording is black, one-step predictions blue, the free run orange; series of a
@@ -13,17 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker as mticker
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import TwoSlopeNorm
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import matplotlib.ticker as mticker  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import TwoSlopeNorm  # noqa: E402
-
-from ..model import Model  # noqa: E402
-from .predict import Prediction, neural_weights, to_mm  # noqa: E402
-from .runs import history_rms_mm  # noqa: E402
+from ..model import Model
+from .predict import Prediction, neural_weights, to_mm
+from .runs import history_rms_mm
 
 RECORDED = "black"
 ONE_STEP = "tab:blue"
@@ -46,15 +44,22 @@ class Series:
     histories: Sequence[dict[str, np.ndarray]]  # history.csv columns of each run
 
 
+def _subplots(*grid, figsize, layout=None, dpi=None, **kwargs):
+    """A figure and its axes from matplotlib's object API, drawn by Agg, with no pyplot
+    state and no change of the process's backend."""
+    fig = Figure(figsize=figsize, layout=layout, dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(*grid, **kwargs)
+
+
 def save(fig, stem: str | Path) -> list[Path]:
-    """Write the figure as STEM.png and STEM.svg (no timestamps), close it, return the paths."""
+    """Write the figure as STEM.png and STEM.svg (no timestamps), return the paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     png, svg = stem.with_suffix(".png"), stem.with_suffix(".svg")
-    with plt.rc_context({"svg.hashsalt": "activebonds", "svg.fonttype": "none"}):
+    with matplotlib.rc_context({"svg.hashsalt": "activebonds", "svg.fonttype": "none"}):
         fig.savefig(png, dpi=DPI, metadata={"Software": None})
         fig.savefig(svg, metadata={"Date": None})
-    plt.close(fig)
     return [png, svg]
 
 
@@ -88,8 +93,8 @@ def convergence(
     than one run), the lines are medians across runs and the best cost's interquartile range
     is shaded. ``references``: (label, RMS mm) drawn as horizontal lines (e.g. the zero-force
     baseline, an exact optimum, a floor) where they fall within 100x of the curves."""
-    fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, ax = _subplots(figsize=(7.5, 4.2), layout="constrained")
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     if band is None:
         band = any(len(s.histories) > 1 for s in series)
     drawn = False
@@ -155,7 +160,7 @@ def parameters(
     the identified value, the value written beside it; log-searched genes are marked."""
     genes = model.layout.genes
     n = len(genes)
-    fig, ax = plt.subplots(figsize=(7.5, max(1.6, 0.28 * n + 1.0)), layout="constrained")
+    fig, ax = _subplots(figsize=(7.5, max(1.6, 0.28 * n + 1.0)), layout="constrained")
     if n == 0:
         ax.text(0.5, 0.5, "no free parameter", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
@@ -205,7 +210,7 @@ def weight_heatmap(
     labels = bond_labels(model)
     rows = np.flatnonzero(neural)
     m = np.concatenate([w_len, w_rate], axis=1)[rows] if rows.size else np.zeros((0, 0))
-    fig, ax = plt.subplots(
+    fig, ax = _subplots(
         figsize=(max(4.5, 0.9 * m.shape[1] + 2.5), max(2.0, 0.55 * len(rows) + 1.6)),
         layout="constrained",
     )
@@ -216,7 +221,7 @@ def weight_heatmap(
     finite = np.isfinite(m)
     vmax = float(np.nanmax(np.abs(m))) if finite.any() else 1.0
     vmax = vmax if vmax > 0 else (float(np.nanmax(span)) / 2 if np.isfinite(span).any() else 1.0)
-    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")
+    cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.85")
     im = ax.imshow(
         np.ma.masked_invalid(m), cmap=cmap, norm=TwoSlopeNorm(0.0, -vmax, vmax), aspect="auto"
     )
@@ -249,7 +254,7 @@ def variant_success(
     child: the best of its parents), per generation (moving sums over about 2 % of the run),
     and each variant's share of trials."""
     gens = np.asarray(history.get("generation", []), np.float64)
-    fig, (ax, bx) = plt.subplots(2, 1, figsize=(7.5, 4.8), sharex=True, layout="constrained")
+    fig, (ax, bx) = _subplots(2, 1, figsize=(7.5, 4.8), sharex=True, layout="constrained")
     if gens.size == 0:
         ax.text(
             0.5, 0.5, "no generation recorded", ha="center", va="center", transform=ax.transAxes
@@ -291,7 +296,7 @@ def trajectories(
     one-step predictions and the free run; the end of the fitted window is a vertical line.
     The y range follows the recording, so a diverging free run leaves the panel."""
     n_p, dim = pred.recorded.shape[1], pred.recorded.shape[2]
-    fig, axes = plt.subplots(
+    fig, axes = _subplots(
         n_p,
         dim,
         figsize=(3.0 * dim + 1, 1.9 * n_p + 0.9),
@@ -336,7 +341,7 @@ def trajectories(
 
 def activations(pred: Prediction, labels: Sequence[str], stem: str | Path) -> list[Path]:
     """Neuron activations along the free run, with the saturation limits (|a| = 0.95)."""
-    fig, ax = plt.subplots(figsize=(7.5, 3.0), layout="constrained")
+    fig, ax = _subplots(figsize=(7.5, 3.0), layout="constrained")
     for b in np.flatnonzero(pred.neural):
         ax.plot(pred.times, pred.activation[:, b], lw=1.3, label=f"neuron {labels[b]}")
     for y in (-0.95, 0.95):

@@ -21,14 +21,11 @@ import numpy as np
 from ..data import Trajectory
 from ..model import Model, Params, Topology
 from ..physics import advance, neuron_activity, rollout_states, start_velocity
+from ..runtime import float64
 from .runs import RunRecord, load_run, original_window
 
 SATURATION = 0.95  # |a| above this: a saturated neuron
 NEAR_ZERO = 0.01  # |w| below this fraction of the weight range: a near-zero weight
-
-
-def _x64() -> None:
-    jax.config.update("jax_enable_x64", True)
 
 
 class _Topo:
@@ -75,13 +72,13 @@ def _activations(params, xs, vs, topo: _Topo):
     return jax.vmap(lambda x, v: neuron_activity(params, topo.topo, x, v))(xs, vs)
 
 
+@float64
 def one_step(
     model: Model, positions: np.ndarray, dt: float, substeps: int = 1, method: str = "euler"
 ) -> np.ndarray:
     """Prediction of every frame t >= 2 from the recorded frames t - 1 and t - 2, [F, P, D].
 
     NaN where an input frame misses a marker, and for frames 0 and 1."""
-    _x64()
     x = np.asarray(positions, dtype=np.float64)
     out = np.full_like(x, np.nan)
     if x.shape[0] < 3:
@@ -105,6 +102,7 @@ def one_step(
     return _finite_or_nan(out)
 
 
+@float64
 def free_run(
     model: Model,
     positions: np.ndarray,
@@ -118,7 +116,6 @@ def free_run(
     Returns positions and velocities [n_frames, P, D] (velocities are the model's own state;
     frames before the start are the recording and NaN velocities). Once a frame goes
     non-finite, it and every later frame are NaN."""
-    _x64()
     x = np.asarray(positions, dtype=np.float64)
     n = x.shape[0] if n_frames is None else int(n_frames)
     xs = np.full((n, *x.shape[1:]), np.nan)
@@ -185,10 +182,10 @@ def error_mm(predicted: np.ndarray, recorded: np.ndarray) -> np.ndarray:
         return np.sqrt(np.sum(d * d, axis=-1)) * 1000.0
 
 
+@float64
 def activations(model: Model, xs: np.ndarray, vs: np.ndarray) -> np.ndarray:
     """Neuron activations at each state (x, v), [F, B]; 0 for non-neural bonds, NaN where the
     state is unknown."""
-    _x64()
     xs = np.asarray(xs, np.float64)
     vs = np.asarray(vs, np.float64)
     n_b = model.topology.n_binary
@@ -285,6 +282,7 @@ class Prediction:
         return self.n_frames > self.fit_frames
 
 
+@float64
 def predict(
     model: Model,
     traj: Trajectory,
@@ -369,6 +367,7 @@ def default_frames(record: RunRecord) -> int:
     return 2 * record.window.n_frames
 
 
+@float64
 def predict_run(
     run: str | Path | RunRecord, frames: int | None = None
 ) -> tuple[Prediction, RunRecord]:

@@ -1,0 +1,38 @@
+"""Process-wide settings, applied only by entry points (the command line, the benchmarks, the
+tests), never by importing the package or calling its functions.
+
+XLA's CPU backend routes small reductions through YNNPACK fusions, which cost 2-3x more than
+its own loops on the tiny arrays of this problem (measured: ``benchmarks/profile.py``).
+:func:`fast_cpu_flags` opts out unless the user chose (``XLA_FLAGS`` already names the flag);
+it must run before JAX's first computation, which creates the CPU backend. A Python user who
+wants the same speed calls it first, or sets
+``XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type=`` in the environment.
+"""
+
+from __future__ import annotations
+
+import os
+
+YNN_FLAG = "xla_cpu_experimental_ynn_fusion_type"
+
+
+def fast_cpu_flags() -> None:
+    """Add ``--xla_cpu_experimental_ynn_fusion_type=`` to ``XLA_FLAGS`` unless it is set."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if YNN_FLAG not in flags:
+        os.environ["XLA_FLAGS"] = (flags + f" --{YNN_FLAG}=").strip()
+
+
+def float64(fn):
+    """Run ``fn`` with JAX's 64-bit mode on, scoped to the call (the process's setting is
+    left as it was)."""
+    import functools
+
+    import jax
+
+    @functools.wraps(fn)
+    def scoped(*args, **kwargs):
+        with jax.enable_x64(True):
+            return fn(*args, **kwargs)
+
+    return scoped

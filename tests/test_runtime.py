@@ -1,0 +1,55 @@
+"""Importing the package and calling its functions leave the process as it was: XLA_FLAGS,
+JAX's x64 mode and matplotlib's backend are the entry points' choice (activebonds.runtime)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from helpers import HORSE_LIMB, HORSE_TROT
+
+SCRIPT = r"""
+import json, os, sys
+from pathlib import Path
+
+def state():
+    import jax, matplotlib
+    return [os.environ.get("XLA_FLAGS"), bool(jax.config.jax_enable_x64), matplotlib.get_backend()]
+
+before = state()
+import activebonds, activebonds.report, activebonds.report.html, activebonds.identify
+import activebonds.experiments.paper, activebonds.simulate
+imported = state()
+from activebonds.identify import fit
+from activebonds.report.html import write_report
+run = Path(sys.argv[3]) / "run"
+result = fit(sys.argv[1], sys.argv[2], markers=("Head", "Withers", "HFL"), frames=(0, 10),
+             population=8, generations=3, out=run)
+write_report(run)
+called = state()
+x64_inside = json.loads((run / "run.json").read_text())["backend"]["x64"]
+print(json.dumps({"before": before, "imported": imported, "called": called,
+                  "x64_inside": x64_inside, "dtype": str(result.genome.dtype)}))
+"""
+
+
+def test_import_and_calls_leave_the_process_as_it_was(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_ENABLE_X64")}
+    env["MPLBACKEND"] = "svg"  # any backend but Agg: switching to Agg would show
+    proc = subprocess.run(
+        [sys.executable, "-c", SCRIPT, str(HORSE_LIMB), str(HORSE_TROT), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["before"] == [None, False, "svg"]
+    assert got["imported"] == got["before"]
+    assert got["called"] == got["before"]
+    # ... while the fit itself ran in float64 (the default precision), scoped to the call
+    assert got["x64_inside"] is True and got["dtype"] == "float64"
