@@ -5,7 +5,7 @@
 (b) ``full_horse``: all 7 VHDC markers, every pair bonded (21 mechanical-neural bonds), a model
     written as TOML in code (rest lengths = mean distances over the recording, bounds +-50 %);
 (c) ``mesh``: a synthetic 35-particle 7x5 sheet in 3D with neighbour + diagonal standard bonds,
-    data simulated with ``activebonds.simulate.simulate``;
+    data simulated with ``activebonds.simulation.simulate``;
 (d) any of them with ``horizon=H`` (H = 1 is the paper's one-step cost);
 (e) ``triangle``: examples/triangle.toml simulated 60 frames at 60 Hz, fitted with its own
     bounds, for time-to-target (truth = the file's values).
@@ -34,7 +34,7 @@ from activebonds.data import Trajectory, read_trajectory  # noqa: E402
 from activebonds.identify.problem import Identification, identification  # noqa: E402
 from activebonds.identify.settings import FitSettings  # noqa: E402
 from activebonds.model import Model, load_model, loads_model  # noqa: E402
-from activebonds.simulate import simulate  # noqa: E402
+from activebonds.simulation import simulate  # noqa: E402
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "activebonds"
 HORSE_CSV = PACKAGE / "datasets" / "horse_vhdc" / "Horse1_M1_trot1_kinematics.csv"

@@ -73,7 +73,7 @@ def record_data() -> None:
     """(Re)write the simulated recordings the golden fits use."""
     from activebonds.data import write_trajectory
     from activebonds.model import load_model
-    from activebonds.simulate import simulate
+    from activebonds.simulation import simulate
 
     for name, (model, frames, rate) in RECORDINGS.items():
         write_trajectory(simulate(load_model(EXAMPLES / model), frames, rate), GOLDEN / name)

@@ -197,7 +197,7 @@ def workspace(tmp_path_factory) -> dict:
     if "ws" not in _MEMO:
         from activebonds.data import write_trajectory
         from activebonds.model import load_model
-        from activebonds.simulate import simulate
+        from activebonds.simulation import simulate
 
         base = tmp_path_factory.mktemp("reliability")
         shutil.copyfile(EXAMPLES / "triangle.toml", base / "triangle.toml")

@@ -25,7 +25,7 @@ from activebonds.identify.cost import make_cost, make_windows
 from activebonds.identify.lsq import equation_error_fit, least_squares, linear_problem
 from activebonds.model import as_standard, load_model, loads_model
 from activebonds.report.predict import one_step
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 from helpers import HORSE_LIMB, HORSE_TROT, ROOT, cli
 
 TETRA = ROOT / "tests" / "models" / "tetra.toml"

@@ -14,7 +14,7 @@ from activebonds.data import Trajectory
 from activebonds.experiments.baselines import momentum_floor_rms_mm
 from activebonds.experiments.paper import EXPERIMENTS
 from activebonds.model import load_model
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 from helpers import EXAMPLES
 
 

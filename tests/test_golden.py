@@ -43,7 +43,7 @@ def test_golden_fit(name):
 def test_golden_recordings_are_the_simulated_ones(tmp_path):
     """The stored recordings are what the simulator produces today (to 1e-9 m: CSV in mm)."""
     from activebonds.model import load_model
-    from activebonds.simulate import simulate
+    from activebonds.simulation import simulate
 
     for name, (model, frames, rate) in golden.RECORDINGS.items():
         stored = read_trajectory(golden.GOLDEN / name)

@@ -27,7 +27,7 @@ from activebonds.data import read_trajectory, write_trajectory
 from activebonds.identify import es, fit
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model, loads_model
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 from helpers import NEURAL_TRIANGLE, TRIANGLE, cli, cli_popen
 
 # --------------------------------------------------------------------------------------------

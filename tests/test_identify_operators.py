@@ -17,7 +17,7 @@ import pytest
 from activebonds.identify import operators as ops
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model, loads_model
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 from helpers import TRIANGLE
 
 # Compiled once per module (eager op-by-op dispatch is slow on CPU).

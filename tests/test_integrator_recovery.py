@@ -17,7 +17,7 @@ from activebonds.identify import fit
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model
 from activebonds.physics import advance, start_velocity
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 from helpers import ROOT
 
 TETRA = ROOT / "tests" / "models" / "tetra.toml"

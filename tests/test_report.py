@@ -37,7 +37,7 @@ from activebonds.report import (
     write_report,
 )
 from activebonds.report.predict import near_zero_share, rms_mm, saturation_share
-from activebonds.simulate import simulate
+from activebonds.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE = ROOT / "examples" / "triangle.toml"

@@ -8,7 +8,7 @@ import os
 import subprocess
 import sys
 
-from helpers import HORSE_LIMB, HORSE_TROT
+from helpers import HORSE_LIMB, HORSE_TROT, TRIANGLE
 
 SCRIPT = r"""
 import json, os, sys
@@ -20,7 +20,7 @@ def state():
 
 before = state()
 import activebonds, activebonds.report, activebonds.report.html, activebonds.identify
-import activebonds.experiments.paper, activebonds.simulate
+import activebonds.experiments.paper, activebonds.simulation
 imported = state()
 from activebonds.identify import fit
 from activebonds.report.html import write_report
@@ -53,3 +53,31 @@ def test_import_and_calls_leave_the_process_as_it_was(tmp_path):
     assert got["called"] == got["before"]
     # ... while the fit itself ran in float64 (the default precision), scoped to the call
     assert got["x64_inside"] is True and got["dtype"] == "float64"
+
+
+def test_the_public_face_is_importable_from_the_top_level():
+    import activebonds
+    from activebonds import (
+        FitSettings,
+        fit,
+        load_model,
+        read_trajectory,
+        resume,
+        save_model,
+        simulate,
+        write_report,
+    )
+
+    assert callable(fit) and callable(resume) and callable(write_report)
+    assert FitSettings().population == 100
+    model = load_model(TRIANGLE)
+    traj = simulate(model, 5, 60.0)
+    assert traj.n_frames == 5 and read_trajectory(HORSE_TROT).n_markers == 7
+    assert save_model.__module__ == "activebonds.model.io"
+    import activebonds.simulation  # noqa: F401  (the module does not shadow the function)
+
+    assert activebonds.simulate is simulate
+    assert set(activebonds.__all__) == {
+        "fit", "resume", "FitResult", "FitSettings", "load_model", "save_model",
+        "read_trajectory", "write_trajectory", "simulate", "write_report",
+    }  # fmt: skip

@@ -9,3 +9,34 @@ backend stay as they were): entry points make such choices (:mod:`activebonds.ru
 """
 
 __version__ = "0.2.0"
+
+# The public face, imported on first use (importing the package stays light): everything else
+# lives in its subpackage (model, physics, data, identify, report, experiments, cli).
+_PUBLIC = {
+    "fit": "activebonds.identify.driver",
+    "resume": "activebonds.identify.driver",
+    "FitResult": "activebonds.identify.driver",
+    "FitSettings": "activebonds.identify.settings",
+    "load_model": "activebonds.model.io",
+    "save_model": "activebonds.model.io",
+    "read_trajectory": "activebonds.data.readers",
+    "write_trajectory": "activebonds.data.writers",
+    "simulate": "activebonds.simulation",
+    "write_report": "activebonds.report.html",
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        import importlib
+
+        value = getattr(importlib.import_module(_PUBLIC[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'activebonds' has no attribute '{name}'")
+
+
+def __dir__():
+    return sorted([*globals(), *_PUBLIC])

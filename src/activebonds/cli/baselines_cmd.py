@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from ..errors import InputError
-from .main import _frames, app, fail, out
+from .app import app, fail, out, parse_option_frames
 
 
 @app.command()
@@ -39,7 +39,7 @@ def baselines(
     try:
         settings = settings_from_options(
             markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
-            frames=_frames(frames, parse_frames),
+            frames=parse_option_frames(frames, parse_frames),
             bonds=bonds,
         )
         m = variant(load_model(model), settings.bonds)

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from .main import app, fail, out
+from .app import app, fail, out
 
 
 def _parse_seeds(seeds: int) -> list[int]:

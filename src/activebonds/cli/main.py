@@ -13,27 +13,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from ..errors import InputError
-
-app = typer.Typer(
-    help="Identify active particle-bond models (springs, dampers, mechanical-neural bonds) "
-    "from motion capture with a self-adaptive evolution strategy.",
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-    add_completion=False,
-)
-# Not a terminal (a log, a pipe): no 80-column wrapping of paths and summaries.
-out = Console() if sys.stdout.isatty() else Console(width=160, soft_wrap=True)
-err = Console(stderr=True, width=10_000, soft_wrap=True)
-
-
-def fail(error: InputError | str, code: int = 2):
-    text = error.line() if isinstance(error, InputError) else str(error)
-    err.print(f"error: {text}", markup=False, highlight=False, soft_wrap=True)
-    raise typer.Exit(code)
+from .app import app, fail, out, parse_option_frames
 
 
 @app.command()
@@ -82,7 +65,7 @@ def simulate(
     integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
 ):
     """Free-run a model from its particles' initial state (or a recording's first two frames)."""
-    from ..simulate import simulate_to_file
+    from ..simulation import simulate_to_file
 
     try:
         n = simulate_to_file(model, frames, rate, out_path, start, substeps, integrator)
@@ -131,7 +114,7 @@ def fit(
     try:
         settings = settings_from_options(
             markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
-            frames=_frames(frames, parse_frames),
+            frames=parse_option_frames(frames, parse_frames),
             bonds=bonds,
             population=population,
             generations=generations,
@@ -178,13 +161,6 @@ def resume(
     except KeyboardInterrupt:
         fail(f"interrupted; continue with: activebonds resume {run}", code=130)
     _summary(result)
-
-
-def _frames(text, parse):
-    try:
-        return parse(text)
-    except ValueError as e:
-        raise InputError("--frames", str(e)) from None
 
 
 def _progress(total: int):
@@ -247,9 +223,10 @@ def main() -> None:
     sys.exit(code if isinstance(code, int) else 0)
 
 
-# Commands defined in their own modules register themselves on import.
-from . import baselines_cmd as _baselines_cmd  # noqa: E402,F401
-from . import experiments_cmd as _experiments_cmd  # noqa: E402,F401
-from .report_cmd import report as _report  # noqa: E402
+# The other commands, after these in --help; their modules register them on the app.
+from . import experiments_cmd  # noqa: E402,F401
+from .report_cmd import report  # noqa: E402
 
-app.command(name="report")(_report)
+app.command(name="report")(report)
+
+from . import baselines_cmd  # noqa: E402,F401

@@ -30,7 +30,7 @@ def report(
 ):
     """Write an HTML report of a run: summary, convergence, parameters, neurons, animation."""
     from ..report import write_report
-    from .main import fail
+    from .app import fail
 
     try:
         path = write_report(run, out, frames=frames)

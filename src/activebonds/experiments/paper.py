@@ -32,7 +32,7 @@ from ..identify.settings import FitSettings
 from ..model import Model, as_neural, as_standard, load_model, save_model
 from ..report.predict import predict
 from ..runtime import float64
-from ..simulate import simulate
+from ..simulation import simulate
 from .baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from .resources import example, horse_trot
 from .seeds import SeedRuns, run_seeds
