@@ -14,7 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from activebonds import fit, load_model, simulate
+try:
+    from activebonds import fit, load_model, simulate
+except ImportError:  # a checkout before the top-level API (0.1.0)
+    from activebonds.simulate import simulate
+
+    from activebonds.identify import fit
+    from activebonds.model import load_model
 
 TETRA = Path(__file__).resolve().parents[1] / "tests" / "models" / "tetra.toml"
 
