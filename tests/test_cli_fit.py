@@ -40,6 +40,9 @@ def test_fit_horse_limb_on_the_trot_tiny(tmp_path):
     assert status["best_rms_mm"] == pytest.approx(best_rms[-1], rel=1e-12)
     printed = re.search(r"best RMS error ([0-9.eE+-]+) mm", proc.stdout)
     assert printed and float(printed.group(1)) == float(f"{best_rms[-1]:.4g}")
+    # beside the zero-force baseline on the same frames (the horse's frames 0-9: 5.62 mm)
+    zero = re.search(r"zero-force baseline on the same frames ([0-9.eE+-]+) mm", proc.stdout)
+    assert zero and float(zero.group(1)) == pytest.approx(5.6205, abs=1e-3)
 
     settings = json.loads((run / "run.json").read_text())["settings"]
     assert settings["markers"] == ["Head", "Withers", "HFL"]

@@ -172,9 +172,14 @@ def _progress(total: int):
 def _summary(result) -> None:
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
+    from ..experiments.baselines import zero_force_rms_mm
+
+    data = result.identification.data
+    zero = zero_force_rms_mm(data.positions, data.mask, data.dt)
     out.print(
         f"[bold]{result.status}[/]: best RMS error {result.rms_mm:.4g} mm "
-        f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())})"
+        f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
+        f"zero-force baseline on the same frames {zero:.4g} mm"
     )
     if result.run is not None:
         out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
