@@ -63,22 +63,28 @@ def _gene(index, where) -> int:
     return int(np.asarray(index)[where])
 
 
-def _switched_off(model: Model) -> tuple[Params, list[int]]:
-    """Model parameters with every linear unknown's term removed, neural gains at 0; and the
-    genes that are not linear (left at the file's values)."""
-    layout, topo = model.layout, model.topology
-    base, index = layout.base, layout.index
-    p = {f: np.array(v, np.float64, copy=True) for f, v in base._asdict().items()}
-    linear_fields = {"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"}
-    nonlinear = sorted(
+LINEAR_FIELDS = frozenset({"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"})
+
+
+def nonlinear_genes(model: Model) -> list[int]:
+    """The genes outside the linear families (neural terms, masses, flexion springs): where
+    there is one, the least-squares optimum is no optimum of the model's own family."""
+    return sorted(
         {
             int(g)
-            for f, idx in index._asdict().items()
-            if f not in linear_fields
+            for f, idx in model.layout.index._asdict().items()
+            if f not in LINEAR_FIELDS
             for g in np.asarray(idx).ravel()
             if g >= 0
         }
     )
+
+
+def _switched_off(model: Model) -> Params:
+    """Model parameters with every linear unknown's term removed, neural gains at 0."""
+    layout, topo = model.layout, model.topology
+    base, index = layout.base, layout.index
+    p = {f: np.array(v, np.float64, copy=True) for f, v in base._asdict().items()}
     for f in ("mass", "tern_k", "tern_angle"):
         if (np.asarray(getattr(index, f)) >= 0).any():
             what = "masses (use equation_error_fit)" if f == "mass" else "flexion springs"
@@ -101,7 +107,7 @@ def _switched_off(model: Model) -> tuple[Params, list[int]]:
         p["k"][b] = p["c"][b] = 0.0
     for u in range(topo.unary.size):
         p["unary_k"][u] = p["unary_c"][u] = 0.0
-    return Params(**p), nonlinear
+    return Params(**p)
 
 
 def linear_problem(model: Model, windows: Windows) -> LinearProblem:
@@ -111,7 +117,7 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
         raise InputError("--horizon", "least squares needs the one-step cost (horizon 1)")
     layout, topo = model.layout, model.topology
     base, index = layout.base, layout.index
-    off_params, _ = _switched_off(model)
+    off_params = _switched_off(model)
     x, v, dt = windows.x0, windows.v0, windows.dt
     n_s, n_p, d = x.shape
     with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
@@ -329,8 +335,7 @@ def least_squares(model: Model, windows: Windows, bounded: bool = True) -> Linea
     for g, gene in enumerate(layout.genes):
         if g in values:
             natural[g] = min(max(values[g], gene.lower), gene.upper)
-    _, nonlinear = _switched_off(model)
-    for g in nonlinear:
+    for g in nonlinear_genes(model):
         if layout.genes[g].name.endswith(".gain"):
             natural[g] = 0.0
     genome = np.where(layout.log, np.log(np.maximum(natural, 1e-300)), natural)

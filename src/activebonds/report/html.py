@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import InputError
 from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
-from ..identify.lsq import least_squares
+from ..identify.lsq import least_squares, nonlinear_genes
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
@@ -311,21 +311,11 @@ def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
         rows.append(("momentum floor (internal forces)", floor, None))
         try:
             lsq = least_squares(record.model, make_windows(*window(0, fit), dt, 1))
-            if not _nonlinear_genes(record.model):
+            if not nonlinear_genes(record.model):
                 rows.append(("exact least squares (this model's family)", lsq.rms_mm, None))
         except InputError:
             pass
     return rows
-
-
-def _nonlinear_genes(model) -> bool:
-    """Whether a gene lies outside the linear families (then least squares is no optimum)."""
-    linear = {"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"}
-    return any(
-        (np.asarray(idx) >= 0).any()
-        for f, idx in model.layout.index._asdict().items()
-        if f not in linear
-    )
 
 
 def parameters_table(record: RunRecord) -> Table:
