@@ -461,7 +461,7 @@ def _rel(a, b, scale=1e-300) -> float:
 
 
 def check_generations(bench, population: int, n_generations: int) -> tuple[bool, float, int]:
-    """Feed both ESs the package's random numbers (``es.noise``) and the package's state,
+    """Feed both ESs the package's random numbers (``PaperES.draw``) and the package's state,
     generation after generation: each NumPy generation must give the package's next state.
 
     Costs and local costs must agree everywhere. Genes and mutabilities are compared on the
@@ -473,24 +473,25 @@ def check_generations(bench, population: int, n_generations: int) -> tuple[bool,
     import jax
     import jax.numpy as jnp
 
-    from activebonds.identify import es
+    from activebonds.identify import es, evolve
 
     settings = bench.settings.model_copy(update={"population": population}).es()
     problem = bench.problem
-    init_key, gen_key = jax.random.split(jax.random.PRNGKey(3))
-    state = jax.jit(partial(es.init, problem=problem, settings=settings, dtype=jnp.float64))(
-        init_key
-    )
+    strategy = es.PaperES(problem, settings, jnp.float64)
+    init_key, gen_key = evolve.keys(3)
+    run = jax.jit(partial(evolve.start, strategy, problem, jnp.float64))(init_key)
     mine = NumpyES.from_identification(bench.ident, settings).init()
-    one = jax.jit(partial(es.generation, problem=problem, settings=settings))
-    noise = jax.jit(partial(es.noise, problem=problem, settings=settings, dtype=jnp.float32))
+    one = jax.jit(partial(evolve.step, strategy, problem, jnp.float64))
+    noise = jax.jit(lambda g: strategy.draw(jax.random.fold_in(gen_key, g)))
     worst, tied = 0.0, 0
     for g in range(n_generations):
+        state = run.strategy
         mine.genes, mine.sigma = np.array(state.genes), np.array(state.sigma)
         mine.fit, mine.local = np.array(state.cost), np.array(state.local)
         mine.variant_probs = np.array(state.variant_probs, np.float64)
-        nz = noise(gen_key, jnp.int32(g))
-        state, _ = one(nz, state)
+        nz = noise(jnp.int32(g))
+        run, _ = one(nz, run)
+        state = run.strategy
         mine.step(Noise(**{f: np.asarray(getattr(nz, f)) for f in Noise._fields}))
         worst = max(worst, _rel(mine.fit, state.cost), _rel(mine.local, state.local))
         pool = mine.pool_cost[None, :]

@@ -32,7 +32,6 @@ import statistics
 import sys
 import tempfile
 import time
-from functools import partial
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -43,7 +42,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
 from activebonds.identify import es  # noqa: E402
-from run import BIG_STOP, F64, Ours, _cast  # noqa: E402
+from run import F64, Ours, _cast  # noqa: E402
 
 now = time.perf_counter
 
@@ -179,7 +178,8 @@ def _chain(frame_id, frames, locs, files, funcs) -> list[tuple[str, str, int]]:
 
     In the HLO text's StackFrames table (jax 0.10 / XLA), a frame's printed
     ``parent_frame_id`` is the parent's 1-based index plus one (1 = no parent): read that way,
-    every chain runs op -> helper -> operator -> es.generation -> es.run -> caller."""
+    every chain runs op -> helper -> operator -> PaperES.ask/tell -> evolve.step -> evolve.chunk
+    -> caller."""
     out, seen = [], set()
     while frame_id in frames and frame_id not in seen and len(out) < 64:
         seen.add(frame_id)
@@ -260,27 +260,26 @@ def parse_hlo(text: str) -> dict:
 
 
 def _generation_sections() -> list[tuple[int, str]]:
-    """(first line, category) of es.generation's numbered sections and of its history row."""
+    """(first line, category) of the numbered sections of PaperES.ask and PaperES.tell and
+    of the history row."""
     path = Path(es.__file__)
     source = path.read_text()
     tree = ast.parse(source)
-    fn = next(
-        (n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.name == "generation"),
-        None,
-    )
-    if fn is None:
-        return []
     lines = source.splitlines()
-    marks = [(fn.lineno, "other")]
+    marks = []
     names = {"1": "crossover", "2": "mutation", "3": "cost evaluation", "4": "selection"}
-    for i in range(fn.lineno, fn.end_lineno + 1):
-        text = lines[i - 1].strip()
-        m = re.match(r"#\s*(\d)\.", text)
-        if m and m.group(1) in names:
-            marks.append((i, names[m.group(1)]))
-        if re.match(r"(finite|ordered|row)\s*=", text) and marks[-1][1] != "history row":
-            marks.append((i, "history row"))
-    return marks
+    for fn in ast.walk(tree):
+        if not (isinstance(fn, ast.FunctionDef) and fn.name in ("ask", "tell")):
+            continue
+        marks.append((fn.lineno, "other"))
+        for i in range(fn.lineno, fn.end_lineno + 1):
+            text = lines[i - 1].strip()
+            m = re.match(r"#\s*(\d)\.", text)
+            if m and m.group(1) in names:
+                marks.append((i, names[m.group(1)]))
+            if re.match(r"(finite|ordered|row)\s*=", text) and marks[-1][1] != "history row":
+                marks.append((i, "history row"))
+    return sorted(marks)
 
 
 _SECTIONS = None
@@ -298,9 +297,11 @@ def _frame_category(src) -> str | None:
         return "cost evaluation"
     if base in ("operators.py", "es.py") and top in _BY_FUNCTION:
         return _BY_FUNCTION[top]
-    if base == "es.py" and top == "run":
-        return "loop bookkeeping"  # es.run's scan body: the stop mask over the state
-    if base == "es.py" and top == "generation":
+    if base == "evolve.py" and top in ("population_evaluate", "evaluate"):
+        return "cost evaluation"
+    if base == "evolve.py" and top in ("chunk", "body"):
+        return "loop bookkeeping"  # the scan body: the stop mask over the state
+    if base == "es.py" and top in ("ask", "tell"):
         if _SECTIONS is None:
             _SECTIONS = _generation_sections()
         cat = "other"
@@ -376,10 +377,7 @@ def trace(runner, n_calls: int, trace_dir: str) -> tuple[dict, dict, float]:
 
 def profile_trace(bench, population, chunk, n_calls, top, trace_dir) -> dict:
     runner = Ours(bench, population, chunk)
-    run = jax.jit(
-        partial(es.run, problem=runner.problem, settings=runner.es_settings, n_generations=chunk)
-    )
-    hlo = parse_hlo(run.lower(runner.gen_key, runner.state, stop=BIG_STOP).compile().as_text())
+    hlo = parse_hlo(runner.run_c.as_text())
     dur, count, wall = trace(runner, n_calls, trace_dir)
     gens = chunk * n_calls
     containers = ("while", "call", "conditional")

@@ -16,8 +16,8 @@ Sections (see benchmarks/README.md for what every column means):
            (a child process); in full mode this run is the paper's experiment end to end
            (500 x 50,000 generations, neural, compile included).
 
-Our ES is measured through the package API exactly as driver.py runs it: ``es.init`` and a
-jitted ``es.run`` chunk of generations (lax.scan), AOT-compiled with
+Our ES is measured through the package API exactly as driver.py runs it: the evolve loop's
+start and a jitted chunk of generations (lax.scan), AOT-compiled with
 ``jax.jit(...).lower(...).compile()`` so that compile time is reported apart.
 """
 
@@ -34,7 +34,6 @@ import statistics
 import subprocess
 import sys
 import time
-from functools import partial
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -45,7 +44,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
-from activebonds.identify import driver, es  # noqa: E402
+from activebonds.identify import es, evolve  # noqa: E402
+from activebonds.identify.cost import Display  # noqa: E402
 from numpy_es import NumpyES  # noqa: E402
 
 F64 = jnp.float64
@@ -81,8 +81,9 @@ def _cast(evaluate, dtype=F64):
 
 
 class Ours:
-    """The package's ES as driver.py runs it: jitted init, jitted chunk of ``chunk``
-    generations (es.run, one lax.scan), called repeatedly with the state carried over."""
+    """The package's ES as driver.py runs it: the one evolve loop (identify/evolve.py) with
+    the paper's strategy, its jitted start and a jitted chunk of generations (one lax.scan,
+    the length the loop picks), called repeatedly with the state carried over."""
 
     label = "ours"
 
@@ -90,34 +91,31 @@ class Ours:
         settings = bench.settings.model_copy(update={"population": population})
         self.problem = bench.problem._replace(evaluate=_cast(bench.problem.evaluate))
         self.es_settings = settings.es()
-        # as the driver sizes its chunks (fewer generations if their random numbers are large)
-        chunk_length = getattr(driver, "chunk_length", None)
-        if chunk_length is not None:
-            chunk = chunk_length(self.problem, self.es_settings, chunk)
-        self.population, self.block = population, chunk
-        init_key, self.gen_key = jax.random.split(jax.random.PRNGKey(seed))
+        self.strategy = es.PaperES(self.problem, self.es_settings, F64)
+        display = Display(bench.ident.windows.n_terms)
+        self.loop = evolve.Evolution(
+            self.strategy, self.problem, F64, total=BIG_STOP, requested=chunk, display=display
+        )
+        self.population, self.block = population, self.loop.length
+        init_key, self.gen_key = evolve.keys(seed)
         t0 = now()
-        init = jax.jit(partial(es.init, problem=self.problem, settings=self.es_settings, dtype=F64))
-        init_c = init.lower(init_key).compile()
+        init_c = self.loop._start.lower(init_key).compile()
         t1 = now()
         self.state = jax.block_until_ready(init_c(init_key))
         t2 = now()
-        run = jax.jit(
-            partial(es.run, problem=self.problem, settings=self.es_settings, n_generations=chunk)
-        )
-        self.run_c = run.lower(self.gen_key, self.state, stop=BIG_STOP).compile()
+        self.run_c = self.loop._chunk.lower(self.gen_key, self.state, BIG_STOP).compile()
         t3 = now()
         self.compile_s = (t1 - t0) + (t3 - t2)
         self.init_s = t2 - t1
 
     def call(self) -> float:
         t = now()
-        self.state, _ = self.run_c(self.gen_key, self.state, stop=BIG_STOP)
+        self.state, _ = self.run_c(self.gen_key, self.state, BIG_STOP)
         jax.block_until_ready(self.state)
         return now() - t
 
     def best_genome(self) -> np.ndarray:
-        return np.asarray(es.best(self.state)[0])
+        return np.asarray(self.strategy.best(self.state.strategy)[0])
 
 
 class Numpy:

@@ -8,7 +8,8 @@ small chunks so that checkpoints land every ``--checkpoint-every`` generations. 
 any result, so kills at random moments land inside the evolution rather than in start-up.
 
     python tests/reliability_runner.py fit MODEL DATA OUT --seed 3 --population 30 \
-        --generations 400 --checkpoint-every 50 --chunk 10 [--bonds neural] [--frames 0:30]
+        --generations 400 --checkpoint-every 50 --chunk 10 [--bonds neural] [--frames 0:30] \
+        [--optimizer random]
     python tests/reliability_runner.py resume OUT [--throttle 0.02]
 
 As a module, it gives the tests their shared pieces: the small problems, a workspace with
@@ -67,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument("--bonds", default="model")
     f.add_argument("--frames", default="0:")
     f.add_argument("--horizon", type=int, default=1)
+    f.add_argument("--optimizer", default="es")
     f.add_argument("--throttle", type=float, default=0.0)
     r = sub.add_parser("resume")
     r.add_argument("out")
@@ -95,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
                 bonds=a.bonds,
                 frames=parse_frames(a.frames),
                 horizon=a.horizon,
+                optimizer=a.optimizer,
             )
             result = fit(a.model, a.data, settings, out=a.out, progress=progress)
     except InputError as e:

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory, write_trajectory
-from activebonds.identify import es, fit
+from activebonds.identify import es, evolve, fit
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
@@ -113,19 +113,20 @@ def test_nan_candidates_are_counted_and_never_survive():
     settings = es.ESSettings(population=40)
     n = settings.population
     init_key, gen_key = jax.random.split(jax.random.PRNGKey(0))
-    state = jax.jit(partial(es.init, problem=problem, settings=settings))(init_key)
-    init_failed = int(np.sum(~np.isfinite(np.asarray(state.cost))))
+    strategy = es.PaperES(problem, settings)
+    state = jax.jit(partial(evolve.start, strategy, problem, None))(init_key)
+    init_failed = int(np.sum(~np.isfinite(np.asarray(state.strategy.cost))))
     assert 0 < init_failed < n // 2
     assert int(state.failed_total) == init_failed
-    step = jax.jit(partial(es.run, problem=problem, settings=settings, n_generations=1))
+    step = jax.jit(partial(evolve.chunk, strategy, problem, None, 1))
     failed, best = [], []
     for _ in range(60):
-        finite_parents = int(np.isfinite(np.asarray(state.cost)).sum())
-        state, (rows, _) = step(gen_key, state, stop=10**6)
-        f = int(rows.failed[0])
+        finite_parents = int(np.isfinite(np.asarray(state.strategy.cost)).sum())
+        state, (rows, _) = step(gen_key, state, 10**6)
+        f = int(rows["failed"][0])
         failed.append(f)
-        best.append(float(rows.best[0]))
-        cost, genes = np.asarray(state.cost), np.asarray(state.genes)
+        best.append(float(rows["best"][0]))
+        cost, genes = np.asarray(state.strategy.cost), np.asarray(state.strategy.genes)
         assert cost.shape == (n,)
         if finite_parents + n - f >= n:  # enough finite candidates in parents + children
             assert np.all(np.isfinite(cost)), cost
@@ -139,8 +140,9 @@ def test_nan_candidates_are_counted_and_never_survive():
 def test_init_gives_nan_evaluations_an_infinite_cost():
     problem = nan_problem()
     settings = es.ESSettings(population=40)
-    state = jax.jit(partial(es.init, problem=problem, settings=settings))(jax.random.PRNGKey(0))
-    cost, local = np.asarray(state.cost), np.asarray(state.local)
+    strategy = es.PaperES(problem, settings)
+    state = jax.jit(partial(evolve.start, strategy, problem, None))(jax.random.PRNGKey(0))
+    cost, local = np.asarray(state.strategy.cost), np.asarray(state.strategy.local)
     assert (~np.isfinite(cost)).any()
     assert np.all(np.isfinite(cost) | np.isposinf(cost)), "NaN cost in the initial population"
     assert np.all(np.isfinite(local) | np.isposinf(local)), "NaN local cost"

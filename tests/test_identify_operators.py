@@ -578,7 +578,7 @@ def test_crossover_children_refer_to_their_own_parents():
     """Individual 0 wins every global tournament (the copy parent) but loses every local one,
     so the crossover children are made from individuals 1 and 2 only. Their success count and
     variant-2 bias must use those parents, not the unrelated tournament winner."""
-    from activebonds.identify import es
+    from activebonds.identify import es, evolve
 
     n, g = 4, 2
     settings = es.ESSettings(population=n, crossover_rate=1.0, elite_fraction=0.25)
@@ -596,8 +596,6 @@ def test_crossover_children_refer_to_their_own_parents():
         cost=jnp.array([2.0, 10.0, 10.0, 10.0]),
         local=jnp.array([[100.0, 100.0], [1.0, 1.0], [1.0, 1.0], [1.0, 1.0]]),
         variant_probs=jnp.full(4, 0.25),
-        generation=jnp.asarray(0, jnp.int32),
-        failed_total=jnp.asarray(0, jnp.int32),
     )
     f = jnp.float64
     nz = ops.Noise(
@@ -612,10 +610,12 @@ def test_crossover_children_refer_to_their_own_parents():
         cauchy=jnp.zeros((n,), f),
         gumbel=jnp.zeros((2 * n,), f),
     )
-    _, row = jax.jit(lambda nz, s: es.generation(nz, s, problem, settings))(nz, state)
-    assert int(row.trials[0]) == n
+    strategy = es.PaperES(problem, settings)
+    run = evolve.Run(state, jnp.asarray(0, jnp.int32), jnp.asarray(0, jnp.int32))
+    _, row = jax.jit(lambda nz, s: evolve.step(strategy, problem, None, nz, s))(nz, run)
+    assert int(row["trials"][0]) == n
     # cost 8 beats its parents (10) though not the tournament winner (2): all successes
-    assert int(row.successes[0]) == n
+    assert int(row["successes"][0]) == n
     # the per-slot costs a crossover child's variant-2 bias reads are its parents' (1.0)
     parents = jnp.array([[[1, 2]]])
     per_slot = ops.crossover_slot_costs(state.local, parents, jnp.asarray(slots))

@@ -1,12 +1,12 @@
 """Non-finite values: candidates whose cost is NaN or +-inf, all-failed runs, diverging models.
 
-* Property test (hypothesis) of ``es.generation`` on a hand-built ``es.Problem`` whose
+* Property test (hypothesis) of a generation of the paper's ES (``evolve.step``) on a hand-built ``es.Problem`` whose
   evaluate returns NaN, -NaN, +inf or -inf (cost and local costs) for a random subset of
   genomes, chosen by a hash of the genome (fraction 0-100 %, salt and kinds drawn): the run
   goes on; ``failed`` counts exactly the failed children (recorded with a debug callback);
   failed candidates rank worst and never survive while enough finite candidates exist
   (every survivor's stored cost is its genome's real cost); the best cost never rises.
-* ``es.init`` on the same problem: failed initial candidates rank worst as well (-inf and
+* ``evolve.start`` on the same problem: failed initial candidates rank worst as well (-inf and
   -NaN initial costs used to rank best and survive as elite).
 * A fit whose every candidate diverges (stiffness far too high for dt, horizon 10) stops
   with status ``failed: ...`` in status.json and the CLI exits 1 with one line.
@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -28,7 +29,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from activebonds.identify import es
+from activebonds.identify import es, evolve
 from reliability_runner import EXAMPLES, cli, cli_many, one_line_error, workspace
 
 pytestmark = pytest.mark.timeout(300)
@@ -75,14 +76,21 @@ def _problem(fail_fraction, salt, kind_weights, record: bool) -> es.Problem:
 
 @jax.jit
 def _init(key, fail_fraction, salt, kind_weights):
-    return es.init(key, _problem(fail_fraction, salt, kind_weights, True), SETTINGS)
+    problem = _problem(fail_fraction, salt, kind_weights, True)
+    return evolve.start(es.PaperES(problem, SETTINGS), problem, None, key)
 
 
 @jax.jit
 def _generation(key, index, state, fail_fraction, salt, kind_weights):
     problem = _problem(fail_fraction, salt, kind_weights, True)
-    nz = es.noise(key, index, problem, SETTINGS, jnp.float32)
-    return es.generation(nz, state, problem, SETTINGS)
+    strategy = es.PaperES(problem, SETTINGS)
+    nz = strategy.draw(jax.random.fold_in(key, index))
+    return evolve.step(strategy, problem, None, nz, state)
+
+
+def _view(run):
+    """The paper ES's state and the loop's counters as one object."""
+    return SimpleNamespace(**run.strategy._asdict(), failed_total=run.failed_total)
 
 
 def _run_generations(seed, fail_fraction, salt, weights, n_generations, init_fraction):
@@ -109,10 +117,11 @@ def _run_generations(seed, fail_fraction, salt, weights, n_generations, init_fra
         seen_costs += [c if np.isfinite(c) else np.inf for _, _, c in children]
         genes, costs = np.array(seen_genes), np.array(seen_costs)
         expected = []
-        for x in np.asarray(state.genes):
+        for x in np.asarray(state.strategy.genes):
             d = np.abs(genes - x).max(axis=1)
             expected.append(costs[d.argmin()] if d.min() < 1e-12 else np.nan)
-        rows.append((old, state, row, np.array(expected), children))
+        view = (_view(old), _view(state), SimpleNamespace(**row))
+        rows.append((*view, np.array(expected), children))
     return rows
 
 

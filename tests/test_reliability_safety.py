@@ -129,8 +129,8 @@ def test_foreign_checkpoint_files_do_not_evict_real_ones(tmp_path, tmp_path_fact
     arrays = checkpoint_arrays(ref / "checkpoints" / LAST)
     for name, data in _armed_files(tmp_path, tmp_path / "fired", arrays).items():
         (run / "checkpoints" / name).write_bytes(data)
-    state = {k: arrays[f"state_{k}"] for k in rundir.STATE_KEYS}
-    history = {k: arrays[f"history_{k}"] for k in rundir.HISTORY_COLUMNS}
+    state = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
+    history = {k[8:]: v for k, v in arrays.items() if k.startswith("history_")}
     rundir.save_checkpoint(run, state, history)
     assert FIT["generations"] in complete_checkpoints(run)
 

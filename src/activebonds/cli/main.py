@@ -104,6 +104,12 @@ def fit(
             "least-squares optimum of the linear parameters, neural gains 0)."
         ),
     ] = "uniform",
+    optimizer: Annotated[
+        str,
+        typer.Option(
+            help="es (the paper's evolution strategy) or random (pure random search, a baseline)."
+        ),
+    ] = "es",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
@@ -126,6 +132,7 @@ def fit(
             precision=precision,
             adapt_variants=adapt_variants,
             init=init,
+            optimizer=optimizer,
         )
         with _progress(generations) as progress:
             result = run_fit(

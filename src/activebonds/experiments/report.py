@@ -17,14 +17,7 @@ from .paper import EXPERIMENTS, SERIES
 def _histories(folder: Path, series: str) -> list[dict]:
     with np.load(folder / f"{series}_curves.npz") as z:
         best, median = z["best_rms_mm"], z["median_rms_mm"]
-    return [
-        {
-            "best_rms_mm": b,
-            "best_cost": (b / 1000.0) ** 2,
-            "median_cost": (m / 1000.0) ** 2,
-        }
-        for b, m in zip(best, median, strict=True)
-    ]
+    return [{"best_rms_mm": b, "median_rms_mm": m} for b, m in zip(best, median, strict=True)]
 
 
 def _baseline_rows(base: dict | None) -> list[list[str]]:

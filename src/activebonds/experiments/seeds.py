@@ -10,15 +10,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..identify import es
-from ..identify.cost import rms_mm
-from ..identify.driver import chunk_length
+from ..identify.cost import Display
+from ..identify.evolve import DEFAULT_CHUNK, Evolution, keys
 from ..identify.problem import Identification
 from ..runtime import float64
 
@@ -41,40 +40,45 @@ def run_seeds(
     seeds: list[int],
     generations: int,
     progress: Callable[[int, int], None] | None = None,
-    chunk: int = 250,
+    chunk: int = DEFAULT_CHUNK,
 ) -> SeedRuns:
     dtype = jnp.float64
     problem = ident.problem
-    keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
-    split = jax.vmap(jax.random.split)(keys)
-    init_keys, gen_keys = split[:, 0], split[:, 1]
-    init = jax.jit(jax.vmap(partial(es.init, problem=problem, settings=settings, dtype=dtype)))
-    k = chunk_length(problem, settings, chunk, runs=len(seeds))
-    step = jax.jit(
-        jax.vmap(lambda key, st, stop: es.run(key, st, problem, settings, k, stop), (0, 0, None))
+    strategy = es.PaperES(problem, settings, dtype)
+    display = Display(ident.windows.n_terms)
+    loop = Evolution(
+        strategy,
+        problem,
+        dtype,
+        total=generations,
+        requested=chunk,
+        display=display,
+        seeds=len(seeds),
     )
+    split = jnp.stack([keys(s) for s in seeds])
+    init_keys, gen_keys = split[:, 0], split[:, 1]
     start = time.time()
-    state = init(init_keys)
-    n_terms = ident.windows.n_terms
+    state = loop.start(init_keys)
     best, median = [], []
-    done = 0
-    while done < generations:
-        state, (rows, active) = step(gen_keys, state, generations)
-        act = np.asarray(active)[0]
-        best.append(np.asarray(rows.best)[:, act])
-        median.append(np.asarray(rows.median)[:, act])
-        done = int(np.asarray(state.generation)[0])
+    for latest, rows in loop.run(gen_keys, state, generations):
+        state = latest
+        best.append(rows["best_rms_mm"])
+        median.append(rows["median_rms_mm"])
         if progress is not None:
-            progress(done, generations)
-    idx = np.asarray(jnp.argmin(state.cost, axis=1))
-    genomes = np.asarray(state.genes)[np.arange(len(seeds)), idx]
+            progress(int(rows["generation"][-1]), generations)
+    genomes = np.stack([np.asarray(strategy.best(s)[0]) for s in _unstack(state.strategy)])
     best_all = np.concatenate(best, axis=1)
     return SeedRuns(
         seeds=list(seeds),
-        best_rms_mm=rms_mm(best_all, n_terms),
-        median_rms_mm=rms_mm(np.concatenate(median, axis=1), n_terms),
+        best_rms_mm=best_all,
+        median_rms_mm=np.concatenate(median, axis=1),
         genomes=genomes.astype(np.float64),
-        final_rms_mm=rms_mm(best_all[:, -1], n_terms),
+        final_rms_mm=best_all[:, -1],
         failed=np.asarray(state.failed_total),
         seconds=time.time() - start,
     )
+
+
+def _unstack(tree):
+    n = jax.tree.leaves(tree)[0].shape[0]
+    return [jax.tree.map(lambda a, i=i: a[i], tree) for i in range(n)]

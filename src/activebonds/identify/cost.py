@@ -102,3 +102,25 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
 def rms_mm(cost, n_terms: int):
     """A summed squared error (m^2) shown as the RMS position error in millimetres."""
     return np.sqrt(np.asarray(cost, dtype=np.float64) / max(n_terms, 1)) * 1000.0
+
+
+@dataclass(frozen=True)
+class Display:
+    """How this cost is shown to people: a summed squared position error (m^2) over
+    ``n_terms`` predictions, as the RMS position error in millimetres. The run directory
+    records it, so that readers never guess a unit."""
+
+    n_terms: int
+    name: str = "rms_mm"
+    label: str = "RMS position error"
+    unit: str = "mm"
+
+    def __call__(self, cost):
+        return rms_mm(cost, self.n_terms)
+
+    def column(self, cost_column: str) -> str:
+        """'best_cost' -> 'best_rms_mm'."""
+        return f"{cost_column.removesuffix('_cost')}_{self.name}"
+
+    def record(self) -> dict:
+        return {"name": self.name, "label": self.label, "unit": self.unit, "terms": self.n_terms}

@@ -12,20 +12,19 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
 from ..data.writers import render_npz
 from ..errors import InputError
-from ..model import Model, dumps_model, load_model, loads_model, save_model
-from . import es, rundir
-from .cost import rms_mm
+from ..model import Model, dumps_model, load_model
+from . import rundir, strategies
+from .cost import Display
+from .evolve import Evolution, history_columns, keys
 from .problem import Identification, identification
 from .settings import FitSettings
 
@@ -88,7 +87,7 @@ def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress) -> 
     if out is not None:
         model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
         run = _create_run(out, model_text, ident, settings, model_path, data_path, overwrite)
-    return _evolve(ident, settings, run, None, None, progress)
+    return _evolve(ident, settings, run, progress)
 
 
 def _create_run(out, model_text, ident, settings, model_path, data_path, overwrite) -> Path:
@@ -96,23 +95,17 @@ def _create_run(out, model_text, ident, settings, model_path, data_path, overwri
     for name, path in (("model", model_path), ("data", data_path)):
         if path is not None:
             inputs[name] = {"path": str(path.resolve()), "sha256": rundir.sha256_file(path)}
-    meta = {
-        "format": rundir.FORMAT,
-        "settings": settings.model_dump(mode="json"),
-        "seed": settings.seed,
-        "inputs": inputs,
-        "versions": rundir.versions(),
-        "backend": rundir.backend(),
-        "command": rundir.python_command(),
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
+    strategy = strategies.make(settings.optimizer, ident.problem, settings, _dtype(settings))
+    display = Display(ident.windows.n_terms)
+    meta = rundir.new_meta(
+        settings, inputs, strategy.name, history_columns(strategy, display), display
+    )
     files = {"model.toml": model_text, "data.npz": render_npz(ident.data, Path("data.npz"))}
     return rundir.create(out, files, meta, overwrite)
 
 
 def _stored_identification(run: Path, settings: FitSettings) -> Identification:
-    model = loads_model((run / "model.toml").read_text(encoding="utf-8"), str(run / "model.toml"))
-    window = read_trajectory(run / "data.npz")
+    model, window = rundir.read_input_model(run), rundir.read_window(run)
     return identification(model, window, settings.model_copy(update={"frames": (0, None)}))
 
 
@@ -147,14 +140,7 @@ def resume(
 
 def _resume(run: Path, settings: FitSettings, progress) -> FitResult:
     ident = _stored_identification(run, settings)
-    n, g = settings.population, ident.model.layout.n_genes
-    p = ident.model.topology.n_particles
-    shapes = {"genes": (n, g), "sigma": (n, g), "cost": (n,), "local": (n, p)}
-    state, history, skipped = rundir.load_checkpoint(run, shapes)
-    if state is None and skipped:
-        raise InputError(run, "no complete checkpoint to resume from" + _skipped(skipped))
-    # No checkpoint at all: the run was stopped before its first one; start it afresh.
-    return _evolve(ident, settings, run, state, history, progress)
+    return _evolve(ident, settings, run, progress, resuming=True)
 
 
 def _skipped(skipped: list[str]) -> str:
@@ -191,101 +177,60 @@ def _check_unchanged(run: Path, meta: dict) -> None:
         )
 
 
-def _to_numpy(state: es.ESState) -> dict[str, np.ndarray]:
-    return {k: np.asarray(v) for k, v in state._asdict().items()}
-
-
-def _from_numpy(arrays: dict[str, np.ndarray], dtype) -> es.ESState:
-    return es.ESState(
-        genes=jnp.asarray(arrays["genes"], dtype),
-        sigma=jnp.asarray(arrays["sigma"], dtype),
-        cost=jnp.asarray(arrays["cost"], dtype),
-        local=jnp.asarray(arrays["local"], dtype),
-        variant_probs=jnp.asarray(arrays["variant_probs"], dtype),
-        generation=jnp.asarray(arrays["generation"], jnp.int32),
-        failed_total=jnp.asarray(arrays["failed_total"], jnp.int32),
-    )
-
-
-def _rows(rows: es.GenerationRow, active, first_gen: int, n_terms: int) -> dict[str, np.ndarray]:
-    act = np.asarray(active)
-    k = int(act.sum())
-    best = np.asarray(rows.best)[act]
-    out = {
-        "generation": np.arange(first_gen + 1, first_gen + k + 1),
-        "best_cost": best,
-        "median_cost": np.asarray(rows.median)[act],
-        "worst_cost": np.asarray(rows.worst)[act],
-        "best_rms_mm": rms_mm(best, n_terms),
-        "failed": np.asarray(rows.failed)[act],
-    }
-    trials, succ = np.asarray(rows.trials)[act], np.asarray(rows.successes)[act]
-    for i in range(4):
-        out[f"trials_v{i + 1}"] = trials[:, i]
-        out[f"successes_v{i + 1}"] = succ[:, i]
-    return out
-
-
-def _evolve(ident, settings: FitSettings, run, state_np, history, progress) -> FitResult:
+def _evolve(
+    ident: Identification, settings: FitSettings, run: Path | None, progress, resuming=False
+):
+    """Start (or, with a run directory holding a checkpoint, continue) the run and evolve it
+    to ``settings.generations``, checkpointing every ``checkpoint_every`` generations and on
+    Ctrl-C."""
     dtype = _dtype(settings)
     problem = ident.problem._replace(evaluate=_cast(ident.problem.evaluate, dtype))
-    es_settings = settings.es()
-    init_key, gen_key = jax.random.split(jax.random.PRNGKey(settings.seed))
-    n_terms = ident.windows.n_terms
+    strategy = strategies.make(settings.optimizer, problem, settings, dtype)
+    display = Display(ident.windows.n_terms)
     total = settings.generations
-
-    if state_np is None:
-        state = jax.jit(partial(es.init, problem=problem, settings=es_settings, dtype=dtype))(
-            init_key
-        )
-        history = {c: np.zeros(0) for c in rundir.HISTORY_COLUMNS}
-        if not np.isfinite(np.asarray(state.cost)).any():
-            return _finish(
-                ident,
-                settings,
-                run,
-                state,
-                history,
-                "failed: every candidate's simulation went non-finite",
-            )
-    else:
-        state = _from_numpy(state_np, dtype)
-    chunk = jax.jit(
-        partial(es.run, problem=problem, settings=es_settings, n_generations=settings.chunk)
+    loop = Evolution(
+        strategy, problem, dtype, total=total, requested=settings.chunk, display=display
     )
-    gen = int(state.generation)
-    last_ckpt = gen
-    if run is not None and state_np is None:
-        _checkpoint(run, ident, settings, state, history, "running")
+    init_key, gen_key = keys(settings.seed)
+    integer = {c.name for c in loop.columns if c.integer}
+    saved = None
+    if resuming:
+        template = loop.template(init_key)
+        saved = rundir.load_checkpoint(run, rundir.state_shapes(template))
+        if saved[0] is None and saved[2]:
+            raise InputError(run, "no complete checkpoint to resume from" + _skipped(saved[2]))
+    if saved is not None and saved[0] is not None:
+        arrays, history, _ = saved
+        state = rundir.unflatten_state(arrays, template)
+    else:  # a new run, or one stopped before its first checkpoint: start afresh
+        state = loop.start(init_key)
+        history = {c.name: np.zeros(0) for c in loop.columns}
+        if not np.isfinite(float(strategy.best(state.strategy)[1])):
+            failed = "failed: every candidate's simulation went non-finite"
+            return _finish(ident, settings, run, strategy, state, history, integer, failed)
+        if run is not None:
+            _checkpoint(run, ident, settings, strategy, state, history, integer, "running")
+    gen = last_ckpt = int(state.generation)
     started = time.time()
     if progress is not None and gen > 0 and len(history["best_rms_mm"]):
         progress(gen, total, float(history["best_rms_mm"][-1]))  # a resumed run starts here
     try:
-        while gen < total:
-            state, (rows, active) = chunk(gen_key, state, stop=total)
-            new = _rows(rows, active, gen, n_terms)
-            history = {k: np.concatenate([history[k], new[k]]) for k in history}
+        for latest, rows in loop.run(gen_key, state, total):
+            state = latest
+            history = {k: np.concatenate([history[k], rows[k]]) for k in history}
             gen = int(state.generation)
             if progress is not None:
                 progress(gen, total, float(history["best_rms_mm"][-1]))
             if run is not None and (gen - last_ckpt >= settings.checkpoint_every) and gen < total:
-                _checkpoint(run, ident, settings, state, history, "running", started)
+                args = (run, ident, settings, strategy, state, history, integer)
+                _checkpoint(*args, "running", started)
                 last_ckpt = gen
     except KeyboardInterrupt:
         if run is not None:
-            _checkpoint(run, ident, settings, state, history, "interrupted", started)
+            args = (run, ident, settings, strategy, state, history, integer)
+            _checkpoint(*args, "interrupted", started)
         raise
-    return _finish(ident, settings, run, state, history, "completed", started)
-
-
-NOISE_BUDGET = 64 * 2**20  # bytes of random numbers drawn per compiled chunk
-
-
-def chunk_length(problem, es_settings, requested: int, runs: int = 1) -> int:
-    """Generations per compiled chunk: as requested, fewer if their random numbers would
-    exceed NOISE_BUDGET. Results do not depend on it (see es.run)."""
-    per_generation = es.noise_bytes(problem, es_settings) * runs
-    return int(max(1, min(requested, NOISE_BUDGET // per_generation)))
+    return _finish(ident, settings, run, strategy, state, history, integer, "completed", started)
 
 
 def _cast(evaluate, dtype):
@@ -296,43 +241,44 @@ def _cast(evaluate, dtype):
     return cast
 
 
-def _best(ident: Identification, state) -> tuple[np.ndarray, float, np.ndarray]:
-    genome, cost, local = es.best(state)
+def _best(strategy, state) -> tuple[np.ndarray, float, np.ndarray]:
+    genome, cost, local = strategy.best(state.strategy)
     return np.asarray(genome, np.float64), float(cost), np.asarray(local, np.float64)
 
 
-def _checkpoint(run, ident, settings, state, history, status, started=None) -> None:
-    rundir.save_checkpoint(run, _to_numpy(state), history)
-    write_text_atomic(run / "history.csv", rundir.history_csv(history))
-    genome, cost, _ = _best(ident, state)
+def _checkpoint(run, ident, settings, strategy, state, history, integer, status, started=None):
+    rundir.save_checkpoint(run, rundir.flatten_state(state), history)
+    rundir.write_history(run, history, integer)
+    genome, cost, _ = _best(strategy, state)
+    display = Display(ident.windows.n_terms)
     if np.isfinite(cost):
-        save_model(ident.model.with_genome(genome), run / "best_model.toml")
+        rundir.save_best_model(run, ident.model.with_genome(genome))
     rundir.write_status(
         run,
         status=status,
         generation=int(state.generation),
         generations=settings.generations,
-        best_rms_mm=float(rms_mm(cost, ident.windows.n_terms)) if np.isfinite(cost) else None,
+        best_rms_mm=float(display(cost)) if np.isfinite(cost) else None,
         failed_evaluations=int(state.failed_total),
         job=settings.job(),
         wall_seconds=None if started is None else round(time.time() - started, 3),
     )
 
 
-def _finish(ident, settings, run, state, history, status, started=None) -> FitResult:
-    genome, cost, local = _best(ident, state)
-    n_terms = ident.windows.n_terms
+def _finish(ident, settings, run, strategy, state, history, integer, status, started=None):
+    genome, cost, local = _best(strategy, state)
+    display = Display(ident.windows.n_terms)
     per_particle = ident.windows.weight.sum(axis=(0, 1))
     model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
     if run is not None:
-        _checkpoint(run, ident, settings, state, history, status, started)
+        _checkpoint(run, ident, settings, strategy, state, history, integer, status, started)
     return FitResult(
         model=model,
         genome=genome,
         cost=cost,
-        rms_mm=float(rms_mm(cost, n_terms)),
+        rms_mm=float(display(cost)),
         local_rms_mm={
-            name: float(rms_mm(c, int(w)))
+            name: float(Display(int(w))(c))
             for name, c, w in zip(ident.model.particle_names, local, per_particle, strict=True)
         },
         history=history,

@@ -4,10 +4,9 @@ Every operator is a pure function of arrays and an explicit PRNG key, vectorised
 population (no Python loop over individuals or bonds). Shapes: N individuals, G genes, P
 particles, T bond-type groups, S extremity slots per group.
 
-The paper names four concurrent mutation variants without defining them; the four below are
-ours (DESIGN.md §3): (1) all genes, (2) one bond type's genes, biased to the worst local cost,
-(3) all genes with mutabilities frozen, (4) a Cauchy jump of a single gene. All but (3)
-self-adapt every mutability first.
+The paper names four concurrent mutation variants without defining them; :data:`VARIANTS`
+holds the four of DESIGN.md §3 as one table, from which the mutation masks, the per-variant
+counts, the history columns and the report's labels are derived.
 """
 
 from __future__ import annotations
@@ -19,7 +18,26 @@ import jax.numpy as jnp
 
 from . import rng
 
-N_VARIANTS = 4
+
+class Variant(NamedTuple):
+    """One mutation variant: what it moves, how, and whose choice it is."""
+
+    name: str  # short name, used in history columns (``trials_<name>``)
+    label: str  # for people (report legends)
+    genes: str  # which genes move: "all", "group" (one bond type's) or "one"
+    adapts: bool  # whether the mutabilities self-adapt before the genes move
+    step: str  # distribution of the step, scaled by the mutability: "normal" or "cauchy"
+    origin: str  # "paper" where the paper specifies the choice, "ours" where DESIGN.md does
+
+
+VARIANTS = (
+    Variant("all", "(1) all genes", "all", True, "normal", "ours"),
+    Variant("type", "(2) one bond type, worst first", "group", True, "normal", "ours"),
+    Variant("frozen", "(3) all genes, frozen mutabilities", "all", False, "normal", "ours"),
+    Variant("jump", "(4) Cauchy jump of one gene", "one", True, "cauchy", "ours"),
+)
+N_VARIANTS = len(VARIANTS)
+_GENES = ("all", "group", "one")
 
 
 class Bounds(NamedTuple):
@@ -151,7 +169,7 @@ def mutate(
     """Apply the drawn mutation variant to each child.
 
     Mutabilities self-adapt log-normally before the genes move (Schwefel:
-    tau' = 1/sqrt(2n), tau = 1/sqrt(2 sqrt(n))). variant [N] in 0..3 (paper numbering 1..4).
+    tau' = 1/sqrt(2n), tau = 1/sqrt(2 sqrt(n))). variant [N] indexes :data:`VARIANTS`.
     """
     n, g = genes.shape
     tau_global = 1.0 / jnp.sqrt(2.0 * g)
@@ -161,21 +179,24 @@ def mutate(
 
     in_group = gene_group[None, :] == group[:, None]  # [N, G]
     single = jnp.arange(g)[None, :] == one_gene[:, None]
-    v = variant[:, None]
-    # Which genes each variant moves, and whether it adapts the mutabilities. As in Schwefel's
-    # scheme, the whole strategy vector self-adapts before the genes move, in every variant
-    # but (3), whose mutabilities are frozen: (2) and (4) restrict which genes *move*, not
-    # which mutabilities adapt. (Adapting only (1) and (2), or only the moved genes, leaves
-    # the selected individuals' mutabilities near their initial size: fits stall.)
-    touched = jnp.where(v == 1, in_group, jnp.where(v == 3, single, True))
-    adapt = jnp.broadcast_to(v != 2, touched.shape)
+    # Per child, from the table: which genes move, whether mutabilities adapt, which step.
+    # As in Schwefel's scheme the whole strategy vector self-adapts before the genes move in
+    # every adapting variant: "group" and "one" restrict which genes *move*, not which
+    # mutabilities adapt. (Adapting only some variants, or only the moved genes, leaves the
+    # selected individuals' mutabilities near their initial size: fits stall.)
+    moves = jnp.asarray([_GENES.index(m.genes) for m in VARIANTS])[variant][:, None]
+    touched = jnp.where(moves == 1, in_group, jnp.where(moves == 2, single, True))
+    adapt = jnp.broadcast_to(
+        jnp.asarray([m.adapts for m in VARIANTS])[variant][:, None], touched.shape
+    )
+    cauchy_step = jnp.asarray([m.step == "cauchy" for m in VARIANTS])[variant][:, None]
 
     span = bounds.upper - bounds.lower
     z0, zi, step = (x.astype(genes.dtype) for x in (noise.z0, noise.zi, noise.step))
     new_sigma = jnp.where(adapt, sigma * jnp.exp(tau_global * z0 + tau_local * zi), sigma)
     new_sigma = jnp.clip(new_sigma, sigma_floor * span, span)
     cauchy = noise.cauchy.astype(genes.dtype)[:, None]
-    delta = jnp.where(v == 3, new_sigma * cauchy, new_sigma * step)
+    delta = jnp.where(cauchy_step, new_sigma * cauchy, new_sigma * step)
     moved = jnp.where(touched, genes + delta, genes)
     return reflect(moved, bounds), new_sigma
 

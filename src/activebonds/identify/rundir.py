@@ -2,15 +2,20 @@
 
 Layout of RUN/::
 
-    run.json            settings, seed, input files and their sha256, software versions, backend
+    run.json            settings, seed, input files and their sha256, software versions,
+                        backend, the strategy, the history's columns and the cost's display
     model.toml          the input model file as given (for the record and for resume --force)
     data.npz            the recorded window that is fitted (selected markers and frames)
     history.csv         one row per generation (deterministic: no wall-clock fields)
     status.json         state, generation, best RMS, wall times (not part of the result)
     best_model.toml     the best model so far, in the model-file format
-    checkpoints/gen-XXXXXXXXX.npz   ES state + history, written atomically; the two newest kept
+    checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
-Nothing is ever unpickled: checkpoints and data are read with ``allow_pickle=False``.
+This module is the only one that writes or reads these files. A checkpoint stores the loop
+state pytree by its paths (``state_generation``, ``state_failed_total``, then the strategy's
+state: ``state_genes``, ``state_sigma``, ... for the paper's ES) and the history by column
+(``history_best_cost``, ...), so any strategy's state round-trips. Nothing is ever unpickled:
+checkpoints and data are read with ``allow_pickle=False``.
 """
 
 from __future__ import annotations
@@ -21,27 +26,19 @@ import json
 import platform
 import sys
 import time
+import warnings
 from importlib import metadata
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from ..atomic import remove_leftovers, staged_directory, write_atomic, write_text_atomic
 from ..errors import InputError
 
-FORMAT = 1
-HISTORY_COLUMNS = (
-    "generation",
-    "best_cost",
-    "median_cost",
-    "worst_cost",
-    "best_rms_mm",
-    "failed",
-    *(f"trials_v{i}" for i in range(1, 5)),
-    *(f"successes_v{i}" for i in range(1, 5)),
-)
-STATE_KEYS = ("genes", "sigma", "cost", "local", "variant_probs", "generation", "failed_total")
+FORMAT = 2  # 2: the strategy, history columns and cost display are recorded in run.json
 KEEP_CHECKPOINTS = 2
+LOOP_KEYS = ("generation", "failed_total")  # the loop's own entries of a checkpointed state
 
 
 def sha256_file(path: str | Path) -> str:
@@ -110,6 +107,10 @@ def read_meta(run: Path) -> dict:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise InputError(path, f"unreadable run.json ({err})") from None
+    if isinstance(meta, dict) and isinstance(meta.get("format"), int) and meta["format"] < FORMAT:
+        raise InputError(
+            path, f"a run of an older activebonds (format {meta['format']}); fit it again"
+        )
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(path, f"unsupported run format (expected format {FORMAT})")
     return meta
@@ -127,24 +128,94 @@ def read_status(run: Path) -> dict:
         return {}
 
 
-def history_csv(history: dict[str, np.ndarray]) -> str:
-    lines = [",".join(HISTORY_COLUMNS)]
-    cols = [history[c] for c in HISTORY_COLUMNS]
-    ints = {"generation", "failed"} | {
-        c for c in HISTORY_COLUMNS if c.startswith(("trials", "succ"))
-    }
-    for row in zip(*cols, strict=True):
+def write_history(run: Path, history: dict[str, np.ndarray], integer: set[str]) -> None:
+    """history.csv: the columns in the order of ``history`` (integers as such)."""
+    names = list(history)
+    lines = [",".join(names)]
+    for row in zip(*(history[c] for c in names), strict=True):
         lines.append(
             ",".join(
-                str(int(v)) if name in ints else repr(float(v))
-                for name, v in zip(HISTORY_COLUMNS, row, strict=True)
+                str(int(v)) if name in integer else repr(float(v))
+                for name, v in zip(names, row, strict=True)
             )
         )
-    return "\n".join(lines) + "\n"
+    write_text_atomic(run / "history.csv", "\n".join(lines) + "\n")
+
+
+def history_columns(meta: dict) -> list[str]:
+    return list(meta.get("history", {}).get("columns", []))
+
+
+def read_history(run: Path, meta: dict | None = None) -> dict[str, np.ndarray]:
+    """history.csv as columns by header name; the recorded columns empty for a missing
+    file or a header with no row (a run that failed before its first generation)."""
+    meta = read_meta(run) if meta is None else meta
+    empty = {c: np.zeros(0) for c in history_columns(meta)}
+    path = run / "history.csv"
+    if not path.is_file():
+        return empty
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(path, f"unreadable history ({err})") from None
+    if len(lines) < 2:
+        return empty
+    header = [h.strip() for h in lines[0].split(",")]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    except ValueError as err:
+        raise InputError(path, f"unreadable history ({err})") from None
+    if data.shape[1] != len(header):
+        raise InputError(path, f"{data.shape[1]} values per row for {len(header)} columns")
+    return {**empty, **{name: data[:, i] for i, name in enumerate(header)}}
+
+
+def flatten_state(state) -> dict[str, np.ndarray]:
+    """The loop state (evolve.Run) as arrays by path: the loop's entries, then the
+    strategy's (their paths without the 'strategy' prefix, joined by '.')."""
+    out = {k: np.asarray(getattr(state, k)) for k in LOOP_KEYS}
+    leaves = jax.tree_util.tree_flatten_with_path(state.strategy)[0]
+    for path, leaf in leaves:
+        name = ".".join(_key_name(k) for k in path) or "strategy"
+        if name in out:
+            raise ValueError(f"a strategy state may not have an entry named {name!r}")
+        out[name] = np.asarray(leaf)
+    return out
+
+
+def unflatten_state(arrays: dict[str, np.ndarray], template):
+    """Arrays by path back into the structure (and dtypes) of ``template``."""
+    import jax.numpy as jnp
+
+    leaves = jax.tree_util.tree_flatten_with_path(template.strategy)
+    strategy = [
+        jnp.asarray(arrays[".".join(_key_name(k) for k in path) or "strategy"], leaf.dtype)
+        for path, leaf in leaves[0]
+    ]
+    loop = {k: jnp.asarray(arrays[k], getattr(template, k).dtype) for k in LOOP_KEYS}
+    return template._replace(strategy=jax.tree_util.tree_unflatten(leaves[1], strategy), **loop)
+
+
+def state_shapes(template) -> dict[str, tuple]:
+    """The shape of every entry of a checkpointed state, from a template (eval_shape)."""
+    flat = {k: getattr(template, k) for k in LOOP_KEYS}
+    for path, leaf in jax.tree_util.tree_flatten_with_path(template.strategy)[0]:
+        flat[".".join(_key_name(k) for k in path) or "strategy"] = leaf
+    return {k: tuple(v.shape) for k, v in flat.items()}
+
+
+def _key_name(key) -> str:
+    for attr in ("name", "key", "idx"):
+        if hasattr(key, attr):
+            return str(getattr(key, attr))
+    return str(key)
 
 
 def save_checkpoint(run: Path, state: dict[str, np.ndarray], history: dict[str, np.ndarray]):
-    """ES state and history up to ``state['generation']``, atomically; keep the two newest."""
+    """A flattened loop state (:func:`flatten_state`) and the history up to
+    ``state['generation']``, atomically; keep the two newest."""
     folder = run / "checkpoints"
     gen = int(state["generation"])
     arrays = {f"state_{k}": np.asarray(v) for k, v in state.items()}
@@ -171,8 +242,9 @@ def _generation_of(path: Path) -> int | None:
 
 
 def load_checkpoint(run: Path, shapes: dict[str, tuple]):
-    """The newest checkpoint that loads completely and has the expected shapes; torn,
-    truncated or foreign files are skipped (and reported), leftovers of writes removed."""
+    """The newest checkpoint that loads completely and holds every entry of ``shapes`` with
+    that shape; torn, truncated or foreign files are skipped (and reported), leftovers of
+    writes removed. Returns (state arrays by path, history by column, skipped files)."""
     folder = run / "checkpoints"
     remove_leftovers(folder)
     remove_leftovers(run)
@@ -184,8 +256,11 @@ def load_checkpoint(run: Path, shapes: dict[str, tuple]):
             raw = path.read_bytes()  # np.load on a path leaks the handle of a corrupt file
             with np.load(io.BytesIO(raw), allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
-            state = {k: arrays[f"state_{k}"] for k in STATE_KEYS}
-            history = {k: arrays[f"history_{k}"] for k in HISTORY_COLUMNS}
+            state = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
+            history = {k[8:]: v for k, v in arrays.items() if k.startswith("history_")}
+            for k in (*LOOP_KEYS, *shapes):
+                if k not in state:
+                    raise ValueError(f"no entry {k}")
             for k, shape in shapes.items():
                 if state[k].shape != shape:
                     raise ValueError(f"{k} has shape {state[k].shape}, expected {shape}")
@@ -196,6 +271,64 @@ def load_checkpoint(run: Path, shapes: dict[str, tuple]):
         except Exception as err:  # noqa: BLE001 - any unreadable checkpoint is skipped
             skipped.append(f"{path.name}: {type(err).__name__}")
     return None, None, skipped
+
+
+def new_meta(settings, inputs: dict, strategy: str, columns, display) -> dict:
+    """run.json of a new run: what decides it, and how its history is to be read."""
+    return {
+        "format": FORMAT,
+        "settings": settings.model_dump(mode="json"),
+        "seed": settings.seed,
+        "inputs": inputs,
+        "strategy": strategy,
+        "history": {
+            "columns": [c.name for c in columns],
+            "integer": [c.name for c in columns if c.integer],
+            "display": display.record(),
+        },
+        "versions": versions(),
+        "backend": backend(),
+        "command": python_command(),
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def display_of(meta: dict) -> dict:
+    """How the run's costs are shown: {name, label, unit, terms}."""
+    return dict(meta.get("history", {}).get("display", {}))
+
+
+def save_best_model(run: Path, model) -> None:
+    from ..model import save_model
+
+    save_model(model, run / "best_model.toml")
+
+
+def read_best_model(run: Path):
+    """The best model so far, or None before the first checkpoint."""
+    from ..model import load_model
+
+    path = run / "best_model.toml"
+    return load_model(path) if path.is_file() else None
+
+
+def read_input_model(run: Path):
+    """The model file the run was started from (its copy in the run)."""
+    from ..model import loads_model
+
+    path = run / "model.toml"
+    if not path.is_file():
+        raise InputError(run, "not a complete run directory (no model.toml)")
+    return loads_model(path.read_text(encoding="utf-8"), str(path))
+
+
+def read_window(run: Path):
+    """The recorded window that is fitted."""
+    from ..data import read_trajectory
+
+    if not (run / "data.npz").is_file():
+        raise InputError(run, "not a complete run directory (no data.npz)")
+    return read_trajectory(run / "data.npz")
 
 
 def python_command() -> str:

@@ -29,7 +29,8 @@ class FitSettings(BaseModel):
     sigma_init: float = Field(0.1, gt=0, le=1)
     adapt_variants: bool = False
     init: Literal["uniform", "lsq"] = "uniform"  # lsq: one individual at the linear optimum
-    chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call
+    optimizer: str = "es"  # a name of identify.strategies: "es" (the paper's) or "random"
+    chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call, at most
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
     precision: Literal["float32", "float64"] = "float64"
 
@@ -39,6 +40,15 @@ class FitSettings(BaseModel):
         start, stop = v
         if start < 0 or (stop is not None and stop <= start):
             raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
+        return v
+
+    @field_validator("optimizer")
+    @classmethod
+    def _optimizer(cls, v):
+        from .strategies import names
+
+        if v not in names():
+            raise ValueError(f"unknown optimizer {v!r}; choose one of {', '.join(names())}")
         return v
 
     def es(self) -> ESSettings:

@@ -60,6 +60,9 @@ class Section:
     notes: Sequence[str] = field(default_factory=tuple)
 
 
+_OPTIMIZERS = {"es": "the paper's evolution strategy (es)", "random": "random search (random)"}
+
+
 def fmt(x: object, digits: int = 4) -> str:
     """Numbers to short text (NaN/None as an em dash); other values as str."""
     if x is None:
@@ -235,6 +238,7 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
             f"{start}:{start + w.n_frames} ({w.n_frames} frames, {w.duration:.4g} s)",
         ),
         ("rate", f"{w.rate:g} Hz"),
+        ("optimizer", _OPTIMIZERS.get(s.optimizer, s.optimizer)),
         ("population", s.population),
         ("generations", f"{gens_done} of {s.generations}"),
         ("seed", s.seed),

@@ -19,6 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
+from ..identify.operators import VARIANTS
 from ..model import Model
 from .predict import Prediction, neural_weights, to_mm
 from .runs import history_rms_mm
@@ -28,12 +29,6 @@ ONE_STEP = "tab:blue"
 FREE_RUN = "tab:orange"
 AXES = "XYZ"
 DPI = 110
-VARIANTS = (  # the ES's mutation variants (identify/operators.py)
-    "1: all genes",
-    "2: one bond type",
-    "3: all, mutabilities frozen",
-    "4: Cauchy jump, one gene",
-)
 
 
 @dataclass(frozen=True)
@@ -255,21 +250,22 @@ def variant_success(
     and each variant's share of trials."""
     gens = np.asarray(history.get("generation", []), np.float64)
     fig, (ax, bx) = _subplots(2, 1, figsize=(7.5, 4.8), sharex=True, layout="constrained")
-    if gens.size == 0:
-        ax.text(
-            0.5, 0.5, "no generation recorded", ha="center", va="center", transform=ax.transAxes
-        )
+    present = all(f"trials_{v.name}" in history for v in VARIANTS)
+    if gens.size == 0 or not present:
+        text = "no generation recorded" if present else "this optimiser has no mutation variants"
+        ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
         return save(fig, stem)
     win = max(1, len(gens) // 50)
 
     def smooth(a: np.ndarray) -> np.ndarray:
         return np.convolve(np.asarray(a, np.float64), np.ones(win), mode="same")
 
-    trials_all = smooth(sum(np.asarray(history[f"trials_v{i}"], np.float64) for i in range(1, 5)))
-    for i in range(1, 5):
-        t, s = smooth(history[f"trials_v{i}"]), smooth(history[f"successes_v{i}"])
+    trials = [np.asarray(history[f"trials_{v.name}"], np.float64) for v in VARIANTS]
+    trials_all = smooth(sum(trials))
+    for v in VARIANTS:
+        t, s = smooth(history[f"trials_{v.name}"]), smooth(history[f"successes_{v.name}"])
         with np.errstate(invalid="ignore", divide="ignore"):
-            ax.plot(gens, np.where(t > 0, s / t, np.nan), lw=1.2, label=VARIANTS[i - 1])
+            ax.plot(gens, np.where(t > 0, s / t, np.nan), lw=1.2, label=v.label)
             bx.plot(gens, np.where(trials_all > 0, t / trials_all, np.nan), lw=1.2)
     ax.set_ylabel("success rate")
     ax.set_ylim(bottom=0)

@@ -1,0 +1,183 @@
+"""The one evolve loop: any strategy, one run or several seeds at once, in compiled chunks.
+
+A generation is fused: ``ask``, the vmapped evaluation (non-finite -> +inf, counted),
+``tell``. Many generations run in one compiled ``lax.scan`` (a chunk) whose random numbers
+are drawn first, in bulk; generation g's numbers depend only on the seed key and g, so
+results do not depend on how a run is chunked, interrupted or resumed. Generations at or
+beyond ``stop`` leave the state unchanged, so one compiled chunk serves a whole run. Used by
+``fit``/``resume`` (driver.py), the multi-seed experiments and the benchmarks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .strategy import Column, Problem, Strategy, finite_or_inf
+
+NOISE_BUDGET = 64 * 2**20  # bytes of random numbers drawn per compiled chunk
+DEFAULT_CHUNK = 250  # generations per compiled chunk, at most
+
+
+class Run(NamedTuple):
+    """The loop's state: the strategy's state, and what the loop itself counts."""
+
+    strategy: Any
+    generation: jax.Array  # int32: generations done
+    failed_total: jax.Array  # int32: non-finite evaluations so far
+
+
+def population_evaluate(problem: Problem, dtype) -> Callable:
+    """genes [N, G] -> (cost [N], local [N, P]) in ``dtype``, non-finite -> +inf."""
+
+    def evaluate(genes):
+        cost, local = jax.vmap(problem.evaluate)(genes)
+        out = dtype or jnp.result_type(float)
+        return finite_or_inf(cost.astype(out), local.astype(out))
+
+    return evaluate
+
+
+def start(strategy: Strategy, problem: Problem, dtype, key) -> Run:
+    """The strategy's first state; every failed evaluation it made is counted."""
+    evaluate = population_evaluate(problem, dtype)
+    failures = []
+
+    def counted(genes):
+        cost, local = evaluate(genes)
+        failures.append(jnp.sum(~jnp.isfinite(cost)).astype(jnp.int32))
+        return cost, local
+
+    state = strategy.init(key, counted)
+    failed = sum(failures[1:], failures[0]) if failures else jnp.asarray(0, jnp.int32)
+    return Run(state, jnp.asarray(0, jnp.int32), failed)
+
+
+def step(strategy: Strategy, problem: Problem, dtype, noise, run: Run):
+    """One generation from its random numbers: (new loop state, history row)."""
+    genes, aux = strategy.ask(noise, run.strategy)
+    cost, local = population_evaluate(problem, dtype)(genes)
+    failed = jnp.sum(~jnp.isfinite(cost)).astype(jnp.int32)
+    state, row = strategy.tell(noise, run.strategy, aux, cost, local)
+    new = Run(state, run.generation + 1, run.failed_total + failed)
+    return new, {**row, "failed": failed}
+
+
+def chunk(strategy: Strategy, problem: Problem, dtype, n: int, base_key, run: Run, stop):
+    """``n`` generations in one ``lax.scan``; those at or beyond ``stop`` change nothing.
+    Returns (state, (rows, active))."""
+    indices = run.generation + jnp.arange(n, dtype=jnp.int32)
+    noises = jax.vmap(lambda g: strategy.draw(jax.random.fold_in(base_key, g)))(indices)
+
+    def body(s, nz):
+        new, row = step(strategy, problem, dtype, nz, s)
+        active = s.generation < stop
+        s = jax.tree.map(lambda a, b: jnp.where(active, a, b), new, s)
+        return s, (row, active)
+
+    return jax.lax.scan(body, run, noises)
+
+
+def chunk_length(strategy: Strategy, requested: int, total: int | None = None, runs: int = 1):
+    """Generations per compiled chunk: at most ``requested`` and the generations of the run,
+    fewer if their random numbers would exceed NOISE_BUDGET."""
+    per_generation = max(1, strategy.noise_bytes * runs)
+    n = min(requested, NOISE_BUDGET // per_generation)
+    if total is not None:
+        n = min(n, total)
+    return int(max(1, n))
+
+
+def keys(seed: int):
+    """(init key, generation key) of a seed."""
+    return jax.random.split(jax.random.PRNGKey(seed))
+
+
+class Evolution:
+    """Compiled start and chunks of one strategy on one problem; ``seeds`` runs them side by
+    side (vmapped: they share the compiled code and the vector width). ``display`` turns
+    costs into what people read (the cost's :class:`~activebonds.identify.cost.Display`)."""
+
+    def __init__(
+        self,
+        strategy: Strategy,
+        problem: Problem,
+        dtype,
+        *,
+        total: int,
+        requested: int = DEFAULT_CHUNK,
+        display,
+        seeds: int | None = None,
+    ):
+        self.strategy, self.problem, self.dtype = strategy, problem, dtype
+        self.display, self.seeds = display, seeds
+        self.columns = history_columns(strategy, display)
+        self.length = chunk_length(strategy, requested, total, seeds or 1)
+        one_start = partial(start, strategy, problem, dtype)
+        one_chunk = partial(chunk, strategy, problem, dtype, self.length)
+        if seeds is None:
+            self._start = jax.jit(one_start)
+            self._chunk = jax.jit(one_chunk)
+        else:
+            self._start = jax.jit(jax.vmap(one_start))
+            self._chunk = jax.jit(jax.vmap(one_chunk, in_axes=(0, 0, None)))
+
+    def start(self, init_key) -> Run:
+        return self._start(init_key)
+
+    def template(self, init_key) -> Run:
+        """Shapes and dtypes of the loop state, without computing it (for checkpoints)."""
+        return jax.eval_shape(self._start, init_key)
+
+    def run(self, gen_key, state: Run, stop: int) -> Iterator[tuple[Run, dict[str, np.ndarray]]]:
+        """Chunks until ``stop`` generations are done: yields (state, history rows of the
+        chunk, as NumPy columns by name; [seeds, k] when vmapped)."""
+        while _generation(state) < stop:
+            state, (rows, active) = self._chunk(gen_key, state, stop)
+            yield state, self.rows(rows, active, state)
+
+    def rows(self, rows: dict, active, state: Run) -> dict[str, np.ndarray]:
+        act = np.asarray(active)
+        act = act if act.ndim == 1 else act[0]
+        done = _generation(state)
+        k = int(act.sum())
+        out: dict[str, np.ndarray] = {"generation": np.arange(done - k + 1, done + 1)}
+        for col in self.columns[1:]:
+            if col.field in rows:
+                out[col.name] = _pick(np.asarray(rows[col.field]), act, col)
+        for col in self.strategy.columns:
+            if col.name in self.strategy.cost_columns:
+                out[self.display.column(col.name)] = self.display(out[col.name])
+        return {c.name: out[c.name] for c in self.columns}
+
+
+def _pick(values: np.ndarray, act: np.ndarray, col: Column) -> np.ndarray:
+    """Rows of the active generations (axis -1 for scalar fields, -2 for vector ones)."""
+    if col.index is not None:
+        values = values[..., col.index]
+    return values[..., act]
+
+
+def _generation(state: Run) -> int:
+    return int(np.asarray(state.generation).reshape(-1)[0])
+
+
+def history_columns(strategy: Strategy, display) -> tuple[Column, ...]:
+    """The columns of a run's history: the generation, the strategy's cost columns, the same
+    shown through the cost's display (e.g. ``best_rms_mm``), the failures, and the
+    strategy's other columns."""
+    costs = [c for c in strategy.columns if c.name in strategy.cost_columns]
+    shown = [Column(display.column(c.name), "") for c in costs]
+    others = [c for c in strategy.columns if c.name not in strategy.cost_columns]
+    return (
+        Column("generation", "generation", integer=True),
+        *costs,
+        *shown,
+        Column("failed", "failed", integer=True),
+        *others,
+    )
