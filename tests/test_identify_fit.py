@@ -68,8 +68,8 @@ def test_recovers_the_triangle_within_one_percent(triangle_fit):
 
 def test_neural_triangle_fit_reaches_a_tenth_of_a_millimetre(neural_fit):
     truth, result = neural_fit
-    assert truth.topology.neural.all()
-    assert result.model.topology.neural.all()
+    assert truth.topology.bonds["binary"]["neural"].all()
+    assert result.model.topology.bonds["binary"]["neural"].all()
     assert result.model.layout.n_genes == 27  # k, l0, c, gain, threshold, 2 + 2 weights, x 3
     assert result.rms_mm < 0.1
     assert result.history["best_rms_mm"][0] > 4 * result.rms_mm
