@@ -57,9 +57,9 @@ def neural_fit():
 def test_recovers_the_triangle_within_one_percent(triangle_fit):
     truth, result = triangle_fit
     assert result.status == "completed"
-    for field in ("k", "l0", "c"):
-        want = np.asarray(getattr(truth.params, field))
-        got = np.asarray(getattr(result.model.params, field))
+    for field in ("stiffness", "rest_length", "damping"):
+        want = np.asarray(truth.params.bonds["binary"][field])
+        got = np.asarray(result.model.params.bonds["binary"][field])
         np.testing.assert_allclose(got, want, rtol=0.01, err_msg=field)
     # started away from the truth: the initial population was uniform within the bounds
     assert result.history["best_rms_mm"][0] > 100 * result.rms_mm

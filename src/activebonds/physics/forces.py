@@ -12,10 +12,10 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from .. import bonds
-from ..bonds.accumulate import accumulate as _accumulate
+from ..bonds.accumulate import accumulate as _accumulate  # noqa: F401 (its old home)
 from ..model.params import Params, Topology
 
-__all__ = ["_accumulate", "bond_forces", "neuron_activity", "total_force", "uniform_field"]
+__all__ = ["bond_forces", "neuron_activity", "total_force", "uniform_field"]
 
 
 def uniform_field(params: Params, topo: Topology, x, v):
