@@ -29,27 +29,34 @@ import numpy as np
 # cost
 
 
+def _fields(params) -> dict:
+    """Masses, field and the binary bonds' parameters of a ``Params``, by name."""
+    return {"mass": params.mass, "gravity": params.gravity, **params.bonds["binary"]}
+
+
 class NumpyCost:
     """``cost(genomes [N, G]) -> (global [N], local [N, P])``, the package's short-term cost."""
 
     def __init__(self, model, windows, substeps: int = 1, method: str = "euler"):
         topo, layout = model.topology, model.layout
-        if topo.unary.size or topo.ternary.size:
+        if set(topo.active()) - {"binary"}:
             raise NotImplementedError("the NumPy baseline covers binary bonds and gravity only")
         if method not in ("euler", "verlet"):
             raise ValueError(method)
         self.method, self.substeps = method, int(substeps)
         self.n_genes = layout.n_genes
         self.log = layout.log
-        self.base = {f: np.asarray(v, np.float64) for f, v in layout.base._asdict().items()}
-        self.index = {f: np.asarray(v) for f, v in layout.index._asdict().items()}
-        self.i, self.j = topo.binary[:, 0], topo.binary[:, 1]
-        self.neural = np.asarray(topo.neural, bool)
-        self.off = 1.0 - np.eye(topo.n_binary)
+        self.base = {f: np.asarray(v, np.float64) for f, v in _fields(layout.base).items()}
+        self.index = {f: np.asarray(v) for f, v in _fields(layout.index).items()}
+        n_b = topo.count("binary")
+        pairs = topo.particles("binary")
+        self.i, self.j = pairs[:, 0], pairs[:, 1]
+        self.neural = np.asarray(topo.bonds["binary"]["neural"], bool)
+        self.off = 1.0 - np.eye(n_b)
         # incidence [P, B]: +1 at the bond's first particle, -1 at its second (force on i is +T u)
-        inc = np.zeros((topo.n_particles, topo.n_binary))
-        inc[self.i, np.arange(topo.n_binary)] += 1.0
-        inc[self.j, np.arange(topo.n_binary)] -= 1.0
+        inc = np.zeros((topo.n_particles, n_b))
+        inc[self.i, np.arange(n_b)] += 1.0
+        inc[self.j, np.arange(n_b)] -= 1.0
         self.incidence = inc
         self.x0, self.v0 = windows.x0, windows.v0  # [S, P, D]
         self.x_prev = windows.x_prev
@@ -80,11 +87,11 @@ class NumpyCost:
         length = np.sqrt(np.sum(d * d, axis=-1))
         u = d / length[..., None]
         rate = np.sum((v[:, :, self.j] - v[:, :, self.i]) * u, axis=-1)  # [N, S, B]
-        elong = length - p["l0"][:, None]
-        tension = p["k"][:, None] * elong + p["c"][:, None] * rate
+        elong = length - p["rest_length"][:, None]
+        tension = p["stiffness"][:, None] * elong + p["damping"][:, None] * rate
         if self.neural.any():
-            wl = np.swapaxes(p["w_len"] * self.off, -1, -2)  # [N, B(j), B(b)]
-            wr = np.swapaxes(p["w_rate"] * self.off, -1, -2)
+            wl = np.swapaxes(p["length_weights"] * self.off, -1, -2)  # [N, B(j), B(b)]
+            wr = np.swapaxes(p["rate_weights"] * self.off, -1, -2)
             drive = elong @ wl + rate @ wr  # [N, S, B]
             act = np.tanh(drive - p["threshold"][:, None])
             tension = tension + np.where(self.neural, p["gain"][:, None] * act, 0.0)

@@ -65,7 +65,7 @@ class Bench:
         w = self.ident.windows
         return {
             "particles": int(self.model.topology.n_particles),
-            "bonds": int(self.model.topology.n_binary),
+            "bonds": int(sum(self.model.topology.count(k) for k in self.model.topology.bonds)),
             "genes": int(self.n_genes),
             "starts": int(w.x0.shape[0]),
             "horizon": int(w.horizon),
@@ -195,7 +195,7 @@ def _mesh_data(n_frames: int) -> tuple[Model, Trajectory]:
 
 def mesh(frames: int = 60, horizon: int = 1) -> Bench:
     model, traj = _mesh_data(frames)
-    b = model.topology.n_binary
+    b = model.topology.count("binary")
     h = f", H={horizon}" if horizon != 1 else ""
     return _bench(
         f"mesh35 standard {frames}f{h}",

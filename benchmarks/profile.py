@@ -71,6 +71,7 @@ _BY_FUNCTION = {
     "streams": "RNG",
 }
 _COST_FILES = ("cost.py", "forces.py", "integrate.py", "layout.py", "params.py")
+_COST_FILES += ("accumulate.py", "unary.py", "binary.py", "ternary.py")  # activebonds/bonds
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,10 +1,14 @@
 """A plain NumPy reference of the physics (DESIGN.md §2), written from the equations alone.
 
 Deliberately simple: explicit Python loops over particles and bonds, float64 throughout, no
-code shared with :mod:`activebonds.physics`. ``params`` and ``topo`` are any objects with the
-attribute names of :class:`activebonds.model.Params` and :class:`activebonds.model.Topology`.
+code shared with :mod:`activebonds.physics` or :mod:`activebonds.bonds`. ``params`` and
+``topo`` are any objects with the attributes of :class:`activebonds.model.Params`
+(``mass``, ``gravity``, ``bonds[kind][field]``) and :class:`activebonds.model.Topology`
+(``bonds[kind]["particles"]``, flags such as ``bonds["binary"]["neural"]``, ``disabled``).
 
-Equations (SI units):
+One oracle per bond kind, ``KIND_FORCES[name](p, t, x, v)`` with ``p`` and ``t`` that kind's
+parameters and topology; a new kind adds its own (here or in its test file) and, if it is
+conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
 
 * uniform field: F_p += m_p g
 * unary spring + damper: F_p += -k_u (x_p - a) - c_u v_p
@@ -25,8 +29,12 @@ def _arr(a) -> np.ndarray:
     return np.asarray(a, dtype=np.float64)
 
 
+def _particles(t, arity: int) -> np.ndarray:
+    return np.asarray(t["particles"]).reshape(-1, arity)
+
+
 # --------------------------------------------------------------------------------------------
-# Forces, one family at a time
+# Forces, one kind at a time
 # --------------------------------------------------------------------------------------------
 
 
@@ -39,21 +47,21 @@ def uniform_field_force(params, topo, x, v) -> np.ndarray:
     return f
 
 
-def unary_force(params, topo, x, v) -> np.ndarray:
+def unary_force(p, t, x, v) -> np.ndarray:
     x, v = _arr(x), _arr(v)
     f = np.zeros_like(x)
-    for b, p in enumerate(np.asarray(topo.unary).reshape(-1)):
-        k = float(params.unary_k[b])
-        c = float(params.unary_c[b])
-        a = _arr(params.unary_anchor[b])
-        f[p] += -k * (x[p] - a) - c * v[p]
+    for b, (q,) in enumerate(_particles(t, 1)):
+        k = float(p["stiffness"][b])
+        c = float(p["damping"][b])
+        a = _arr(p["anchor"][b])
+        f[q] += -k * (x[q] - a) - c * v[q]
     return f
 
 
-def bond_state(topo, x, v):
+def bond_state(t, x, v):
     """Per binary bond: lengths L, elongation rates Ldot, unit vectors u (from i to j)."""
     x, v = _arr(x), _arr(v)
-    pairs = np.asarray(topo.binary).reshape(-1, 2)
+    pairs = _particles(t, 2)
     n = pairs.shape[0]
     lengths = np.zeros(n)
     rates = np.zeros(n)
@@ -68,11 +76,11 @@ def bond_state(topo, x, v):
     return lengths, rates, units
 
 
-def neuron_activations(params, topo, x, v) -> np.ndarray:
+def neuron_activations(p, t, x, v) -> np.ndarray:
     """a_b for every binary bond (computed for all; only neural bonds use it)."""
-    lengths, rates, _ = bond_state(topo, x, v)
-    e = lengths - _arr(params.l0)
-    w_len, w_rate = _arr(params.w_len), _arr(params.w_rate)
+    lengths, rates, _ = bond_state(t, x, v)
+    e = lengths - _arr(p["rest_length"])
+    w_len, w_rate = _arr(p["length_weights"]), _arr(p["rate_weights"])
     n = len(lengths)
     acts = np.zeros(n)
     for b in range(n):
@@ -80,24 +88,24 @@ def neuron_activations(params, topo, x, v) -> np.ndarray:
         for j in range(n):
             if j != b:
                 s += w_len[b, j] * e[j] + w_rate[b, j] * rates[j]
-        acts[b] = math.tanh(s - float(params.threshold[b]))
+        acts[b] = math.tanh(s - float(p["threshold"][b]))
     return acts
 
 
-def binary_force(params, topo, x, v) -> np.ndarray:
+def binary_force(p, t, x, v) -> np.ndarray:
     x = _arr(x)
     f = np.zeros_like(x)
-    pairs = np.asarray(topo.binary).reshape(-1, 2)
+    pairs = _particles(t, 2)
     if pairs.shape[0] == 0:
         return f
-    lengths, rates, units = bond_state(topo, x, v)
-    acts = neuron_activations(params, topo, x, v)
-    neural = np.asarray(topo.neural).reshape(-1)
+    lengths, rates, units = bond_state(t, x, v)
+    acts = neuron_activations(p, t, x, v)
+    neural = np.asarray(t["neural"]).reshape(-1)
     for b, (i, j) in enumerate(pairs):
-        tension = float(params.k[b]) * (lengths[b] - float(params.l0[b]))
-        tension += float(params.c[b]) * rates[b]
+        tension = float(p["stiffness"][b]) * (lengths[b] - float(p["rest_length"][b]))
+        tension += float(p["damping"][b]) * rates[b]
         if neural[b]:
-            tension += float(params.gain[b]) * acts[b]
+            tension += float(p["gain"][b]) * acts[b]
         f[i] += tension * units[b]
         f[j] -= tension * units[b]
     return f
@@ -118,31 +126,33 @@ def _cos_and_gradients(xi, xj, xk):
     return cos, g_i, g_j, g_k
 
 
-def ternary_force(params, topo, x, v) -> np.ndarray:
+def ternary_force(p, t, x, v) -> np.ndarray:
     x = _arr(x)
     f = np.zeros_like(x)
-    for t, (i, j, k) in enumerate(np.asarray(topo.ternary).reshape(-1, 3)):
+    for n, (i, j, k) in enumerate(_particles(t, 3)):
         cos, g_i, g_j, g_k = _cos_and_gradients(x[i], x[j], x[k])
         # E = 1/2 kf (cos - cos0)^2  ->  dE/dx = kf (cos - cos0) dcos/dx
-        dE = float(params.tern_k[t]) * (cos - math.cos(float(params.tern_angle[t])))
+        dE = float(p["stiffness"][n]) * (cos - math.cos(float(p["rest_angle"][n])))
         f[i] -= dE * g_i
         f[j] -= dE * g_j
         f[k] -= dE * g_k
     return f
 
 
-FAMILIES = {
-    "uniform_field": uniform_field_force,
-    "unary": unary_force,
-    "binary": binary_force,
-    "ternary": ternary_force,
-}
+KIND_FORCES = {"unary": unary_force, "binary": binary_force, "ternary": ternary_force}
+
+
+def kind_force(kind, params, topo, x, v) -> np.ndarray:
+    """The forces of one kind's bonds (zero for a disabled kind)."""
+    if kind in getattr(topo, "disabled", ()):
+        return np.zeros_like(_arr(x))
+    return KIND_FORCES[kind](params.bonds[kind], topo.bonds[kind], x, v)
 
 
 def total_force(params, topo, x, v) -> np.ndarray:
-    f = np.zeros_like(_arr(x))
-    for family in FAMILIES.values():
-        f = f + family(params, topo, x, v)
+    f = uniform_field_force(params, topo, x, v)
+    for kind in topo.bonds:
+        f = f + kind_force(kind, params, topo, x, v)
     return f
 
 
@@ -151,23 +161,46 @@ def total_force(params, topo, x, v) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def potential_energy(params, topo, x) -> np.ndarray:
-    """Gravity + unary springs + binary springs + flexion springs. x: [..., P, D]."""
-    x = _arr(x)
-    mass = _arr(params.mass)
-    energy = -np.einsum("p,...pd,d->...", mass, x, _arr(params.gravity))
-    for b, p in enumerate(np.asarray(topo.unary).reshape(-1)):
-        r = x[..., p, :] - _arr(params.unary_anchor[b])
-        energy = energy + 0.5 * float(params.unary_k[b]) * np.sum(r * r, axis=-1)
-    for b, (i, j) in enumerate(np.asarray(topo.binary).reshape(-1, 2)):
+def unary_energy(p, t, x) -> np.ndarray:
+    energy = np.zeros(x.shape[:-2])
+    for b, (q,) in enumerate(_particles(t, 1)):
+        r = x[..., q, :] - _arr(p["anchor"][b])
+        energy = energy + 0.5 * float(p["stiffness"][b]) * np.sum(r * r, axis=-1)
+    return energy
+
+
+def binary_energy(p, t, x) -> np.ndarray:
+    energy = np.zeros(x.shape[:-2])
+    for b, (i, j) in enumerate(_particles(t, 2)):
         length = np.linalg.norm(x[..., j, :] - x[..., i, :], axis=-1)
-        energy = energy + 0.5 * float(params.k[b]) * (length - float(params.l0[b])) ** 2
-    for t, (i, j, k) in enumerate(np.asarray(topo.ternary).reshape(-1, 3)):
+        energy = (
+            energy + 0.5 * float(p["stiffness"][b]) * (length - float(p["rest_length"][b])) ** 2
+        )
+    return energy
+
+
+def ternary_energy(p, t, x) -> np.ndarray:
+    energy = np.zeros(x.shape[:-2])
+    for n, (i, j, k) in enumerate(_particles(t, 3)):
         a = x[..., i, :] - x[..., j, :]
         b = x[..., k, :] - x[..., j, :]
         cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
-        cos0 = math.cos(float(params.tern_angle[t]))
-        energy = energy + 0.5 * float(params.tern_k[t]) * (cos - cos0) ** 2
+        cos0 = math.cos(float(p["rest_angle"][n]))
+        energy = energy + 0.5 * float(p["stiffness"][n]) * (cos - cos0) ** 2
+    return energy
+
+
+KIND_ENERGIES = {"unary": unary_energy, "binary": binary_energy, "ternary": ternary_energy}
+
+
+def potential_energy(params, topo, x) -> np.ndarray:
+    """Gravity + the springs of every kind. x: [..., P, D]."""
+    x = _arr(x)
+    mass = _arr(params.mass)
+    energy = -np.einsum("p,...pd,d->...", mass, x, _arr(params.gravity))
+    for kind in topo.bonds:
+        if kind not in getattr(topo, "disabled", ()):
+            energy = energy + KIND_ENERGIES[kind](params.bonds[kind], topo.bonds[kind], x)
     return energy
 
 

@@ -56,7 +56,7 @@ def test_fit_horse_limb_on_the_trot_tiny(tmp_path):
 
     # the best model is neural and reproduces the reported error on that window
     best = load_model(run / "best_model.toml")
-    assert best.topology.neural.all() and best.topology.n_binary == 3
+    assert best.topology.bonds["binary"]["neural"].all() and best.topology.count("binary") == 3
     windows = make_windows(window.positions, window.mask, window.dt, 1)
     cost, _ = jax.jit(make_cost(best, windows))(jnp.asarray(best.layout.initial()))
     assert float(rms_mm(cost, windows.n_terms)) == pytest.approx(best_rms[-1], rel=1e-6)

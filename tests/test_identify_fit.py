@@ -57,9 +57,9 @@ def neural_fit():
 def test_recovers_the_triangle_within_one_percent(triangle_fit):
     truth, result = triangle_fit
     assert result.status == "completed"
-    for field in ("k", "l0", "c"):
-        want = np.asarray(getattr(truth.params, field))
-        got = np.asarray(getattr(result.model.params, field))
+    for field in ("stiffness", "rest_length", "damping"):
+        want = np.asarray(truth.params.bonds["binary"][field])
+        got = np.asarray(result.model.params.bonds["binary"][field])
         np.testing.assert_allclose(got, want, rtol=0.01, err_msg=field)
     # started away from the truth: the initial population was uniform within the bounds
     assert result.history["best_rms_mm"][0] > 100 * result.rms_mm
@@ -68,8 +68,8 @@ def test_recovers_the_triangle_within_one_percent(triangle_fit):
 
 def test_neural_triangle_fit_reaches_a_tenth_of_a_millimetre(neural_fit):
     truth, result = neural_fit
-    assert truth.topology.neural.all()
-    assert result.model.topology.neural.all()
+    assert truth.topology.bonds["binary"]["neural"].all()
+    assert result.model.topology.bonds["binary"]["neural"].all()
     assert result.model.layout.n_genes == 27  # k, l0, c, gain, threshold, 2 + 2 weights, x 3
     assert result.rms_mm < 0.1
     assert result.history["best_rms_mm"][0] > 4 * result.rms_mm

@@ -110,7 +110,12 @@ def test_an_unsolvable_start_is_a_failed_candidate_not_a_biased_one(truth):
     """Stiff, heavily damped parameters for the frame interval: the fixed point of the start
     state does not converge in its rounds, so the velocity is NaN (the candidate costs +inf
     and is counted as failed) instead of silently wrong."""
-    p = truth.params._replace(k=np.full(6, 5000.0), c=np.full(6, 60.0))
+    binary = {
+        **truth.params.bonds["binary"],
+        "stiffness": np.full(6, 5000.0),
+        "damping": np.full(6, 60.0),
+    }
+    p = truth.params._replace(bonds={**truth.params.bonds, "binary": binary})
     x0, v0 = (np.asarray(a) for a in truth.initial_state())
     x1, _ = advance(p, truth.topology, x0, v0, 0.02, 2, "euler")
     v = np.asarray(start_velocity(p, truth.topology, x0, np.asarray(x1), 0.02, 2, "euler"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -16,17 +17,27 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 EXAMPLE_NAMES = ["triangle", "horse_limb", "chain2d"]
 
 
+def leaves(params) -> dict:
+    """'mass', 'binary.stiffness', ... -> array."""
+    flat, _ = jax.tree_util.tree_flatten_with_path(params)
+    return {jax.tree_util.keystr(path): leaf for path, leaf in flat}
+
+
 def assert_params_equal(a, b):
-    assert a._fields == b._fields
-    for name, x, y in zip(a._fields, a, b, strict=True):
-        np.testing.assert_array_equal(np.asarray(x), np.asarray(y), err_msg=name)
+    a, b = leaves(a), leaves(b)
+    assert a.keys() == b.keys()
+    for name in a:
+        np.testing.assert_array_equal(np.asarray(a[name]), np.asarray(b[name]), err_msg=name)
 
 
 def assert_same_model(a, b):
     assert a.spec == b.spec
     assert_params_equal(a.params, b.params)
-    for name in ("unary", "binary", "neural", "ternary"):
-        np.testing.assert_array_equal(getattr(a.topology, name), getattr(b.topology, name))
+    assert a.topology.bonds.keys() == b.topology.bonds.keys()
+    for kind, arrays in a.topology.bonds.items():
+        assert arrays.keys() == b.topology.bonds[kind].keys()
+        for name, x in arrays.items():
+            np.testing.assert_array_equal(x, b.topology.bonds[kind][name])
     assert a.layout.genes == b.layout.genes
     assert a.layout.groups == b.layout.groups
     assert_params_equal(a.layout.index, b.layout.index)
@@ -61,19 +72,26 @@ def test_example_save_load(name, tmp_path):
 def test_example_shapes():
     """What the examples contain, so a broken loader cannot pass the round trips vacuously."""
     tri = load_model(EXAMPLES / "triangle.toml")
-    assert (tri.dimension, tri.topology.n_particles, tri.topology.n_binary) == (3, 3, 3)
+    assert (tri.dimension, tri.topology.n_particles, tri.topology.count("binary")) == (3, 3, 3)
     np.testing.assert_array_equal(tri.params.mass, [1.0, 1.5, 2.0])
-    np.testing.assert_array_equal(tri.params.k, [40.0, 60.0, 80.0])
-    np.testing.assert_array_equal(tri.params.l0, [0.5, 0.6, 0.45])
-    np.testing.assert_array_equal(tri.params.c, [0.5, 1.0, 0.8])
+    binary = tri.params.bonds["binary"]
+    np.testing.assert_array_equal(binary["stiffness"], [40.0, 60.0, 80.0])
+    np.testing.assert_array_equal(binary["rest_length"], [0.5, 0.6, 0.45])
+    np.testing.assert_array_equal(binary["damping"], [0.5, 1.0, 0.8])
     assert tri.layout.n_genes == 9
     horse = load_model(EXAMPLES / "horse_limb.toml")
-    assert horse.topology.neural.all() and horse.markers == ("Head", "Withers", "HFL")
+    assert horse.topology.bonds["binary"]["neural"].all() and horse.markers == (
+        "Head",
+        "Withers",
+        "HFL",
+    )
     assert horse.layout.n_genes == 3 * (5 + 4)  # k, l0, c, gain, threshold + 2x2 weights
     chain = load_model(EXAMPLES / "chain2d.toml")
-    assert chain.dimension == 2 and len(chain.topology.ternary) == 3
+    assert chain.dimension == 2 and chain.topology.count("ternary") == 3
     np.testing.assert_array_equal(chain.params.gravity, [0.0, -9.81])
-    np.testing.assert_array_equal(chain.topology.binary, [[0, 1], [1, 2], [2, 3], [3, 4]])
+    np.testing.assert_array_equal(
+        chain.topology.particles("binary"), [[0, 1], [1, 2], [2, 3], [3, 4]]
+    )
     # the four "link" bonds share one set of genes, the three "joint" bonds another
     assert chain.layout.n_genes == 2 + 3 + 1
 
@@ -88,8 +106,10 @@ def test_with_genome_dump_load_keeps_values(name, seed):
     changed = model.with_genome(genome)
     decoded = layout.decode(jnp.asarray(genome))
     # the new model's values are the genome's (up to exp/log rounding of log-scaled genes) ...
-    for field, x, y in zip(decoded._fields, changed.params, decoded, strict=True):
-        np.testing.assert_allclose(x, np.asarray(y), rtol=1e-14, atol=0, err_msg=field)
+    new, dec = leaves(changed.params), leaves(decoded)
+    assert new.keys() == dec.keys()
+    for field in new:
+        np.testing.assert_allclose(new[field], np.asarray(dec[field]), 1e-14, 0, err_msg=field)
     np.testing.assert_allclose(changed.layout.initial(), genome, rtol=1e-13, atol=1e-15)
     assert [(g.name, g.lower, g.upper, g.log) for g in changed.layout.genes] == [
         (g.name, g.lower, g.upper, g.log) for g in layout.genes
@@ -97,7 +117,9 @@ def test_with_genome_dump_load_keeps_values(name, seed):
     # ... and survive a dump and load exactly
     again = loads_model(dumps_model(changed), "<dumped>")
     assert_same_model(changed, again)
-    assert not np.array_equal(changed.params.k, model.params.k)
+    assert not np.array_equal(
+        changed.params.bonds["binary"]["stiffness"], model.params.bonds["binary"]["stiffness"]
+    )
 
 
 def test_with_genome_weights_become_per_bond_lists():
@@ -106,9 +128,12 @@ def test_with_genome_weights_become_per_bond_lists():
     genome = np.clip(genome, model.layout.lower, model.layout.upper)
     changed = loads_model(dumps_model(model.with_genome(genome)))
     decoded = model.layout.decode(jnp.asarray(genome))
+    new, dec = changed.params.bonds["binary"], decoded.bonds["binary"]
     for b in range(3):
-        np.testing.assert_allclose(changed.params.w_len[b], np.asarray(decoded.w_len[b]), 1e-14)
-        assert changed.params.w_len[b, b] == 0.0 and changed.params.w_rate[b, b] == 0.0
+        np.testing.assert_allclose(
+            new["length_weights"][b], np.asarray(dec["length_weights"][b]), 1e-14
+        )
+        assert new["length_weights"][b, b] == 0.0 and new["rate_weights"][b, b] == 0.0
         assert isinstance(changed.spec.bond[b].weights.length, list)
 
 

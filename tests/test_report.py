@@ -336,7 +336,8 @@ def test_a_run_that_failed_at_once_is_still_reported(neural_run, tmp_path):
     (run / "history.csv").write_text(header + "\n")  # as written when every start failed
     record = load_run(run)
     assert not record.has_best and len(record.history["generation"]) == 0
-    assert record.model.topology.neural.all()  # the run's bond variant, starting values
+    # the run's bond variant, starting values
+    assert record.model.topology.bonds["binary"]["neural"].all()
     pred, _ = predict_run(record, frames=20)
     summary = dict(summary_table(record, pred).rows)
     assert summary["status"] == "completed (no best model)"

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import bonds
 from ..identify.cost import make_windows
 from ..model import Model
 
@@ -99,10 +100,11 @@ def momentum_floor_rms_mm(
 
 
 def model_floor_rms_mm(model: Model, positions: np.ndarray, mask: np.ndarray, dt: float):
-    """The momentum floor for ``model``'s family, or None where it does not apply: a unary
-    bond makes forces external (nothing is conserved), and free masses make the reachable
+    """The momentum floor for ``model``'s family, or None where it does not apply: a bond kind
+    with external forces (a unary bond) conserves nothing, and free masses make the reachable
     accelerations depend on them (the floor of the file's masses is no floor of the family)."""
-    if model.topology.unary.size or (np.asarray(model.layout.index.mass) >= 0).any():
+    external = [k for k in model.topology.active() if not bonds.get(k).internal]
+    if external or (np.asarray(model.layout.index.mass) >= 0).any():
         return None
     gravity = np.asarray(model.params.gravity, np.float64)
     return momentum_floor_rms_mm(positions, mask, dt, model.params.mass, gravity)

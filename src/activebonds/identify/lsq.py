@@ -2,7 +2,8 @@
 
 With one-substep semi-implicit Euler and horizon 1, the prediction of frame t + 1 is
 ``x_t + dt v_t + dt^2 F(x_t, v_t) / m`` (``v_t`` the backward difference), and the forces of
-the *linear families* are linear in a reparametrisation of their parameters:
+the *linear families* are linear in a reparametrisation of their parameters. Each bond kind
+says how it enters (``kind.linear``, :mod:`activebonds.bonds`), for example:
 
 * binary bonds (the passive part): tension ``k L - (k l0) + c Ldot``, unknowns ``(k, k l0, c)``;
 * unary springs and dampers: ``-k x + (k a) - c v``, unknowns ``(k, k a, c)``.
@@ -27,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import LinearConstraint, lsq_linear, minimize
 
+from .. import bonds
 from ..errors import InputError
 from ..model import Model
 from ..model.params import Params
@@ -59,55 +61,95 @@ class LinearFit:
     exact: bool  # True: optimum of the convex problem (False: the solver's best point)
 
 
-def _gene(index, where) -> int:
-    return int(np.asarray(index)[where])
-
-
-LINEAR_FIELDS = frozenset({"k", "l0", "c", "unary_k", "unary_c", "unary_anchor"})
+def _linear_fields(kind: str) -> frozenset[str]:
+    part = bonds.get(kind).linear
+    return frozenset() if part is None else part.fields
 
 
 def nonlinear_genes(model: Model) -> list[int]:
     """The genes outside the linear families (neural terms, masses, flexion springs): where
     there is one, the least-squares optimum is no optimum of the model's own family."""
-    return sorted(
-        {
-            int(g)
-            for f, idx in model.layout.index._asdict().items()
-            if f not in LINEAR_FIELDS
-            for g in np.asarray(idx).ravel()
-            if g >= 0
-        }
-    )
+    index = model.layout.index
+    arrays = [index.mass, index.gravity]
+    for kind, fields in index.bonds.items():
+        arrays += [a for f, a in fields.items() if f not in _linear_fields(kind)]
+    return sorted({int(g) for a in arrays for g in np.asarray(a).ravel() if g >= 0})
+
+
+def _free(index) -> bool:
+    return bool((np.asarray(index) >= 0).any())
 
 
 def _switched_off(model: Model) -> Params:
     """Model parameters with every linear unknown's term removed, neural gains at 0."""
     layout, topo = model.layout, model.topology
     base, index = layout.base, layout.index
-    p = {f: np.array(v, np.float64, copy=True) for f, v in base._asdict().items()}
-    for f in ("mass", "tern_k", "tern_angle"):
-        if (np.asarray(getattr(index, f)) >= 0).any():
-            what = "masses (use equation_error_fit)" if f == "mass" else "flexion springs"
-            raise InputError(model.name, f"least squares: free {what} do not enter linearly")
-    neural = np.asarray(topo.neural, bool)
-    if neural.any():
-        gain_free = np.asarray(index.gain) >= 0
-        lows = np.array([layout.genes[g].lower if g >= 0 else 0.0 for g in index.gain])
-        highs = np.array([layout.genes[g].upper if g >= 0 else 0.0 for g in index.gain])
-        fixed_on = neural & ~gain_free & (np.asarray(base.gain) != 0)
-        no_zero = neural & gain_free & ((lows > 0) | (highs < 0))
-        if fixed_on.any() or no_zero.any():
-            raise InputError(
-                model.name,
-                "least squares: a neural bond's gain must be able to be 0 (the neurons are "
-                "switched off; their terms do not enter linearly)",
+    values = {
+        kind: {f: np.array(a, np.float64, copy=True) for f, a in fields.items()}
+        for kind, fields in base.bonds.items()
+    }
+    if _free(index.mass):
+        raise InputError(
+            model.name, "least squares: free masses (use equation_error_fit) do not enter linearly"
+        )
+    for name in topo.active():
+        kind = bonds.get(name)
+        if kind.linear is None:
+            if any(_free(a) for a in index.bonds[name].values()):
+                raise InputError(
+                    model.name, f"least squares: free {kind.what} do not enter linearly"
+                )
+            continue
+        try:
+            values[name] = kind.linear.switch_off(
+                values[name], index.bonds[name], topo.bonds[name], layout.genes
             )
-        p["gain"] = np.where(neural, 0.0, p["gain"])
-    for b in range(topo.n_binary):
-        p["k"][b] = p["c"][b] = 0.0
-    for u in range(topo.unary.size):
-        p["unary_k"][u] = p["unary_c"][u] = 0.0
-    return Params(**p)
+        except ValueError as err:
+            raise InputError(model.name, str(err)) from None
+    return Params(
+        mass=np.array(base.mass, np.float64), gravity=np.array(base.gravity), bonds=values
+    )
+
+
+class _Unknowns:
+    """The columns of the linear unknowns being built, and the known forces."""
+
+    def __init__(self, model: Model, known: np.ndarray):
+        self.model, self.known = model, known
+        self.cols: dict[str, np.ndarray] = {}
+        self.bounds: dict[str, tuple[float, float]] = {}
+        self.pairs: list[tuple[str, str, float, float]] = []
+
+    def _name(self, g: int) -> str:
+        name = f"gene:{g}"
+        if name not in self.cols:
+            genes = self.model.layout.genes
+            self.cols[name] = np.zeros(self.known.shape)
+            self.bounds[name] = (genes[g].lower, genes[g].upper)
+        return name
+
+    def gene(self, g: int) -> np.ndarray:
+        """The column of gene ``g`` itself (a force per unit of it, [S, P, D])."""
+        return self.cols[self._name(g)]
+
+    def product(self, gk: int, gx: int) -> np.ndarray:
+        """The column of the product of genes ``gk`` (a stiffness, >= 0) and ``gx``."""
+        name = f"product:{gk}*{gx}"
+        if name not in self.cols:
+            genes = self.model.layout.genes
+            klo, khi = genes[gk].lower, genes[gk].upper
+            if klo < 0:
+                raise InputError(
+                    self.model.name,
+                    f"least squares: {genes[gk].name} may be negative (min {klo}); "
+                    "the bounds of k x need k >= 0",
+                )
+            xlo, xhi = genes[gx].lower, genes[gx].upper
+            corners = [a * b for a in (klo, khi) for b in (xlo, xhi)]
+            self.cols[name] = np.zeros(self.known.shape)
+            self.bounds[name] = (min(corners), max(corners))
+            self.pairs.append((self._name(gk), name, xlo, xhi))
+        return self.cols[name]
 
 
 def linear_problem(model: Model, windows: Windows) -> LinearProblem:
@@ -124,81 +166,14 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
         known = jax.vmap(lambda a, b: total_force(off_params, topo, a, b))(jnp.asarray(x), v)
         known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
-    cols: dict[str, np.ndarray] = {}
-    bounds: dict[str, tuple[float, float]] = {}
-    pairs: list[tuple[str, str, float, float]] = []
-
-    def gene_var(g: int) -> str:
-        name = f"gene:{g}"
-        if name not in cols:
-            cols[name] = np.zeros((n_s, n_p, d))
-            bounds[name] = (layout.genes[g].lower, layout.genes[g].upper)
-        return name
-
-    def product_var(gk: int, gx: int) -> str:
-        name = f"product:{gk}*{gx}"
-        if name not in cols:
-            klo, khi = layout.genes[gk].lower, layout.genes[gk].upper
-            if klo < 0:
-                raise InputError(
-                    model.name,
-                    f"least squares: {layout.genes[gk].name} may be negative (min {klo}); "
-                    "the bounds of k x need k >= 0",
-                )
-            xlo, xhi = layout.genes[gx].lower, layout.genes[gx].upper
-            corners = [a * b for a in (klo, khi) for b in (xlo, xhi)]
-            cols[name] = np.zeros((n_s, n_p, d))
-            bounds[name] = (min(corners), max(corners))
-            pairs.append((gene_var(gk), name, xlo, xhi))
-        return name
-
-    # binary bonds: F_i += f u, F_j -= f u with f = k (L - l0) + c Ldot
-    i, j = topo.binary[:, 0], topo.binary[:, 1]
-    for b in range(topo.n_binary):
-        dvec = x[:, j[b]] - x[:, i[b]]
-        length = np.linalg.norm(dvec, axis=-1)[:, None]
-        u = dvec / length
-        rate = np.sum((v[:, j[b]] - v[:, i[b]]) * u, axis=-1)[:, None]
-        gk, gl, gc = _gene(index.k, b), _gene(index.l0, b), _gene(index.c, b)
-        k, l0, c = float(base.k[b]), float(base.l0[b]), float(base.c[b])
-        terms = []  # (unknown or None, tension per unit)
-        if gk >= 0 and gl >= 0:
-            terms += [(gene_var(gk), length), (product_var(gk, gl), -np.ones_like(length))]
-        elif gk >= 0:
-            terms += [(gene_var(gk), length - l0)]
-        elif gl >= 0:
-            terms += [(None, k * length), (gene_var(gl), -k * np.ones_like(length))]
-        else:
-            terms += [(None, k * (length - l0))]
-        terms += [(gene_var(gc), rate)] if gc >= 0 else [(None, c * rate)]
-        for var, tension in terms:
-            target = known if var is None else cols[var]
-            target[:, i[b]] += tension * u
-            target[:, j[b]] -= tension * u
-
-    # unary springs and dampers: F_p += -k (x_p - a) - c v_p
-    for n, p in enumerate(np.asarray(topo.unary)):
-        gk, gc = _gene(index.unary_k, n), _gene(index.unary_c, n)
-        k, c = float(base.unary_k[n]), float(base.unary_c[n])
-        ga = [_gene(index.unary_anchor, (n, a)) for a in range(d)]
-        anchor = np.asarray(base.unary_anchor[n], np.float64)
-        if gk >= 0:
-            cols[gene_var(gk)][:, p] -= x[:, p]
-        else:
-            known[:, p] -= k * x[:, p]
-        for a in range(d):
-            if ga[a] >= 0 and gk >= 0:
-                cols[product_var(gk, ga[a])][:, p, a] += 1.0
-            elif ga[a] >= 0:
-                cols[gene_var(ga[a])][:, p, a] += k
-            elif gk >= 0:
-                cols[gene_var(gk)][:, p, a] += anchor[a]
-            else:
-                known[:, p, a] += k * anchor[a]
-        if gc >= 0:
-            cols[gene_var(gc)][:, p] -= v[:, p]
-        else:
-            known[:, p] -= c * v[:, p]
+    unknowns = _Unknowns(model, known)
+    for name in topo.active():
+        kind = bonds.get(name)
+        if kind.linear is not None:
+            kind.linear.columns(
+                base.bonds[name], index.bonds[name], topo.bonds[name], x, v, unknowns
+            )
+    cols, bounds, pairs = unknowns.cols, unknowns.bounds, unknowns.pairs
 
     # A gene that multiplies a free stiffness in one bond and a fixed one in another (bonds of
     # one type may mix free and fixed stiffness) enters bilinearly: not this solver's problem.
@@ -368,7 +343,7 @@ def equation_error_fit(
     from ..model.model import build
 
     particles = [p.model_copy(update={"mass": 1.0}) for p in model.spec.particle]
-    unit = build(model.spec.model_copy(update={"particle": particles}))
+    unit = build(model.spec.model_copy(update={"particle": particles}), disable=model.disabled)
     problem = linear_problem(unit, windows)  # masses 1: columns and offset are forces * dt^2
     dt = windows.dt
     n_s, n_p, d = windows.x0.shape

@@ -9,24 +9,38 @@ from pathlib import Path
 import tomli_w
 from pydantic import ValidationError
 
+from .. import bonds
 from ..atomic import write_text_atomic
 from ..errors import InputError
 from .model import Model, build
 from .schema import ModelSpec
 
 _NOISE = {"float_type", "float_parsing", "list_type", "model_type", "dict_type", "is_instance_of"}
-_EXPECTED = {
-    "anchor": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
+_PARAMETER = "expected a number or a table { value = .., min = .., max = .., fixed = .. }"
+_FORM_EXPECTED = {
+    "scalar": _PARAMETER,
+    "vector": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
     "weights": "expected a table { length = .., rate = .., min = .., max = .. }",
-    "length": "expected a number or a list of numbers (one per binary bond)",
-    "rate": "expected a number or a list of numbers (one per binary bond)",
+}
+_EXPECTED = {
+    "length": "expected a number or a list of numbers (one per bond of the kind)",
+    "rate": "expected a number or a list of numbers (one per bond of the kind)",
     "gravity": "expected a list of numbers",
     "position": "expected a list of numbers",
     "velocity": "expected a list of numbers",
+    "mass": _PARAMETER,
 }
-_PARAMETER = "expected a number or a table { value = .., min = .., max = .., fixed = .. }"
-for _name in ("mass", "stiffness", "rest_length", "damping", "rest_angle", "gain", "threshold"):
-    _EXPECTED[_name] = _PARAMETER
+
+
+def _expected(key: str, otherwise: str) -> str:
+    """What a field takes, for a value none of its forms accepted."""
+    for kind in bonds.kinds():
+        for p in kind.parameters:
+            if p.key == key:
+                return _FORM_EXPECTED[p.form]
+    return _EXPECTED.get(key, otherwise)
+
+
 _LEADING_FIELD = re.compile(r"^([A-Za-z_][\w\[\]\.]*): (.*)$", re.S)
 
 
@@ -68,7 +82,7 @@ def _explain(err: ValidationError, source: str) -> InputError:
         ):
             continue
         if noise:  # every alternative of a union failed: say what the field takes
-            msg = _EXPECTED.get(where.rsplit(".", 1)[-1].split("[")[0], msg)
+            msg = _expected(where.rsplit(".", 1)[-1].split("[")[0], msg)
         text = f"{where}: {msg}" if where else msg
         if text not in problems:
             problems.append(text)

@@ -2,7 +2,7 @@
 
 DESIGN.md §3: genes are grouped by bond type (all occurrences of a type share one parameter
 set); every gene has bounds; positive quantities with wide bounds are searched in log space.
-``decode`` maps a genome (search space) to :class:`Params` with one gather per field, so it
+``decode`` maps a genome (search space) to :class:`Params` with one gather per leaf, so it
 vmaps over a population at no cost.
 """
 
@@ -11,22 +11,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .params import Params
 
-# Bounds for a free parameter given without min/max: (lower, upper) from the file value v.
-_DEFAULT_BOUNDS = {
-    "stiffness": lambda v: (v / 100, v * 100) if v > 0 else (0.0, 1e3),
-    "damping": lambda v: (v / 100, v * 100) if v > 0 else (0.0, 10.0),
-    "rest_length": lambda v: (0.5 * v, 1.5 * v) if v > 0 else (0.0, 1.0),
-    "rest_angle": lambda v: (0.0, math.pi),
-    "gain": lambda v: (0.0, max(100.0, 2 * abs(v))),
-    "threshold": lambda v: (-5.0, 5.0),
-    "mass": lambda v: (v / 10, v * 10),
-    "anchor": lambda v: (v - 1.0, v + 1.0),
-}
+
+# Bounds of a free mass given without min/max, from the file value v (bond parameters declare
+# theirs: activebonds.bonds).
+def mass_bounds(v: float) -> tuple[float, float]:
+    return (v / 10, v * 10)
 
 
 @dataclass(frozen=True)
@@ -82,22 +77,18 @@ class Layout:
         values = jnp.where(jnp.asarray(self.log), jnp.exp(genome), genome)
         padded = jnp.concatenate([values, jnp.zeros((1,), values.dtype)])
 
-        def field(base, index):
+        def leaf(base, index):
             index = np.asarray(index)
             if index.size == 0 or (index < 0).all():
                 return jnp.asarray(base, values.dtype)
             gathered = padded[np.where(index >= 0, index, len(self.genes))]
             return jnp.where(index >= 0, gathered, jnp.asarray(base, values.dtype))
 
-        return Params(*(field(b, i) for b, i in zip(self.base, self.index, strict=True)))
+        return jax.tree_util.tree_map(leaf, self.base, self.index)
 
 
 def _to_search(x: float, log: bool) -> float:
     return math.log(x) if log else x
-
-
-def default_bounds(kind: str, value: float) -> tuple[float, float]:
-    return _DEFAULT_BOUNDS[kind](value)
 
 
 def pick_log(lower: float, upper: float, log: bool | None) -> bool:

@@ -5,25 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import jax
 import numpy as np
 
-from .layout import Gene, Layout, default_bounds, pick_log
+from .. import bonds
+from .layout import Gene, Layout, mass_bounds, pick_log
 from .params import Params, Topology
-from .schema import Bond, ModelSpec, Param, VectorParam, Weights
-
-# bond kind -> {file parameter: Params field}
-_FIELDS = {
-    "unary": {"stiffness": "unary_k", "damping": "unary_c"},
-    "binary": {
-        "stiffness": "k",
-        "rest_length": "l0",
-        "damping": "c",
-        "gain": "gain",
-        "threshold": "threshold",
-    },
-    "ternary": {"stiffness": "tern_k", "rest_angle": "tern_angle"},
-}
-_DEFAULTS = {"stiffness": 0.0, "damping": 0.0, "gain": 1.0, "threshold": 0.0}
+from .schema import ModelSpec, Param, VectorParam, Weights
 
 
 def _value(p: float | Param | None, default: float = 0.0) -> float:
@@ -61,6 +49,10 @@ class Model:
         return tuple(p.marker or p.name for p in self.spec.particle)
 
     @property
+    def disabled(self) -> frozenset[str]:
+        return self.topology.disabled
+
+    @property
     def params(self) -> Params:
         """The model file's values."""
         return self.layout.base
@@ -73,51 +65,60 @@ class Model:
 
     def with_genome(self, genome: np.ndarray) -> Model:
         """The model with its free parameters set from a genome (search space)."""
-        return build(with_values(self, self.layout.natural(genome)))
+        return build(with_values(self, self.layout.natural(genome)), disable=self.disabled)
+
+    def without(self, kinds) -> Model:
+        """The model with the bonds of ``kinds`` switched off (no force, no genes); writing it
+        back keeps their file values. ``Model.without(set())`` switches every kind on again."""
+        return build(self.spec, disable=kinds)
 
 
-def build(spec: ModelSpec) -> Model:
-    """Compile a validated spec into topology and genome layout."""
+def _shape(p: bonds.Parameter, n: int, d: int) -> tuple[int, ...]:
+    return {"scalar": (n,), "vector": (n, d), "weights": (n, n)}[p.form]
+
+
+def build(spec: ModelSpec, disable=frozenset()) -> Model:
+    """Compile a validated spec into topology and genome layout. The bonds of the kinds in
+    ``disable`` exert no force and carry no genes (ablations)."""
+    disable = frozenset(disable)
+    unknown = sorted(disable - set(bonds.names()))
+    if unknown:
+        raise ValueError(f"disable: unknown bond kind(s) {', '.join(unknown)}")
     names = {p.name: i for i, p in enumerate(spec.particle)}
     d = spec.dimension
-    bonds = spec.bond
-    unary = [b for b in bonds if b.kind == "unary"]
-    binary = [b for b in bonds if b.kind == "binary"]
-    ternary = [b for b in bonds if b.kind == "ternary"]
-    n_b = len(binary)
+    kinds = bonds.kinds()
+    of_kind = {k.name: [b for b in spec.bond if b.kind == k.name] for k in kinds}
     topology = Topology(
         n_particles=len(spec.particle),
         dimension=d,
-        unary=np.array([names[b.particles[0]] for b in unary], dtype=np.int32).reshape(-1),
-        binary=np.array([[names[n] for n in b.particles] for b in binary], dtype=np.int32).reshape(
-            -1, 2
-        ),
-        neural=np.array([b.neural for b in binary], dtype=bool).reshape(-1),
-        ternary=np.array(
-            [[names[n] for n in b.particles] for b in ternary], dtype=np.int32
-        ).reshape(-1, 3),
+        bonds={
+            k.name: {
+                "particles": np.array(
+                    [[names[n] for n in b.particles] for b in of_kind[k.name]], dtype=np.int32
+                ).reshape(-1, k.arity),
+                **{
+                    flag: np.array([getattr(b, flag) for b in of_kind[k.name]], bool).reshape(-1)
+                    for flag in k.flags
+                },
+            }
+            for k in kinds
+        },
+        disabled=disable,
     )
-    shapes = {
-        "mass": (len(spec.particle),),
-        "gravity": (d,),
-        "unary_k": (len(unary),),
-        "unary_c": (len(unary),),
-        "unary_anchor": (len(unary), d),
-        "k": (n_b,),
-        "l0": (n_b,),
-        "c": (n_b,),
-        "gain": (n_b,),
-        "threshold": (n_b,),
-        "w_len": (n_b, n_b),
-        "w_rate": (n_b, n_b),
-        "tern_k": (len(ternary),),
-        "tern_angle": (len(ternary),),
-    }
-    base = {f: np.zeros(s, dtype=np.float64) for f, s in shapes.items()}
-    index = {f: np.full(s, -1, dtype=np.int32) for f, s in shapes.items()}
-    base["gain"][:] = _DEFAULTS["gain"]
+    base = Params(
+        mass=np.zeros(len(spec.particle), np.float64),
+        gravity=np.zeros(d, np.float64),
+        bonds={
+            k.name: {
+                p.field: np.full(_shape(p, len(of_kind[k.name]), d), p.default or 0.0, np.float64)
+                for p in k.parameters
+            }
+            for k in kinds
+        },
+    )
+    index = jax.tree_util.tree_map(lambda a: np.full(a.shape, -1, np.int32), base)
     if spec.gravity is not None:
-        base["gravity"][:] = spec.gravity
+        base.gravity[:] = spec.gravity
 
     genes: list[Gene] = []
     gene_of: dict[tuple, int] = {}
@@ -132,12 +133,12 @@ def build(spec: ModelSpec) -> Model:
             slots[group_of[key]] = []
         return group_of[key]
 
-    def put(field, where, kind, p, g, key, value, lower=None, upper=None, log=None):
-        base[field][where] = value
-        if not _is_free(p):
+    def put(values, indices, where, bounds, p, g, key, value, lower=None, upper=None, log=None):
+        values[where] = value
+        if g is None or not _is_free(p):
             return
         if (g, key) not in gene_of:
-            lo, hi = default_bounds(kind, value)
+            lo, hi = bounds(value)
             lo = lo if lower is None else lower
             hi = hi if upper is None else upper
             lo, hi = min(lo, value), max(hi, value)
@@ -149,54 +150,54 @@ def build(spec: ModelSpec) -> Model:
             use_log = pick_log(lo, hi, log)
             gene_of[(g, key)] = len(genes)
             genes.append(Gene(f"{groups[g]}.{key}", g, lo, hi, use_log, value))
-        index[field][where] = gene_of[(g, key)]
+        indices[where] = gene_of[(g, key)]
 
     for i, p in enumerate(spec.particle):
         m = p.mass
-        base["mass"][i] = _value(m)
+        base.mass[i] = _value(m)
         if _is_free(m):
             g = group(f"mass:{p.name}")
             slots[g].append(i)
-            put("mass", i, "mass", m, g, "mass", m.value, m.min, m.max, m.log)
+            put(base.mass, index.mass, i, mass_bounds, m, g, "mass", m.value, m.min, m.max, m.log)
 
-    counters = {"unary": 0, "binary": 0, "ternary": 0}
-    for bi, b in enumerate(bonds):
+    counters = {k.name: 0 for k in kinds}
+    for bi, b in enumerate(spec.bond):
+        kind = bonds.get(b.kind)
         pos = counters[b.kind]
         counters[b.kind] += 1
-        g = group(f"type:{b.type}" if b.type else f"bond[{bi}]")
-        slots[g].extend(names[n] for n in b.particles)
-        for pname, field in _FIELDS[b.kind].items():
-            p = getattr(b, pname)
-            if (
-                p is None
-                and pname not in ("stiffness", "damping")
-                and not (b.neural and pname in ("gain", "threshold"))
-            ):
+        g = None
+        if b.kind not in disable:
+            g = group(f"type:{b.type}" if b.type else f"bond[{bi}]")
+            slots[g].extend(names[n] for n in b.particles)
+        values, indices = base.bonds[b.kind], index.bonds[b.kind]
+        for par in kind.parameters:
+            p = getattr(b, par.key)
+            if p is None or (par.when and not getattr(b, par.when)):
                 continue
-            v = _value(p, _DEFAULTS.get(pname, 0.0))
-            lo = p.min if isinstance(p, Param) else None
-            hi = p.max if isinstance(p, Param) else None
-            lg = p.log if isinstance(p, Param) else None
-            put(field, pos, pname, p, g, pname, v, lo, hi, lg)
-        if b.kind == "unary" and b.anchor is not None:
-            a = b.anchor
-            vals = a if isinstance(a, list) else a.value
-            for ax in range(d):
-                lo = hi = None
-                if isinstance(a, VectorParam):
-                    lo = a.min[ax] if isinstance(a.min, list) else a.min
-                    hi = a.max[ax] if isinstance(a.max, list) else a.max
-                put("unary_anchor", (pos, ax), "anchor", a, g, f"anchor[{ax}]", vals[ax], lo, hi)
-        if b.kind == "binary" and b.neural and b.weights is not None:
-            w = b.weights
-            for field, attr in (("w_len", "length"), ("w_rate", "rate")):
-                xs = getattr(w, attr)
-                xs = xs if isinstance(xs, list) else [xs] * n_b
-                for j in range(n_b):
+            vals, ids = values[par.field], indices[par.field]
+            if par.form == "scalar":
+                lo = p.min if isinstance(p, Param) else None
+                hi = p.max if isinstance(p, Param) else None
+                lg = p.log if isinstance(p, Param) and par.log is None else par.log
+                put(vals, ids, pos, par.bounds, p, g, par.key, _value(p), lo, hi, lg)
+            elif par.form == "vector":
+                xs = p if isinstance(p, list) else p.value
+                for ax in range(d):
+                    lo = hi = None
+                    if isinstance(p, VectorParam):
+                        lo = p.min[ax] if isinstance(p.min, list) else p.min
+                        hi = p.max[ax] if isinstance(p.max, list) else p.max
+                    key = f"{par.key}[{ax}]"
+                    put(vals, ids, (pos, ax), par.bounds, p, g, key, xs[ax], lo, hi, par.log)
+            else:  # weights: a row over the bonds of this kind, the bond's own entry unused
+                n = len(of_kind[b.kind])
+                xs = getattr(p, par.part)
+                xs = xs if isinstance(xs, list) else [xs] * n
+                for j in range(n):
                     if j == pos:
                         continue
-                    key = f"weights.{attr}[{j}]"
-                    put(field, (pos, j), "threshold", w, g, key, xs[j], w.min, w.max, False)
+                    key = f"{par.key}.{par.part}[{j}]"
+                    put(vals, ids, (pos, j), par.bounds, p, g, key, xs[j], p.min, p.max, par.log)
 
     width = max([len(s) for s in slots.values()] + [1])
     group_slots = np.full((len(groups), width), -1, dtype=np.int32)
@@ -206,8 +207,8 @@ def build(spec: ModelSpec) -> Model:
         genes=tuple(genes),
         groups=tuple(groups),
         group_slots=group_slots,
-        base=Params(**base),
-        index=Params(**index),
+        base=base,
+        index=index,
     )
     return Model(spec=spec, topology=topology, layout=layout)
 
@@ -216,19 +217,18 @@ def with_values(model: Model, values: np.ndarray) -> ModelSpec:
     """A spec equal to the model's, with every free parameter set to ``values`` (natural units)."""
     layout = model.layout
     values = np.concatenate([np.asarray(values, dtype=np.float64).reshape(-1), [0.0]])
-    params = Params(
-        *(
-            np.where(np.asarray(i) >= 0, np.asarray(values)[np.maximum(np.asarray(i), 0)], b)
-            if np.asarray(i).size
-            else b
-            for b, i in zip(layout.base, layout.index, strict=True)
-        )
-    )
-    return spec_with_params(model.spec, params)
+
+    def leaf(b, i):
+        i = np.asarray(i)
+        return np.where(i >= 0, values[np.maximum(i, 0)], b) if i.size else b
+
+    params = jax.tree_util.tree_map(leaf, layout.base, layout.index)
+    return spec_with_params(model.spec, params, keep=model.disabled)
 
 
-def spec_with_params(spec: ModelSpec, params: Params) -> ModelSpec:
-    """Write numbers back into a spec, keeping which parameters are free and their bounds."""
+def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> ModelSpec:
+    """Write numbers back into a spec, keeping which parameters are free and their bounds.
+    The bonds of the kinds in ``keep`` keep their file values."""
 
     def setp(p, v):
         if isinstance(p, Param):
@@ -242,28 +242,34 @@ def spec_with_params(spec: ModelSpec, params: Params) -> ModelSpec:
         p.model_copy(update={"mass": setp(p.mass, params.mass[i])})
         for i, p in enumerate(spec.particle)
     ]
-    counters = {"unary": 0, "binary": 0, "ternary": 0}
-    bonds: list[Bond] = []
+    counters: dict[str, int] = {}
+    out = []
     for b in spec.bond:
-        pos = counters[b.kind]
-        counters[b.kind] += 1
+        pos = counters.get(b.kind, 0)
+        counters[b.kind] = pos + 1
+        if b.kind in keep:
+            out.append(b)
+            continue
+        values = params.bonds[b.kind]
         update: dict[str, Any] = {}
-        for pname, field in _FIELDS[b.kind].items():
-            p = getattr(b, pname)
-            if p is not None:
-                update[pname] = setp(p, getattr(params, field)[pos])
-        if b.kind == "unary" and b.anchor is not None:
-            vals = [float(x) for x in params.unary_anchor[pos]]
-            a = b.anchor
-            update["anchor"] = (
-                a.model_copy(update={"value": vals}) if isinstance(a, VectorParam) else vals
-            )
-        if b.kind == "binary" and b.neural and b.weights is not None:
-            row_l = [0.0 if j == pos else float(x) for j, x in enumerate(params.w_len[pos])]
-            row_r = [0.0 if j == pos else float(x) for j, x in enumerate(params.w_rate[pos])]
-            lo, hi = b.weights.min, b.weights.max
-            row_l = [min(max(x, lo), hi) for x in row_l]
-            row_r = [min(max(x, lo), hi) for x in row_r]
-            update["weights"] = b.weights.model_copy(update={"length": row_l, "rate": row_r})
-        bonds.append(b.model_copy(update=update))
-    return spec.model_copy(update={"particle": particles, "bond": bonds})
+        for par in bonds.get(b.kind).parameters:
+            p = getattr(b, par.key)
+            if p is None or (par.when and not getattr(b, par.when)):
+                continue
+            row = values[par.field][pos]
+            if par.form == "scalar":
+                update[par.key] = setp(p, row)
+            elif par.form == "vector":
+                xs = [float(x) for x in row]
+                update[par.key] = (
+                    p.model_copy(update={"value": xs}) if isinstance(p, VectorParam) else xs
+                )
+            else:
+                xs = [0.0 if j == pos else float(x) for j, x in enumerate(row)]
+                parts = update.setdefault(par.key, {})
+                parts[par.part] = [min(max(x, p.min), p.max) for x in xs]
+        for key, value in update.items():
+            if isinstance(value, dict):  # the weights table's rows
+                update[key] = getattr(b, key).model_copy(update=value)
+        out.append(b.model_copy(update=update))
+    return spec.model_copy(update={"particle": particles, "bond": out})

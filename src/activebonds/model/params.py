@@ -1,12 +1,15 @@
 """Static topology apart from dynamic numbers (brax/MJX style).
 
-``Topology`` holds index arrays (which particles each bond joins); ``Params`` holds the numbers
-of one individual, as array leaves that can be vmapped over a population.
+``Topology`` holds index arrays (which particles each bond joins), kind by kind; ``Params``
+holds the numbers of one individual, as array leaves that can be vmapped over a population:
+``params.bonds["binary"]["stiffness"]`` is the [N] stiffness of the model's binary bonds.
+Both list every kind registered when the model was built (:mod:`activebonds.bonds`), in
+registry order, with empty arrays for kinds the model does not use.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -14,34 +17,34 @@ import numpy as np
 
 @dataclass(frozen=True, eq=False)
 class Topology:
-    """Particle count, dimension and bond index arrays: fixed for a whole identification."""
+    """Particle count, dimension and bond index arrays: fixed for a whole identification.
+
+    ``bonds[kind]`` holds ``"particles"`` [N, arity] (int32; a ternary bond's angle is at its
+    middle particle) and one [N] bool array per flag of the kind (``"neural"`` for binary
+    bonds). The bonds of a kind in ``disabled`` exert no force and carry no genes."""
 
     n_particles: int
     dimension: int
-    unary: np.ndarray  # [U] particle index of each unary bond
-    binary: np.ndarray  # [B, 2] particle indices (i, j) of each binary bond
-    neural: np.ndarray  # [B] bool: binary bond b carries a neuron
-    ternary: np.ndarray  # [T, 3] particle indices (i, j, k); the angle is at j
+    bonds: dict[str, dict[str, np.ndarray]]
+    disabled: frozenset[str] = field(default_factory=frozenset)
 
-    @property
-    def n_binary(self) -> int:
-        return int(self.binary.shape[0])
+    def count(self, kind: str) -> int:
+        """Number of bonds of ``kind`` (0 for a kind the model does not know)."""
+        arrays = self.bonds.get(kind)
+        return 0 if arrays is None else int(arrays["particles"].shape[0])
+
+    def particles(self, kind: str) -> np.ndarray:
+        return self.bonds[kind]["particles"]
+
+    def active(self) -> tuple[str, ...]:
+        """Kinds with bonds that are not disabled, in registry order."""
+        return tuple(k for k in self.bonds if k not in self.disabled and self.count(k))
 
 
 class Params(NamedTuple):
-    """The numbers of one model (SI units). Shapes: P particles, D axes, U/B/T bonds."""
+    """The numbers of one model (SI units): masses [P], the uniform field [D] and, per bond
+    kind, its parameters by field (``[N]`` scalars, ``[N, D]`` vectors, ``[N, N]`` weights)."""
 
-    mass: np.ndarray  # [P]
-    gravity: np.ndarray  # [D]
-    unary_k: np.ndarray  # [U]
-    unary_c: np.ndarray  # [U]
-    unary_anchor: np.ndarray  # [U, D]
-    k: np.ndarray  # [B] stiffness
-    l0: np.ndarray  # [B] rest length
-    c: np.ndarray  # [B] damping
-    gain: np.ndarray  # [B] muscle gain (N); used where neural
-    threshold: np.ndarray  # [B]
-    w_len: np.ndarray  # [B, B] weight of bond j's elongation in neuron b (diagonal unused)
-    w_rate: np.ndarray  # [B, B] weight of bond j's elongation rate in neuron b
-    tern_k: np.ndarray  # [T] flexion stiffness
-    tern_angle: np.ndarray  # [T] rest angle (radians)
+    mass: np.ndarray
+    gravity: np.ndarray
+    bonds: dict[str, dict[str, np.ndarray]]

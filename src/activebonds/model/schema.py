@@ -5,14 +5,29 @@ tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
 binary bond of the model (in file order; a neuron's own entry is ignored and written as 0).
+
+A bond table is checked by its kind's class, made from the kind's declaration
+(:mod:`activebonds.bonds`): its flags, its parameters and their rules.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    WrapValidator,
+    create_model,
+    field_validator,
+    model_validator,
+)
+
+from .. import bonds
 
 
 class _Strict(BaseModel):
@@ -140,31 +155,39 @@ class Particle(_Strict):
         return None if xs is None else [_finite(x) for x in xs]
 
 
-_KIND_PARAMS = {
-    "unary": {"stiffness", "damping", "anchor"},
-    "binary": {"stiffness", "rest_length", "damping", "gain", "weights", "threshold"},
-    "ternary": {"stiffness", "rest_angle"},
-}
-_NEURAL_ONLY = {"gain", "weights", "threshold"}
+class BondBase(_Strict):
+    """The keys every bond table has; each kind's class (:func:`bond_class`) adds its flags
+    and parameters, from the kind's declaration in :mod:`activebonds.bonds`."""
 
-
-class Bond(_Strict):
-    kind: Literal["unary", "binary", "ternary"]
+    kind: str
     particles: list[str]
     type: str | None = None
-    neural: bool = False
-    stiffness: Scalar | None = None
-    rest_length: Scalar | None = None
-    damping: Scalar | None = None
-    anchor: Vector | None = None
-    rest_angle: Scalar | None = None
-    gain: Scalar | None = None
-    weights: Weights | None = None
-    threshold: Scalar | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _foreign_keys(cls, data: Any) -> Any:
+        """Keys of other kinds: a parameter named as such, a flag only where it is set."""
+        if not isinstance(data, dict):
+            return data
+        kind = data.get("kind")
+        data = dict(data)
+        for key in list(data):
+            if key in cls.model_fields:
+                continue
+            flag_of = [k.name for k in bonds.kinds() if key in k.flags]
+            if flag_of:
+                if data[key] is False:  # e.g. 'neural = false' on a unary bond
+                    del data[key]
+                    continue
+                raise ValueError(f"{key}: only {' and '.join(flag_of)} bonds can be {key}")
+            if any(key in k.keys for k in bonds.kinds()):
+                raise ValueError(f"{key}: not a parameter of a {kind} bond")
+        return data
 
     @model_validator(mode="after")
-    def _check_kind(self) -> Bond:
-        arity = {"unary": 1, "binary": 2, "ternary": 3}[self.kind]
+    def _check_kind(self) -> BondBase:
+        kind = bonds.get(self.kind)
+        arity = kind.arity
         # Messages start with the field at fault ("field: ..."); the loader adds it to the path.
         if len(self.particles) != arity:
             raise ValueError(
@@ -173,27 +196,47 @@ class Bond(_Strict):
             )
         if len(set(self.particles)) != arity:
             raise ValueError(f"particles: a {self.kind} bond needs {arity} distinct particles")
-        if self.neural and self.kind != "binary":
-            raise ValueError("neural: only binary bonds can be neural")
-        allowed = _KIND_PARAMS[self.kind]
-        for name in _KIND_PARAMS["binary"] | _KIND_PARAMS["unary"] | _KIND_PARAMS["ternary"]:
-            if getattr(self, name) is not None and name not in allowed:
-                raise ValueError(f"{name}: not a parameter of a {self.kind} bond")
-        for name in _NEURAL_ONLY:
-            if getattr(self, name) is not None and not self.neural:
-                raise ValueError(f"{name}: '{name}' needs neural = true")
-        if self.kind == "binary" and self.rest_length is None:
-            raise ValueError("rest_length: a binary bond needs rest_length")
-        if self.kind == "ternary" and self.rest_angle is None:
-            raise ValueError("rest_angle: a ternary bond needs rest_angle (radians)")
-        for name in ("stiffness", "damping", "rest_length"):
-            value = _value_of(getattr(self, name))
-            if value is not None and value < 0:
-                raise ValueError(f"{name}: must be >= 0, got {value}")
-        value = _value_of(self.rest_angle)
-        if value is not None and not 0.0 <= value <= math.pi:
-            raise ValueError(f"rest_angle: must be in [0, pi] radians, got {value}")
+        for p in kind.parameters:
+            if p.when and getattr(self, p.key) is not None and not getattr(self, p.when):
+                raise ValueError(f"{p.key}: '{p.key}' needs {p.when} = true")
+        for p in kind.parameters:
+            if p.default is None and getattr(self, p.key) is None:
+                raise ValueError(f"{p.key}: a {self.kind} bond needs {p.key}{p.note}")
+        for p in kind.parameters:
+            value = _value_of(getattr(self, p.key)) if p.form == "scalar" else None
+            if p.check and value is not None and not p.check.test(value):
+                raise ValueError(f"{p.key}: must be {p.check.text}, got {value}")
         return self
+
+
+_FORMS = {"scalar": Scalar, "vector": Vector, "weights": Weights}
+
+
+@functools.cache
+def bond_class(kind: bonds.BondKind) -> type[BondBase]:
+    """The pydantic class of a kind's bond tables: its flags and parameters, all optional."""
+    fields: dict[str, Any] = {flag: (bool, False) for flag in kind.flags}
+    for p in kind.parameters:
+        fields[p.key] = (_FORMS[p.form] | None, None)
+    name = kind.name.title().replace("_", "") + "Bond"
+    return create_model(name, __base__=BondBase, **fields)
+
+
+def _bond(data: Any, handler) -> BondBase:
+    """A bond table, validated by its kind's class (errors keep their paths)."""
+    if isinstance(data, BondBase):
+        return data
+    if not isinstance(data, dict):
+        raise ValueError("expected a table with kind = .. and particles = [..]")
+    if "kind" not in data:
+        raise ValueError("kind: required key is missing")
+    kind = data["kind"]
+    if not isinstance(kind, str) or kind not in bonds.names():
+        raise ValueError(f"kind: Input should be {bonds.registry.listing(bonds.names())}")
+    return bond_class(bonds.get(kind)).model_validate(data)
+
+
+Bond = Annotated[Any, WrapValidator(_bond)]
 
 
 class ModelSpec(_Strict):
@@ -235,33 +278,42 @@ class ModelSpec(_Strict):
                     raise ValueError(
                         f"particle[{i}].{field}: expected {d} components, got {len(vec)}"
                     )
-        n_binary = sum(b.kind == "binary" for b in self.bond)
-        types: dict[str, tuple[str, bool]] = {}
+        counts: dict[str, int] = {}
+        for b in self.bond:
+            counts[b.kind] = counts.get(b.kind, 0) + 1
+        types: dict[str, tuple] = {}
         for i, b in enumerate(self.bond):
+            kind = bonds.get(b.kind)
             for name in b.particles:
                 if name not in seen:
                     raise ValueError(f"bond[{i}].particles: unknown particle '{name}'")
-            if b.anchor is not None:
-                vals = b.anchor if isinstance(b.anchor, list) else b.anchor.value
-                if len(vals) != d:
-                    raise ValueError(f"bond[{i}].anchor: expected {d} components, got {len(vals)}")
-                if isinstance(b.anchor, VectorParam):
-                    for bound in (b.anchor.min, b.anchor.max):
-                        if isinstance(bound, list) and len(bound) != d:
-                            raise ValueError(f"bond[{i}].anchor: bounds need {d} components")
-            if b.weights is not None:
-                for field in ("length", "rate"):
-                    xs = getattr(b.weights, field)
-                    if isinstance(xs, list) and len(xs) != n_binary:
+            for p in kind.parameters:
+                value = getattr(b, p.key)
+                if value is None:
+                    continue
+                if p.form == "vector":
+                    vals = value if isinstance(value, list) else value.value
+                    if len(vals) != d:
                         raise ValueError(
-                            f"bond[{i}].weights.{field}: expected {n_binary} entries "
-                            f"(one per binary bond), got {len(xs)}"
+                            f"bond[{i}].{p.key}: expected {d} components, got {len(vals)}"
+                        )
+                    if isinstance(value, VectorParam):
+                        for bound in (value.min, value.max):
+                            if isinstance(bound, list) and len(bound) != d:
+                                raise ValueError(f"bond[{i}].{p.key}: bounds need {d} components")
+                if p.form == "weights":
+                    xs, n = getattr(value, p.part), counts[b.kind]
+                    if isinstance(xs, list) and len(xs) != n:
+                        raise ValueError(
+                            f"bond[{i}].{p.key}.{p.part}: expected {n} entries "
+                            f"(one per {b.kind} bond), got {len(xs)}"
                         )
             if b.type is not None:
-                sig = (b.kind, b.neural)
+                sig = (b.kind, *(getattr(b, flag) for flag in kind.flags))
                 if b.type in types and types[b.type] != sig:
+                    flags = "".join(f" and {flag}" for flag in kind.flags)
                     raise ValueError(
-                        f"bond[{i}].type: bonds of type '{b.type}' must share kind and neural"
+                        f"bond[{i}].type: bonds of type '{b.type}' must share kind{flags}"
                     )
                 types[b.type] = sig
         return self

@@ -14,7 +14,7 @@ def as_standard(model: Model) -> Model:
         else b
         for b in model.spec.bond
     ]
-    return build(model.spec.model_copy(update={"bond": bonds}))
+    return build(model.spec.model_copy(update={"bond": bonds}), disable=model.disabled)
 
 
 def as_neural(model: Model, *, gain: Param | None = None) -> Model:
@@ -38,4 +38,4 @@ def as_neural(model: Model, *, gain: Param | None = None) -> Model:
                 }
             )
         bonds.append(b)
-    return build(model.spec.model_copy(update={"bond": bonds}))
+    return build(model.spec.model_copy(update={"bond": bonds}), disable=model.disabled)

@@ -1,6 +1,6 @@
-"""Physics of particle-bond systems: forces per bond family and time integration."""
+"""Physics of particle-bond systems: forces (the bond kinds' own, summed) and time integration."""
 
-from .forces import FAMILIES, neuron_activity, total_force
+from .forces import bond_forces, neuron_activity, total_force, uniform_field
 from .integrate import (
     advance,
     euler_step,
@@ -11,13 +11,14 @@ from .integrate import (
 )
 
 __all__ = [
-    "FAMILIES",
     "advance",
+    "bond_forces",
     "euler_step",
     "neuron_activity",
     "rollout",
     "rollout_states",
     "start_velocity",
     "total_force",
+    "uniform_field",
     "verlet_step",
 ]

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 
 from ..identify.operators import VARIANTS
 from ..model import Model
-from .predict import Prediction, neural_weights, to_mm
+from .predict import Prediction, neural_bonds, neural_weights, to_mm
 from .runs import history_rms_mm
 
 RECORDED = "black"
@@ -191,8 +191,10 @@ def gene_label(model: Model, name: str) -> str:
 
 
 def bond_labels(model: Model) -> list[str]:
+    """'A–B' for each of the report's per-bond rows (predict.neural_bonds)."""
     names = model.particle_names
-    return [f"{names[i]}–{names[j]}" for i, j in np.asarray(model.topology.binary).reshape(-1, 2)]
+    rows, _ = neural_bonds(model.topology)
+    return ["–".join(names[i] for i in row) for row in rows]
 
 
 def weight_heatmap(
@@ -201,7 +203,7 @@ def weight_heatmap(
     """Rows: neurons (neural bonds); columns: the length then the rate weights of the other
     bonds. Diverging colours centred at 0; unused entries (a neuron's own bond) are blank."""
     w_len, w_rate, span = neural_weights(model)
-    neural = np.asarray(model.topology.neural, bool).reshape(-1)
+    _, neural = neural_bonds(model.topology)
     labels = bond_labels(model)
     rows = np.flatnonzero(neural)
     m = np.concatenate([w_len, w_rate], axis=1)[rows] if rows.size else np.zeros((0, 0))

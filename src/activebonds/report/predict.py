@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import bonds
 from ..data import Trajectory
 from ..model import Model, Params, Topology
 from ..physics import advance, neuron_activity, rollout_states, start_velocity
@@ -37,7 +38,12 @@ class _Topo:
         self.key = (
             topo.n_particles,
             topo.dimension,
-            *((a.shape, a.tobytes()) for a in (topo.unary, topo.binary, topo.neural, topo.ternary)),
+            tuple(sorted(topo.disabled)),
+            *(
+                (kind, name, a.shape, a.tobytes())
+                for kind, arrays in topo.bonds.items()
+                for name, a in arrays.items()
+            ),
         )
 
     def __hash__(self) -> int:
@@ -48,7 +54,26 @@ class _Topo:
 
 
 def _params(model: Model) -> Params:
-    return Params(*(jnp.asarray(np.asarray(a, np.float64)) for a in model.params))
+    return jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a, np.float64)), model.params)
+
+
+def neural_kinds(topo: Topology) -> tuple[str, ...]:
+    """The kinds whose bonds may carry a neuron (binary bonds), in registry order: the
+    report's per-bond rows (labels, activations, weights) are their bonds, in this order."""
+    return tuple(k for k in topo.bonds if bonds.get(k).activity is not None)
+
+
+def neural_bonds(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
+    """Particle indices [B, arity] of the bonds of :func:`neural_kinds` and which carry a
+    neuron [B] (a kind's ``neural`` flag)."""
+    rows, flags = [], []
+    for k in neural_kinds(topo):
+        arrays = topo.bonds[k]
+        rows.append(np.asarray(arrays["particles"], np.int64))
+        flags.append(np.asarray(arrays.get("neural", np.ones(len(rows[-1]), bool)), bool))
+    if not rows:
+        return np.zeros((0, 2), np.int64), np.zeros(0, bool)
+    return np.concatenate(rows), np.concatenate(flags)
 
 
 @partial(jax.jit, static_argnames=("topo", "substeps", "method"))
@@ -188,7 +213,7 @@ def activations(model: Model, xs: np.ndarray, vs: np.ndarray) -> np.ndarray:
     state is unknown."""
     xs = np.asarray(xs, np.float64)
     vs = np.asarray(vs, np.float64)
-    n_b = model.topology.n_binary
+    n_b = len(neural_bonds(model.topology)[1])
     out = np.full((xs.shape[0], n_b), np.nan)
     if n_b == 0:
         return out
@@ -220,15 +245,27 @@ def neural_weights(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Input weights of the neural bonds: length weights [B, B], rate weights [B, B] (NaN on
     the unused diagonal and in rows of non-neural bonds) and each row's weight range [B]."""
     p, topo = model.params, model.topology
-    n_b = topo.n_binary
-    w_len = np.array(p.w_len, np.float64).reshape(n_b, n_b)
-    w_rate = np.array(p.w_rate, np.float64).reshape(n_b, n_b)
-    binary = [b for b in model.spec.bond if b.kind == "binary"]
+    _, neural = neural_bonds(topo)
+    n_b = len(neural)
+    w_len = np.full((n_b, n_b), np.nan)
+    w_rate = np.full((n_b, n_b), np.nan)
     span = np.full(n_b, np.nan)
-    for i, b in enumerate(binary):
-        if b.neural and b.weights is not None:
-            span[i] = b.weights.max - b.weights.min
-    unused = np.eye(n_b, dtype=bool) | ~np.asarray(topo.neural, bool)[:, None]
+    start = 0
+    for k in neural_kinds(topo):
+        kind = bonds.get(k)
+        n = topo.count(k)
+        block = slice(start, start + n)
+        for par in kind.parameters:
+            if par.form != "weights":
+                continue
+            target = w_len if par.part == "length" else w_rate
+            target[block, block] = np.array(p.bonds[k][par.field], np.float64).reshape(n, n)
+            for i, b in enumerate(bond for bond in model.spec.bond if bond.kind == k):
+                w = getattr(b, par.key)
+                if w is not None and (par.when is None or getattr(b, par.when)):
+                    span[start + i] = w.max - w.min
+        start += n
+    unused = np.eye(n_b, dtype=bool) | ~neural[:, None]
     w_len[unused] = np.nan
     w_rate[unused] = np.nan
     return w_len, w_rate, span
@@ -255,7 +292,7 @@ class Prediction:
 
     names: tuple[str, ...]  # particle names
     markers: tuple[str, ...]
-    bonds: np.ndarray  # [B, 2] particle indices of the binary bonds
+    bonds: np.ndarray  # [B, 2] particle indices of the binary bonds (neural_bonds)
     neural: np.ndarray  # [B] bool
     times: np.ndarray  # [F] seconds from the first frame
     dt: float
@@ -305,7 +342,7 @@ def predict(
     one = one_step(model, rec, dt, substeps, method)
     xs, vs = free_run(model, rec, dt, n, substeps, method)
     act = activations(model, xs, vs)
-    neural = np.asarray(model.topology.neural, bool).reshape(-1)
+    pairs_of_bonds, neural = neural_bonds(model.topology)
     sat, per = saturation_share(act, neural)
     complete = np.isfinite(rec).all(axis=(1, 2))
     pairs = complete[1:] & complete[:-1]
@@ -326,7 +363,7 @@ def predict(
     return Prediction(
         names=model.particle_names,
         markers=tuple(traj.markers),
-        bonds=np.asarray(model.topology.binary, np.int64).reshape(-1, 2),
+        bonds=pairs_of_bonds,
         neural=neural,
         times=np.arange(n) * dt,
         dt=dt,

@@ -1,0 +1,30 @@
+"""Bond kinds: one module per kind, declared once and found through the registry.
+
+Adding a kind is a module defining a :class:`BondKind` and one ``register(...)`` line (below,
+or in the code that uses it); the model file, genome layout, physics, least squares and
+report follow from its declaration.
+"""
+
+from . import binary, ternary, unary
+from .kind import ANGLE, NON_NEGATIVE, BondKind, Check, LinearPart, Parameter, spread
+from .registry import get, kinds, names, register, registered, unregister
+
+register(unary.KIND)
+register(binary.KIND)
+register(ternary.KIND)
+
+__all__ = [
+    "ANGLE",
+    "NON_NEGATIVE",
+    "BondKind",
+    "Check",
+    "LinearPart",
+    "Parameter",
+    "get",
+    "kinds",
+    "names",
+    "register",
+    "registered",
+    "spread",
+    "unregister",
+]

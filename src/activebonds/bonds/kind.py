@@ -1,0 +1,100 @@
+"""What a bond kind declares: its file parameters, its topology and its forces.
+
+A kind is one :class:`BondKind` value, usually in a module of its own (``unary.py``,
+``binary.py``, ``ternary.py``) and registered in :mod:`activebonds.bonds.registry`. The model
+file's schema, the genome layout, the physics, the least squares and the report read these
+declarations; none of them names a kind.
+
+Array conventions: a kind with N bonds in a model of P particles in D dimensions has
+``topology["particles"]`` [N, arity] (int32) and one [N] bool array per flag (e.g.
+``topology["neural"]``); its parameters are ``{field: array}`` with [N] per scalar, [N, D] per
+vector and [N, N] per weights row parameter.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+Bounds = Callable[[float], tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class Check:
+    """A rule on a parameter's file value; the message reads '<key>: must be <text>, got v'."""
+
+    test: Callable[[float], bool]
+    text: str
+
+
+NON_NEGATIVE = Check(lambda v: v >= 0, ">= 0")
+ANGLE = Check(lambda v: 0.0 <= v <= math.pi, "in [0, pi] radians")
+
+
+def spread(factor: float, zero: tuple[float, float]) -> Bounds:
+    """Bounds ``(v / factor, v * factor)`` for a positive file value v, ``zero`` otherwise."""
+    return lambda v: (v / factor, v * factor) if v > 0 else zero
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of a bond kind.
+
+    ``key`` is its name in the model file, ``field`` its array in ``params.bonds[kind]``.
+    Forms: ``"scalar"`` (a number or a ``{ value, min, max }`` table; one value per bond),
+    ``"vector"`` (one value per axis, like ``anchor``; genes ``key[axis]``) and ``"weights"``
+    (one row per bond over the bonds of the same kind, the ``part`` sub-list of a
+    ``{ length, rate, min, max }`` table; genes ``key.part[j]``, a bond's own entry unused).
+    """
+
+    key: str
+    field: str
+    default: float | None = 0.0  # the value when the file omits it; None: required
+    bounds: Bounds = lambda v: (v - 1.0, v + 1.0)  # default search bounds from the file value
+    log: bool | None = None  # forced log scaling; None: the file's choice or the bounds' ratio
+    check: Check | None = None
+    form: Literal["scalar", "vector", "weights"] = "scalar"
+    part: str | None = None  # weights form: "length" or "rate"
+    when: str | None = None  # a flag the bond must set to take this parameter (e.g. "neural")
+    note: str = ""  # added to the 'needs <key>' message of a required parameter
+
+
+@dataclass(frozen=True)
+class LinearPart:
+    """How a kind enters the exact least squares (:mod:`activebonds.identify.lsq`).
+
+    ``fields`` are the parameters it solves for; ``switch_off(values, index, topology,
+    layout)`` returns the kind's parameters with those terms' forces removed (or raises
+    ValueError); ``columns(values, index, topology, x, v, unknowns)`` adds the displacement of
+    each linear unknown (and of the fixed terms) through ``unknowns``."""
+
+    fields: frozenset[str]
+    switch_off: Callable
+    columns: Callable
+
+
+@dataclass(frozen=True)
+class BondKind:
+    """A bond kind: ``forces(params, topology, x, v) -> [P, D]`` for one individual, with
+    ``params`` and ``topology`` this kind's dicts and ``x, v`` [P, D] (pure JAX)."""
+
+    name: str
+    arity: int
+    parameters: tuple[Parameter, ...]
+    forces: Callable
+    flags: tuple[str, ...] = ()  # boolean keys of the bond table, one [N] array each
+    internal: bool = True  # forces sum to zero without torque (momentum floor applies)
+    what: str = ""  # its parameters in words, for messages ("flexion springs")
+    activity: Callable | None = None  # (params, topology, x, v) -> [N] neuron activations
+    linear: LinearPart | None = None
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """File keys of its parameters, in declaration order, once each."""
+        return tuple(dict.fromkeys(p.key for p in self.parameters))
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return tuple(p.field for p in self.parameters)
