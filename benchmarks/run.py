@@ -99,11 +99,11 @@ class Ours:
         self.population, self.block = population, self.loop.length
         init_key, self.gen_key = evolve.keys(seed)
         t0 = now()
-        init_c = self.loop._start.lower(init_key).compile()
+        init_c = self.loop.start_fn.lower(init_key).compile()
         t1 = now()
         self.state = jax.block_until_ready(init_c(init_key))
         t2 = now()
-        self.run_c = self.loop._chunk.lower(self.gen_key, self.state, BIG_STOP).compile()
+        self.run_c = self.loop.chunk_fn.lower(self.gen_key, self.state, BIG_STOP).compile()
         t3 = now()
         self.compile_s = (t1 - t0) + (t3 - t2)
         self.init_s = t2 - t1

@@ -216,3 +216,67 @@ def test_every_optimizer_name_builds_a_strategy_with_its_columns():
         assert set(s.cost_columns) <= {c.name for c in s.columns}
         state = jax.jit(partial(evolve.start, s, problem, jnp.float64))(jax.random.PRNGKey(0))
         assert np.isfinite(float(s.best(state.strategy)[1]))
+
+
+def _as_format_1(run) -> None:
+    """Rewrite a run as activebonds 0.2 wrote it (format 1): no strategy, history columns or
+    display in run.json, no optimizer setting, variants numbered, only the best cost in mm."""
+    names = {f"{f}_{v.name}": f"{f}_v{i + 1}" for i, v in enumerate(operators.VARIANTS)
+             for f in ("trials", "successes")}  # fmt: skip
+    dropped = ("median_rms_mm", "worst_rms_mm")
+    meta = json.loads((run / "run.json").read_text())
+    for key in ("strategy", "history"):
+        meta.pop(key)
+    meta["format"] = 1
+    meta["settings"].pop("optimizer")
+    (run / "run.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    status = json.loads((run / "status.json").read_text())
+    status["job"].pop("optimizer")
+    (run / "status.json").write_text(json.dumps(status) + "\n")
+    lines = (run / "history.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [i for i, h in enumerate(header) if h not in dropped]
+    rows = [",".join(names.get(header[i], header[i]) for i in keep)]
+    rows += [",".join(line.split(",")[i] for i in keep) for line in lines[1:]]
+    (run / "history.csv").write_text("\n".join(rows) + "\n")
+    for path in (run / "checkpoints").glob("gen-*.npz"):
+        arrays = checkpoint_arrays(path)
+        old = {}
+        for k, v in arrays.items():
+            if k.removeprefix("history_") in dropped:
+                continue
+            old["history_" + names[k[8:]] if k[8:] in names else k] = v
+        np.savez(path, **old)
+
+
+def test_a_format_1_run_is_reported_and_resumed_as_if_new(tmp_path):
+    """Runs written by activebonds 0.2 (format 1) are read through the migration: the report
+    shows the same curves, and a resume continues them to the same result as one fit."""
+    from activebonds.data import write_trajectory
+    from activebonds.identify import resume
+    from activebonds.model import load_model
+    from activebonds.report.runs import history_rms_mm, load_run
+    from activebonds.simulation import simulate
+
+    data = tmp_path / "triangle.csv"
+    write_trajectory(simulate(load_model(EXAMPLES / "triangle.toml"), 30, 60.0), data)
+    opts = {"population": 20, "seed": 4, "chunk": 25, "checkpoint_every": 25}
+    model = EXAMPLES / "triangle.toml"
+    whole = fit(model, data, out=tmp_path / "whole", generations=100, **opts)
+    run = tmp_path / "old"
+    fit(model, data, out=run, generations=50, **opts)
+    before = load_run(run).history
+    _as_format_1(run)
+    record = load_run(run)
+    assert record.meta["format"] == 2 and record.meta["strategy"] == "es"
+    for key, values in history_rms_mm(record.history).items():
+        np.testing.assert_allclose(values, history_rms_mm(before)[key], rtol=1e-12)
+    assert list(record.history) == list(before)
+    resumed = resume(run, generations=100)
+    assert resumed.status == "completed"
+    assert json.loads((run / "run.json").read_text())["format"] == 2
+    for key, values in whole.history.items():
+        np.testing.assert_array_equal(resumed.history[key], values, err_msg=key)
+    assert (run / "best_model.toml").read_bytes() == (
+        tmp_path / "whole" / "best_model.toml"
+    ).read_bytes()

@@ -135,11 +135,13 @@ def resume(
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
     with _precision(settings):
-        return _resume(run, settings, progress)
+        return _resume(run, meta, settings, progress)
 
 
-def _resume(run: Path, settings: FitSettings, progress) -> FitResult:
+def _resume(run: Path, meta: dict, settings: FitSettings, progress) -> FitResult:
     ident = _stored_identification(run, settings)
+    if meta.get("upgraded_from"):  # a run of an older format continues in the current one
+        rundir.write_meta(run, {k: v for k, v in meta.items() if k != "upgraded_from"})
     return _evolve(ident, settings, run, progress, resuming=True)
 
 
@@ -167,6 +169,8 @@ def _check_unchanged(run: Path, meta: dict) -> None:
                 f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway",
             )
     stored = rundir.read_status(run).get("job")
+    if stored is not None and meta.get("upgraded_from") == 1:
+        stored = {"optimizer": "es", **stored}  # format 1 had the paper's ES only
     current = FitSettings(**meta["settings"]).job()
     if stored is not None and stored != current:
         changed = sorted(k for k in set(stored) | set(current) if stored.get(k) != current.get(k))
@@ -201,6 +205,7 @@ def _evolve(
             raise InputError(run, "no complete checkpoint to resume from" + _skipped(saved[2]))
     if saved is not None and saved[0] is not None:
         arrays, history, _ = saved
+        history = rundir.upgrade_history(history, rundir.read_meta(run))
         state = rundir.unflatten_state(arrays, template)
     else:  # a new run, or one stopped before its first checkpoint: start afresh
         state = loop.start(init_key)

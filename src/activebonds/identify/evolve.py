@@ -121,24 +121,24 @@ class Evolution:
         one_start = partial(start, strategy, problem, dtype)
         one_chunk = partial(chunk, strategy, problem, dtype, self.length)
         if seeds is None:
-            self._start = jax.jit(one_start)
-            self._chunk = jax.jit(one_chunk)
+            self.start_fn = jax.jit(one_start)
+            self.chunk_fn = jax.jit(one_chunk)
         else:
-            self._start = jax.jit(jax.vmap(one_start))
-            self._chunk = jax.jit(jax.vmap(one_chunk, in_axes=(0, 0, None)))
+            self.start_fn = jax.jit(jax.vmap(one_start))
+            self.chunk_fn = jax.jit(jax.vmap(one_chunk, in_axes=(0, 0, None)))
 
     def start(self, init_key) -> Run:
-        return self._start(init_key)
+        return self.start_fn(init_key)
 
     def template(self, init_key) -> Run:
         """Shapes and dtypes of the loop state, without computing it (for checkpoints)."""
-        return jax.eval_shape(self._start, init_key)
+        return jax.eval_shape(self.start_fn, init_key)
 
     def run(self, gen_key, state: Run, stop: int) -> Iterator[tuple[Run, dict[str, np.ndarray]]]:
         """Chunks until ``stop`` generations are done: yields (state, history rows of the
         chunk, as NumPy columns by name; [seeds, k] when vmapped)."""
         while _generation(state) < stop:
-            state, (rows, active) = self._chunk(gen_key, state, stop)
+            state, (rows, active) = self.chunk_fn(gen_key, state, stop)
             yield state, self.rows(rows, active, state)
 
     def rows(self, rows: dict, active, state: Run) -> dict[str, np.ndarray]:

@@ -107,13 +107,57 @@ def read_meta(run: Path) -> dict:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise InputError(path, f"unreadable run.json ({err})") from None
-    if isinstance(meta, dict) and isinstance(meta.get("format"), int) and meta["format"] < FORMAT:
-        raise InputError(
-            path, f"a run of an older activebonds (format {meta['format']}); fit it again"
-        )
+    if isinstance(meta, dict) and meta.get("format") == 1:
+        return _upgrade_meta(run, meta)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(path, f"unsupported run format (expected format {FORMAT})")
     return meta
+
+
+def write_meta(run: Path, meta: dict) -> None:
+    write_text_atomic(run / "run.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
+
+
+# Format 1 (activebonds 0.2): the paper's ES only, no strategy, columns or display in run.json,
+# variants numbered (trials_v1 ...), costs shown in mm for the best only. Read as format 2.
+def _upgrade_meta(run: Path, meta: dict) -> dict:
+    from .cost import Display, make_windows
+    from .es import PaperES
+    from .evolve import history_columns
+
+    try:
+        horizon = int(meta["settings"].get("horizon", 1))
+        window = read_window(run)
+        n_terms = make_windows(window.positions, window.mask, window.dt, horizon).n_terms
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise InputError(run / "run.json", f"cannot read this format-1 run ({err})") from None
+    display = Display(n_terms)
+    columns = history_columns(PaperES, display)
+    meta = {**meta, "format": FORMAT, "strategy": "es", "upgraded_from": 1}
+    meta["history"] = {
+        "columns": [c.name for c in columns],
+        "integer": [c.name for c in columns if c.integer],
+        "display": display.record(),
+    }
+    return meta
+
+
+def upgrade_history(history: dict[str, np.ndarray], meta: dict) -> dict[str, np.ndarray]:
+    """A format-1 history (from history.csv or a checkpoint) in the columns of ``meta``; any
+    other history unchanged."""
+    if "trials_v1" not in history:
+        return history
+    from .cost import Display
+    from .operators import VARIANTS
+
+    out = dict(history)
+    for i, v in enumerate(VARIANTS):
+        for field in ("trials", "successes"):
+            out[f"{field}_{v.name}"] = out.pop(f"{field}_v{i + 1}")
+    display = Display(int(display_of(meta)["terms"]))
+    for key in ("median", "worst"):
+        out[f"{key}_rms_mm"] = display(out[f"{key}_cost"])
+    return {c: out[c] for c in history_columns(meta)}
 
 
 def write_status(run: Path, **fields) -> None:
@@ -169,7 +213,8 @@ def read_history(run: Path, meta: dict | None = None) -> dict[str, np.ndarray]:
         raise InputError(path, f"unreadable history ({err})") from None
     if data.shape[1] != len(header):
         raise InputError(path, f"{data.shape[1]} values per row for {len(header)} columns")
-    return {**empty, **{name: data[:, i] for i, name in enumerate(header)}}
+    history = upgrade_history({name: data[:, i] for i, name in enumerate(header)}, meta)
+    return {**empty, **history}
 
 
 def flatten_state(state) -> dict[str, np.ndarray]:
