@@ -16,6 +16,9 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
   tension f = k (L - l0) + c Ldot (+ g_b a_b if neural), F_i += f u, F_j -= f u
 * neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b), e_j = L_j - l0_j
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
+* contact of p with the plane n . x = h (n a unit vector): d = h - n . x_p; while d > 0,
+  Fn = max(0, k d - c n . v_p) along n, friction Ft = -mu Fn vt / sqrt(|vt|^2 + eps^2) with
+  w = v_p - s (s the surface velocity), vt = w - (n . w) n, eps = 1e-3 m/s; energy 1/2 k d^2
 """
 
 from __future__ import annotations
@@ -139,7 +142,38 @@ def ternary_force(p, t, x, v) -> np.ndarray:
     return f
 
 
-KIND_FORCES = {"unary": unary_force, "binary": binary_force, "ternary": ternary_force}
+CONTACT_EPS = 1e-3  # m/s, the friction's smoothing speed (DESIGN.md §2)
+
+
+def contact_force(p, t, x, v) -> np.ndarray:
+    x, v = _arr(x), _arr(v)
+    f = np.zeros_like(x)
+    dim = x.shape[1]
+    for b, (q,) in enumerate(_particles(t, 1)):
+        n = _arr(p["normal"][b])
+        n = n / math.sqrt(sum(n[a] * n[a] for a in range(dim)))
+        depth = float(p["height"][b]) - sum(n[a] * x[q, a] for a in range(dim))
+        if depth <= 0.0:
+            continue
+        normal_speed = sum(n[a] * v[q, a] for a in range(dim))
+        fn = float(p["stiffness"][b]) * depth - float(p["damping"][b]) * normal_speed
+        fn = max(0.0, fn)
+        w = [v[q, a] - float(p["surface_velocity"][b][a]) for a in range(dim)]
+        wn = sum(n[a] * w[a] for a in range(dim))
+        vt = [w[a] - wn * n[a] for a in range(dim)]
+        speed = math.sqrt(sum(c * c for c in vt) + CONTACT_EPS**2)
+        mu = float(p["friction"][b])
+        for a in range(dim):
+            f[q, a] += fn * n[a] - mu * fn * vt[a] / speed
+    return f
+
+
+KIND_FORCES = {
+    "unary": unary_force,
+    "binary": binary_force,
+    "ternary": ternary_force,
+    "contact": contact_force,
+}
 
 
 def kind_force(kind, params, topo, x, v) -> np.ndarray:
@@ -190,7 +224,23 @@ def ternary_energy(p, t, x) -> np.ndarray:
     return energy
 
 
-KIND_ENERGIES = {"unary": unary_energy, "binary": binary_energy, "ternary": ternary_energy}
+def contact_energy(p, t, x) -> np.ndarray:
+    """1/2 k d^2 while the particle is below its plane (the undamped, frictionless part)."""
+    energy = np.zeros(x.shape[:-2])
+    for b, (q,) in enumerate(_particles(t, 1)):
+        n = _arr(p["normal"][b])
+        n = n / np.linalg.norm(n)
+        depth = float(p["height"][b]) - np.sum(x[..., q, :] * n, axis=-1)
+        energy = energy + 0.5 * float(p["stiffness"][b]) * np.maximum(depth, 0.0) ** 2
+    return energy
+
+
+KIND_ENERGIES = {
+    "unary": unary_energy,
+    "binary": binary_energy,
+    "ternary": ternary_energy,
+    "contact": contact_energy,
+}
 
 
 def potential_energy(params, topo, x) -> np.ndarray:

@@ -538,7 +538,7 @@ CASES = [
         'kind = "spring"\nparticles = ["A", "B"]',
         "bond[0].kind",
         "bond[0].kind",
-        "'unary', 'binary' or 'ternary'",
+        "'unary', 'binary', 'ternary' or 'contact'",
     ),
     Case(
         "invalid TOML syntax",

@@ -5,13 +5,14 @@ or in the code that uses it); the model file, genome layout, physics, least squa
 report follow from its declaration.
 """
 
-from . import binary, ternary, unary
+from . import binary, contact, ternary, unary
 from .kind import ANGLE, NON_NEGATIVE, BondKind, Check, LinearPart, Parameter, spread
 from .registry import get, kinds, names, register, registered, unregister
 
 register(unary.KIND)
 register(binary.KIND)
 register(ternary.KIND)
+register(contact.KIND)
 
 __all__ = [
     "ANGLE",

@@ -8,7 +8,7 @@ declarations; none of them names a kind.
 Array conventions: a kind with N bonds in a model of P particles in D dimensions has
 ``topology["particles"]`` [N, arity] (int32) and one [N] bool array per flag (e.g.
 ``topology["neural"]``); its parameters are ``{field: array}`` with [N] per scalar, [N, D] per
-vector and [N, N] per weights row parameter.
+vector, [N, N] per weights row and [N, D] per constant (unit vector) parameter.
 """
 
 from __future__ import annotations
@@ -46,7 +46,10 @@ class Parameter:
     Forms: ``"scalar"`` (a number or a ``{ value, min, max }`` table; one value per bond),
     ``"vector"`` (one value per axis, like ``anchor``; genes ``key[axis]``) and ``"weights"``
     (one row per bond over the bonds of the same kind, the ``part`` sub-list of a
-    ``{ length, rate, min, max }`` table; genes ``key.part[j]``, a bond's own entry unused).
+    ``{ length, rate, min, max }`` table; genes ``key.part[j]``, a bond's own entry unused)
+    and ``"constant"`` (a fixed per-bond vector of D finite numbers, never a gene, e.g. a
+    contact's ``normal``: refused when zero, stored normalised in ``params.bonds[kind]``,
+    written back as the file gave it).
     """
 
     key: str
@@ -55,7 +58,7 @@ class Parameter:
     bounds: Bounds = lambda v: (v - 1.0, v + 1.0)  # default search bounds from the file value
     log: bool | None = None  # forced log scaling; None: the file's choice or the bounds' ratio
     check: Check | None = None
-    form: Literal["scalar", "vector", "weights"] = "scalar"
+    form: Literal["scalar", "vector", "weights", "constant"] = "scalar"
     part: str | None = None  # weights form: "length" or "rate"
     when: str | None = None  # a flag the bond must set to take this parameter (e.g. "neural")
     note: str = ""  # added to the 'needs <key>' message of a required parameter

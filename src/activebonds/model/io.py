@@ -21,6 +21,7 @@ _FORM_EXPECTED = {
     "scalar": _PARAMETER,
     "vector": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
     "weights": "expected a table { length = .., rate = .., min = .., max = .. }",
+    "constant": "expected a list of numbers (a fixed vector, never searched)",
 }
 _EXPECTED = {
     "length": "expected a number or a list of numbers (one per bond of the kind)",

@@ -74,7 +74,7 @@ class Model:
 
 
 def _shape(p: bonds.Parameter, n: int, d: int) -> tuple[int, ...]:
-    return {"scalar": (n,), "vector": (n, d), "weights": (n, n)}[p.form]
+    return {"scalar": (n,), "vector": (n, d), "weights": (n, n), "constant": (n, d)}[p.form]
 
 
 def build(spec: ModelSpec, disable=frozenset()) -> Model:
@@ -189,6 +189,9 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
                         hi = p.max[ax] if isinstance(p.max, list) else p.max
                     key = f"{par.key}[{ax}]"
                     put(vals, ids, (pos, ax), par.bounds, p, g, key, xs[ax], lo, hi, par.log)
+            elif par.form == "constant":  # a fixed vector, never a gene: stored normalised
+                vec = np.asarray(p, np.float64)
+                vals[pos] = vec / np.linalg.norm(vec)
             else:  # weights: a row over the bonds of this kind, the bond's own entry unused
                 n = len(of_kind[b.kind])
                 xs = getattr(p, par.part)
@@ -257,6 +260,8 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
             if p is None or (par.when and not getattr(b, par.when)):
                 continue
             row = values[par.field][pos]
+            if par.form == "constant":  # never a gene: written back as the file gave it
+                continue
             if par.form == "scalar":
                 update[par.key] = setp(p, row)
             elif par.form == "vector":

@@ -5,6 +5,8 @@ tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
 binary bond of the model (in file order; a neuron's own entry is ignored and written as 0).
+Constant vectors (a contact bond's ``normal``) are plain lists, never searched: D finite
+numbers, not zero (normalised when the model is built, written back as given).
 
 A bond table is checked by its kind's class, made from the kind's declaration
 (:mod:`activebonds.bonds`): its flags, its parameters and their rules.
@@ -209,7 +211,8 @@ class BondBase(_Strict):
         return self
 
 
-_FORMS = {"scalar": Scalar, "vector": Vector, "weights": Weights}
+_FORMS = {"scalar": Scalar, "vector": Vector, "weights": Weights, "constant": list[FiniteFloat]}
+CONSTANT_ZERO = 1e-12  # a constant vector (a contact's normal) this short is refused as zero
 
 
 @functools.cache
@@ -301,6 +304,15 @@ class ModelSpec(_Strict):
                         for bound in (value.min, value.max):
                             if isinstance(bound, list) and len(bound) != d:
                                 raise ValueError(f"bond[{i}].{p.key}: bounds need {d} components")
+                if p.form == "constant":
+                    if len(value) != d:
+                        raise ValueError(
+                            f"bond[{i}].{p.key}: expected {d} components, got {len(value)}"
+                        )
+                    if math.sqrt(sum(x * x for x in value)) <= CONSTANT_ZERO:
+                        raise ValueError(
+                            f"bond[{i}].{p.key}: must be a non-zero vector, got {value}"
+                        )
                 if p.form == "weights":
                     xs, n = getattr(value, p.part), counts[b.kind]
                     if isinstance(xs, list) and len(xs) != n:

@@ -1,0 +1,84 @@
+"""Contact bonds: one particle against a plane (Louchet's "conditional" bond; DESIGN.md §2).
+
+A contact bond acts only while its particle is below the plane ``n . x = h`` (``n`` the
+bond's fixed unit ``normal``, pointing out of the ground; ``h`` its ``height``). With the
+penetration ``d = h - n . x``, while ``d > 0``:
+
+* normal force ``Fn = max(0, k d - c (n . v))`` along ``n``: a spring-damper that pushes and
+  never pulls (the damper cannot hold the particle down when it leaves quickly);
+* Coulomb friction ``Ft = -mu Fn vt / sqrt(|vt|^2 + eps^2)``, with ``w = v - s`` the
+  velocity relative to the surface (``s`` = ``surface_velocity``, e.g. a treadmill belt) and
+  ``vt = w - (n . w) n`` its tangential part; ``eps`` = :data:`FRICTION_EPS` (1e-3 m/s)
+  smooths the sign of ``vt`` near rest (below about ``eps`` the friction acts as a viscous
+  drag of ``mu Fn / eps``);
+
+and no force otherwise. The forces are external (no momentum floor) and not linear in the
+parameters (no exact least squares). Pure JAX without branching on values: the contact is a
+``jnp.where`` on ``d > 0`` whose both branches are finite, and the friction's denominator is
+at least ``eps``, so neither values nor gradients can turn NaN at the switch or at rest.
+
+Model file::
+
+    [[bond]]
+    kind = "contact"
+    type = "ground"                     # bonds of one type share their parameters
+    particles = ["HFL"]                 # exactly one particle
+    normal = [0.0, 0.0, 1.0]            # required; fixed, never searched (see below)
+    height = { value = 0.0, min = -0.1, max = 0.1 }      # m, plane offset along the normal
+    stiffness = { value = 1e4, min = 1e2, max = 1e6 }    # N/m of penetration (required)
+    damping = { value = 50.0, min = 0.0, max = 1e3 }     # N s/m, normal (default 0)
+    friction = { value = 0.8, min = 0.0, max = 2.0 }     # Coulomb coefficient (default 0)
+    surface_velocity = [0.0, 0.0, 0.0]  # m/s (default zero), fixed or free per axis
+
+``normal`` is a constant vector (form ``"constant"``): D finite numbers, refused when zero,
+normalised when loaded (the forces use the unit vector) and written back as the file gave
+it. ``stiffness``, ``damping`` and ``friction`` must be >= 0. Default search bounds when a
+free parameter gives no min/max: height ``h +- 0.1`` m; stiffness ``k/100 .. 100 k``
+(``1e2 .. 1e6`` N/m for 0); damping ``c/100 .. 100 c`` (``0 .. 1e3`` N s/m for 0); friction
+``0 .. max(2, 2 mu)``; each surface velocity axis ``s +- 1`` m/s.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .accumulate import accumulate
+from .kind import NON_NEGATIVE, BondKind, Parameter, spread
+
+FRICTION_EPS = 1e-3  # m/s: the tangential speed below which Coulomb friction is smoothed
+
+
+def forces(params, topology, x, v):
+    idx = topology["particles"][:, 0]
+    n = params["normal"]  # [N, D], unit vectors (normalised when the model is built)
+    xp, vp = x[idx], v[idx]
+    depth = params["height"] - jnp.sum(n * xp, axis=-1)
+    normal_speed = jnp.sum(n * vp, axis=-1)
+    push = jnp.maximum(0.0, params["stiffness"] * depth - params["damping"] * normal_speed)
+    fn = jnp.where(depth > 0.0, push, 0.0)
+    w = vp - params["surface_velocity"]
+    vt = w - jnp.sum(n * w, axis=-1, keepdims=True) * n
+    smooth_speed = jnp.sqrt(jnp.sum(vt * vt, axis=-1) + FRICTION_EPS**2)  # >= eps > 0
+    f = fn[:, None] * n - (params["friction"] * fn / smooth_speed)[:, None] * vt
+    return accumulate(x.shape[0], [(idx, 1, f)])
+
+
+KIND = BondKind(
+    name="contact",
+    arity=1,
+    parameters=(
+        Parameter("normal", "normal", None, form="constant", note=" (a list of D numbers)"),
+        Parameter("height", "height", 0.0, lambda v: (v - 0.1, v + 0.1)),
+        Parameter("stiffness", "stiffness", None, spread(100, (1e2, 1e6)), check=NON_NEGATIVE),
+        Parameter("damping", "damping", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
+        Parameter(
+            "friction", "friction", 0.0, lambda v: (0.0, max(2.0, 2.0 * v)), check=NON_NEGATIVE
+        ),
+        Parameter(
+            "surface_velocity", "surface_velocity", 0.0, lambda v: (v - 1.0, v + 1.0), form="vector"
+        ),
+    ),
+    forces=forces,
+    internal=False,
+    what="contacts",
+)
