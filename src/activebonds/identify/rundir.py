@@ -9,6 +9,7 @@ Layout of RUN/::
     history.csv         one row per generation (deterministic: no wall-clock fields)
     status.json         state, generation, best RMS, wall times (not part of the result)
     best_model.toml     the best model so far, in the model-file format
+    validation.json     free-run metrics on frames not fitted (``fit --validate``), optional
     checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
 This module is the only one that writes or reads these files. A checkpoint stores the loop
@@ -374,6 +375,27 @@ def read_window(run: Path):
     if not (run / "data.npz").is_file():
         raise InputError(run, "not a complete run directory (no data.npz)")
     return read_trajectory(run / "data.npz")
+
+
+def write_validation(run: Path, record: dict) -> None:
+    """validation.json: metrics measured on frames the fit did not use, atomically."""
+    text = json.dumps(record, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    write_text_atomic(run / "validation.json", text)
+
+
+def read_validation(run: Path) -> dict | None:
+    """validation.json, or None if the run has none (raises :class:`InputError` if it is
+    unreadable)."""
+    path = run / "validation.json"
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise InputError(path, f"unreadable validation ({err})") from None
+    if not isinstance(record, dict):
+        raise InputError(path, "unreadable validation (not a JSON object)")
+    return record
 
 
 def python_command() -> str:

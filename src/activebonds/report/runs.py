@@ -31,6 +31,7 @@ class RunRecord:
     model: Model  # best model (or the starting model if there is none)
     has_best: bool  # best_model.toml was found
     window: Trajectory  # the fitted window (data.npz)
+    validation: dict | None = None  # validation.json (fit --validate), if any
 
     @property
     def label(self) -> str:
@@ -67,6 +68,7 @@ def load_run(run: str | Path) -> RunRecord:
         model=model,
         has_best=has_best,
         window=window,
+        validation=rundir.read_validation(run),
     )
 
 
