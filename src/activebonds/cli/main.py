@@ -111,6 +111,13 @@ def fit(
         ),
     ] = "es",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,
+    validate: Annotated[
+        str | None,
+        typer.Option(
+            help="Frames START:STOP of the recording the fit does not use: measure the "
+            "one-step RMS, free-run RMS and frames within 50 mm there (RUN/validation.json)."
+        ),
+    ] = None,
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
     from ..identify import fit as run_fit
@@ -134,6 +141,7 @@ def fit(
             init=init,
             optimizer=optimizer,
         )
+        held_out = _validation_window(model, traj, settings, validate) if validate else None
         with _progress(generations) as progress:
             result = run_fit(
                 model, traj, settings, out=out_dir, overwrite=overwrite, progress=progress
@@ -142,7 +150,7 @@ def fit(
         fail(e)
     except KeyboardInterrupt:
         fail(f"interrupted; continue with: activebonds resume {out_dir}", code=130)
-    _summary(result)
+    _summary(result, held_out)
 
 
 @app.command()
@@ -176,10 +184,39 @@ def _progress(total: int):
     return fit_progress(total, out)
 
 
-def _summary(result) -> None:
+def _validation_window(model, traj, settings, text: str):
+    """(frames, data) of ``--validate START:STOP``, checked before the fit starts."""
+    from ..data import read_trajectory
+    from ..identify.problem import variant
+    from ..identify.settings import parse_frames
+    from ..model import load_model
+    from ..report.metrics import validation_data
+
+    try:
+        frames = parse_frames(text)
+    except ValueError as e:
+        raise InputError("--validate", str(e)) from None
+    recording = read_trajectory(traj)
+    data = validation_data(variant(load_model(model), settings.bonds), recording, settings, frames)
+    stop = recording.n_frames if frames[1] is None else frames[1]
+    return (frames[0], stop), data
+
+
+def _metrics_line(label: str, found: dict) -> str:
+    m, z = found["model"], found["zero_force"]
+    return (
+        f"{label}: one-step RMS {m.one_step_rms_mm:.4g} mm, free-run RMS "
+        f"{m.free_run_rms_mm:.4g} mm, frames within {m.threshold_mm:g} mm "
+        f"{m.frames_text()} (median of {len(m.starts)} starts); zero force "
+        f"{z.one_step_rms_mm:.4g} mm, {z.free_run_rms_mm:.4g} mm, {z.frames_text()}"
+    )
+
+
+def _summary(result, held_out=None) -> None:
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
     from ..experiments.baselines import zero_force_rms_mm
+    from ..report.metrics import read_validation, validation_record, window_metrics
 
     data = result.identification.data
     zero = zero_force_rms_mm(data.positions, data.mask, data.dt)
@@ -188,6 +225,19 @@ def _summary(result) -> None:
         f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
         f"zero-force baseline on the same frames {zero:.4g} mm"
     )
+    s = result.settings
+    fitted = window_metrics(result.model, data, s.substeps, s.integrator)
+    out.print(_metrics_line("fitted frames", fitted), markup=False, highlight=False)
+    if held_out is not None:
+        frames, held = held_out
+        record = validation_record(result.model, held, s, frames)
+        if result.run is not None:
+            from ..identify.rundir import write_validation
+
+            write_validation(result.run, record)
+        _, found = read_validation(record)  # the stored numbers, printed
+        label = f"validation frames {frames[0]}:{frames[1]}"
+        out.print(_metrics_line(label, found), markup=False, highlight=False)
     if result.run is not None:
         out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
 
