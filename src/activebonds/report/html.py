@@ -22,7 +22,7 @@ from ..errors import InputError
 from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.lsq import least_squares, nonlinear_genes
-from . import animation, plots
+from . import animation, metrics, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
 from .runs import RunRecord, load_run
@@ -322,6 +322,54 @@ def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
     return rows
 
 
+def free_run_table(record: RunRecord) -> Table:
+    """One-step RMS, free-run RMS and frames within the threshold
+    (:func:`activebonds.report.metrics.free_run_metrics`) of the model and the zero-force
+    predictor on the fitted frames and, after ``fit --validate``, on the validation frames."""
+    s = record.settings
+    start = s.frames[0]
+    found = metrics.window_metrics(record.model, record.window, s.substeps, s.integrator)
+    windows = [(f"fitted {start}:{start + record.window.n_frames}", found)]
+    note = ""
+    if record.validation is not None:
+        try:
+            frames, held = metrics.read_validation(record.validation)
+            windows.append((f"validation {frames[0]}:{frames[1]}", held))
+        except (KeyError, TypeError, ValueError, IndexError):
+            note = " validation.json could not be read."
+    threshold = found["model"].threshold_mm
+    rows = []
+    for frames, by_name in windows:
+        for name, label in (("model", "this model"), ("zero_force", "zero force")):
+            m = by_name[name]
+            rows.append(
+                (
+                    label,
+                    frames,
+                    m.one_step_rms_mm,
+                    m.free_run_rms_mm,
+                    m.frames_text(),
+                    len(m.starts),
+                )
+            )
+    return Table(
+        (
+            "",
+            "frames",
+            "one-step RMS (mm)",
+            "free-run RMS (mm)",
+            f"frames within {threshold:g} mm (median)",
+            "starts",
+        ),
+        rows,
+        "Free run. Free-run RMS: one run from the window's first two frames. Frames within "
+        f"{threshold:g} mm: free runs from several start frames (spread over the window's "
+        "first half), each counted until its worst marker is first off by more than "
+        f"{threshold:g} mm; the median over starts, '>=' when runs reached the window's end "
+        "first (censored). Zero force: constant velocity from the two start frames." + note,
+    )
+
+
 def parameters_table(record: RunRecord) -> Table:
     rows = [
         (g.name, float(g.value), float(g.lower), float(g.upper), g.log)
@@ -398,7 +446,12 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     sections = [
         Section(
             "Summary",
-            tables=[summary_table(record, pred), baselines_table(record, pred), errors_table(pred)],
+            tables=[
+                summary_table(record, pred),
+                baselines_table(record, pred),
+                free_run_table(record),
+                errors_table(pred),
+            ],
             anchor="summary",
         ),
         Section(
