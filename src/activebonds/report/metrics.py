@@ -242,10 +242,13 @@ def free_run_metrics(
     one = one_step(model, rec, dt, substeps, method)
 
     def run_from(s: int) -> np.ndarray:
-        # the recording from frame s - 1 on, run to a fixed length (one compiled program for
-        # every start); the free run starts at its first complete pair, frames s - 1 and s
-        xs, _ = free_run(model, rec[s - 1 :], dt, n, substeps, method)
-        return xs[2 : n - s + 1]
+        # the recording hidden before frame s - 1, so the free run starts at its first
+        # complete pair, frames s - 1 and s, at the frames' own time; always n - 2 steps
+        # (one compiled program for every start), of which frames s + 1 ... n - 1 are kept
+        hidden = rec.copy()
+        hidden[: s - 1] = np.nan
+        xs, _ = free_run(model, hidden, dt, s + n - 1, substeps, method)
+        return xs[s + 1 : n]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
 
