@@ -48,6 +48,8 @@ def info(
     gaps = {k: v for k, v in d["gaps"].items() if v}
     if gaps:
         table.add_row("gaps", ", ".join(f"{k} {v}" for k, v in gaps.items()))
+    if d["ground"] is not None:
+        table.add_row("vertical, ground (guessed)", d["ground"]["text"])
     out.print(table)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from activebonds.data.orientation import guess_ground
 from activebonds.data.readers import read_trajectory
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
@@ -21,9 +22,11 @@ def describe(traj: Trajectory) -> dict:
 
     ``duration`` is the time from the first to the last frame, ``(frames - 1) / rate``;
     ``units`` the length unit of the source file (positions are always in metres);
-    ``gaps`` maps each marker to its number of missing frames.
+    ``gaps`` maps each marker to its number of missing frames; ``ground`` the vertical axis
+    and ground level guessed from the markers (:mod:`activebonds.data.orientation`), or None.
     """
     missing = np.count_nonzero(~traj.mask, axis=0)
+    ground = guess_ground(traj)
     return {
         "source": traj.source,
         "markers": list(traj.markers),
@@ -36,4 +39,14 @@ def describe(traj: Trajectory) -> dict:
         "dimension": traj.dimension,
         "gaps": {name: int(n) for name, n in zip(traj.markers, missing, strict=True)},
         "total_gaps": traj.n_gaps,
+        "ground": None
+        if ground is None
+        else {
+            "up": ("+" if ground.up > 0 else "-") + "XYZ"[ground.axis],
+            "normal": ground.normal,
+            "height": ground.height,
+            "clear": ground.clear,
+            "lowest_marker": ground.lowest,
+            "text": ground.describe(),
+        },
     }

@@ -14,18 +14,21 @@ from .html import (
     write_comparison_report,
     write_report,
 )
+from .metrics import FreeRunMetrics, free_run_metrics, zero_force_metrics
 from .plots import Series
 from .predict import Prediction, predict, predict_run
 from .runs import RunRecord, load_run
 
 __all__ = [
     "Figure",
+    "FreeRunMetrics",
     "Prediction",
     "RunRecord",
     "Section",
     "Series",
     "Table",
     "errors_table",
+    "free_run_metrics",
     "load_run",
     "payload",
     "predict",
@@ -38,4 +41,5 @@ __all__ = [
     "write_comparison_report",
     "write_gif",
     "write_report",
+    "zero_force_metrics",
 ]

@@ -1,0 +1,53 @@
+"""The vertical axis and ground level guessed from a recording (``activebonds info``)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from activebonds.data import Trajectory, read_trajectory
+from activebonds.data.orientation import guess_ground
+
+HORSE = Path(__file__).resolve().parents[1] / "src" / "activebonds" / "datasets" / "horse_vhdc"
+
+
+@pytest.mark.parametrize(
+    "name", ["Horse1_M1_trot1_kinematics.csv", "Horse1_M1_walk1_kinematics.csv"]
+)
+def test_the_horse_stands_on_z_up_at_ground_level(name):
+    """The VHDC treadmill recordings: z up, hooves at about 0 m (their lowest: -1 cm)."""
+    g = guess_ground(read_trajectory(HORSE / name))
+    assert g.axis == 2 and g.up == 1.0 and g.clear
+    assert -0.02 < g.height < 0.0
+    assert g.lowest.startswith("H") and g.lowest not in ("Head",)
+    assert g.normal == [0.0, 0.0, 1.0] and g.plane_height == pytest.approx(g.height)
+
+
+@pytest.mark.parametrize("axis, sign", [(0, -1.0), (1, 1.0), (1, -1.0)])
+def test_a_turned_recording_is_read_the_right_way_up(axis, sign):
+    """The trot with its axes permuted and flipped: the guess follows the data."""
+    t = read_trajectory(HORSE / "Horse1_M1_trot1_kinematics.csv")
+    perm = [0, 1]  # new axis i holds old axis perm[i]: z goes to `axis`, x and y keep order
+    perm.insert(axis, 2)
+    x = t.positions[:, :, perm].copy()
+    x[:, :, axis] *= sign
+    turned = Trajectory(positions=x, mask=t.mask, markers=t.markers, rate=t.rate)
+    g = guess_ground(turned)
+    assert (g.axis, g.up) == (axis, sign) and g.clear
+    assert sign * g.height == pytest.approx(guess_ground(t).height, abs=1e-12)
+
+
+def test_info_shows_the_guess(tmp_path):
+    exe = Path(sys.executable).with_name("activebonds")
+    csv = HORSE / "Horse1_M1_trot1_kinematics.csv"
+    proc = subprocess.run([str(exe), "info", str(csv), "--json"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    ground = json.loads(proc.stdout)["ground"]
+    assert ground["up"] == "+Z" and ground["normal"] == [0.0, 0.0, 1.0]
+    assert ground["height"] == pytest.approx(guess_ground(read_trajectory(csv)).height)
+    table = subprocess.run([str(exe), "info", str(csv)], capture_output=True, text=True)
+    assert "up = +Z, ground at -0.0105 m" in table.stdout
