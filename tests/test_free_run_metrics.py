@@ -156,6 +156,11 @@ def test_a_wrong_model_gets_off_and_agrees_with_the_prediction(triangle):
     s = m.starts[3]
     xs, _ = free_run(wrong, traj.positions[s - 1 :], traj.dt)
     assert m.frames_within[3] == frames_within(xs[2:], traj.positions[s + 1 :])[0]
+    # a time-free model does not see the time origin
+    later = free_run_metrics(wrong, traj, offset=37)
+    assert later.frames_within == m.frames_within and later.starts == m.starts
+    assert later.free_run_rms_mm == pytest.approx(m.free_run_rms_mm, rel=1e-12)
+    assert later.one_step_rms_mm == pytest.approx(m.one_step_rms_mm, rel=1e-12)
     low = free_run_metrics(wrong, traj, threshold_mm=1.0)
     assert all(a <= b for a, b in zip(low.frames_within, m.frames_within, strict=True))
     assert low.threshold_mm == 1.0
@@ -200,7 +205,7 @@ def test_fit_validate_end_to_end(tmp_path, triangle):
     proc = cli(*common, "--out", run, "--validate", "100:200")
     assert proc.returncode == 0, proc.stderr
     stored = json.loads((run / "validation.json").read_text())
-    assert stored["frames"] == [100, 200]
+    assert stored["frames"] == [100, 200] and stored["time_offset_frames"] == 100
 
     best = load_model(run / "best_model.toml")
     settings = FitSettings(frames=(0, 100), population=20, generations=20, seed=3)

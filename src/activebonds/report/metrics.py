@@ -228,10 +228,15 @@ def free_run_metrics(
     method: str = "euler",
     starts: int | Sequence[int] = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
+    offset: int = 0,
 ) -> FreeRunMetrics:
     """One-step RMS, free-run RMS and frames within ``threshold_mm`` of ``model`` along
     ``trajectory`` (markers in the model's particle order; ``substeps`` and ``method``: the
-    run's integration, as in its settings). See the module's docstring for the definitions."""
+    run's integration, as in its settings). See the module's docstring for the definitions.
+
+    ``offset``: frames from the model's time origin (the fitted window's first frame, where
+    predictions take time 0) to ``trajectory``'s first frame, e.g. ``300`` for frames 300:400
+    validating a fit of 0:300; only a model whose forces depend on time sees it."""
     if trajectory.n_markers != model.topology.n_particles:
         raise ValueError(
             f"{trajectory.n_markers} markers for a model of {model.topology.n_particles} particles"
@@ -239,16 +244,19 @@ def free_run_metrics(
     rec = np.asarray(trajectory.positions, np.float64)
     dt = trajectory.dt
     n = rec.shape[0]
-    one = one_step(model, rec, dt, substeps, method)
+    pad = max(int(offset), 0)
+    # unknown frames before the trajectory put its frames at their time from the origin
+    timed = np.concatenate([np.full((pad, *rec.shape[1:]), np.nan), rec])
+    one = one_step(model, timed, dt, substeps, method)[pad:]
 
     def run_from(s: int) -> np.ndarray:
         # the recording hidden before frame s - 1, so the free run starts at its first
         # complete pair, frames s - 1 and s, at the frames' own time; always n - 2 steps
         # (one compiled program for every start), of which frames s + 1 ... n - 1 are kept
-        hidden = rec.copy()
-        hidden[: s - 1] = np.nan
-        xs, _ = free_run(model, hidden, dt, s + n - 1, substeps, method)
-        return xs[s + 1 : n]
+        hidden = timed.copy()
+        hidden[: pad + s - 1] = np.nan
+        xs, _ = free_run(model, hidden, dt, pad + s + n - 1, substeps, method)
+        return xs[pad + s + 1 : pad + n]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
 
@@ -274,12 +282,14 @@ def zero_force_metrics(
 
 
 def window_metrics(
-    model: Model, trajectory: Trajectory, substeps: int, method: str, **options
+    model: Model, trajectory: Trajectory, substeps: int, method: str, offset: int = 0, **options
 ) -> dict[str, FreeRunMetrics]:
-    """``{"model": ..., "zero_force": ...}`` on one window (``options``: starts,
-    threshold_mm)."""
+    """``{"model": ..., "zero_force": ...}`` on one window (``offset``: see
+    :func:`free_run_metrics`; ``options``: starts, threshold_mm)."""
     return {
-        "model": free_run_metrics(model, trajectory, substeps=substeps, method=method, **options),
+        "model": free_run_metrics(
+            model, trajectory, substeps=substeps, method=method, offset=offset, **options
+        ),
         "zero_force": zero_force_metrics(trajectory, **options),
     }
 
@@ -336,10 +346,15 @@ def validation_record(
 ) -> dict:
     """What RUN/validation.json holds: the frames, the model's and the zero-force
     predictor's metrics on them (:func:`window_metrics`)."""
-    found = window_metrics(model, data, settings.substeps, settings.integrator, **options)
+    # time runs on from the fitted window (a window before it starts at time 0)
+    offset = max(int(frames[0]) - int(settings.frames[0]), 0)
+    found = window_metrics(
+        model, data, settings.substeps, settings.integrator, offset=offset, **options
+    )
     return {
         "frames": [int(frames[0]), int(frames[1])],
         "source": data.source,
+        "time_offset_frames": offset,
         **{name: m.to_dict() for name, m in found.items()},
     }
 
