@@ -431,3 +431,22 @@ def test_contact_parameters_are_recovered_by_fit(integrator):
     for name, value in TRUTH.items():
         assert abs(got[name] - value) / value < 0.02, (name, got[name], value)
     assert abs(found["surface_velocity"][0, 1]) < 0.02 * TRUTH["belt"]  # the belt runs along x
+
+
+@pytest.mark.slow
+def test_simulate_fit_and_report_a_contact_model_on_the_command_line(tmp_path):
+    """The commands end to end on a model with contact bonds (about 40 s: three processes)."""
+    model = tmp_path / "hopper.toml"
+    model.write_text(hopper(**TRUTH), encoding="utf-8")
+    data, run = tmp_path / "hop.csv", tmp_path / "RUN"
+    proc = cli("simulate", model, "--frames", "200", "--rate", "200", "--out", data)
+    assert proc.returncode == 0, proc.stderr
+    proc = cli("fit", model, data, "--out", run, "--population", "20", "--generations", "20")
+    assert proc.returncode == 0, proc.stderr
+    best = loads_model((run / "best_model.toml").read_text(encoding="utf-8"))
+    assert best.topology.count("contact") == 2
+    assert best.spec.bond[1].normal == [0.0, 0.0, 1.0]
+    proc = cli("report", run)
+    assert proc.returncode == 0, proc.stderr
+    html = (run / "report.html").read_text(encoding="utf-8")
+    assert "type:ground.friction" in html and "type:ground.surface_velocity[0]" in html
