@@ -36,6 +36,16 @@ it. ``stiffness``, ``damping`` and ``friction`` must be >= 0. Default search bou
 free parameter gives no min/max: height ``h +- 0.1`` m; stiffness ``k/100 .. 100 k``
 (``1e2 .. 1e6`` N/m for 0); damping ``c/100 .. 100 c`` (``0 .. 1e3`` N s/m for 0); friction
 ``0 .. max(2, 2 mu)``; each surface velocity axis ``s +- 1`` m/s.
+
+Step sizes. Near rest on the surface the smoothed friction is a viscous drag of ``mu Fn / eps``
+(about 6000 N s/m for 1 kg pressed by gravity with mu = 0.6): with a (sub)step ``h`` above
+``m eps / (mu Fn)`` (~0.2 ms there) a sticking particle's tangential velocity chatters within
+about ``mu Fn h / m`` of the surface's instead of settling (bounded: the force saturates at
+``mu Fn``). The normal spring needs ``h sqrt(k / m)`` well below 2. For identification, one
+substep (Euler or Verlet) gives the exact start velocity; with substeps > 1 the start
+velocity's fixed-point solve (:func:`~activebonds.physics.integrate.start_velocity`) does not
+converge in frames where that drag is stiff (``dt mu Fn / (m eps) >> 1``), and those
+predictions are NaN (the candidate costs +inf): fit contact models with ``substeps = 1``.
 """
 
 from __future__ import annotations
