@@ -11,7 +11,8 @@ parameters and topology; a new kind adds its own (here or in its test file) and,
 conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
 
 * uniform field: F_p += m_p g
-* unary spring + damper: F_p += -k_u (x_p - a) - c_u v_p
+* unary spring + damper: F_p += -k_u (x_p - a - u t) - c_u (v_p - u), u the anchor velocity,
+  t the time (an oracle that depends on time takes it as the keyword ``time``)
 * binary bond i-j: d = x_j - x_i, L = |d|, u = d / L, Ldot = (v_j - v_i) . u,
   tension f = k (L - l0) + c Ldot (+ g_b a_b if neural), F_i += f u, F_j -= f u
 * neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b), e_j = L_j - l0_j
@@ -23,6 +24,7 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
@@ -50,14 +52,15 @@ def uniform_field_force(params, topo, x, v) -> np.ndarray:
     return f
 
 
-def unary_force(p, t, x, v) -> np.ndarray:
+def unary_force(p, t, x, v, time=0.0) -> np.ndarray:
     x, v = _arr(x), _arr(v)
     f = np.zeros_like(x)
     for b, (q,) in enumerate(_particles(t, 1)):
         k = float(p["stiffness"][b])
         c = float(p["damping"][b])
-        a = _arr(p["anchor"][b])
-        f[q] += -k * (x[q] - a) - c * v[q]
+        u = _arr(p["anchor_velocity"][b]) if "anchor_velocity" in p else np.zeros(x.shape[1])
+        a = _arr(p["anchor"][b]) + u * float(time)
+        f[q] += -k * (x[q] - a) - c * (v[q] - u)
     return f
 
 
@@ -176,17 +179,20 @@ KIND_FORCES = {
 }
 
 
-def kind_force(kind, params, topo, x, v) -> np.ndarray:
+def kind_force(kind, params, topo, x, v, time=0.0) -> np.ndarray:
     """The forces of one kind's bonds (zero for a disabled kind)."""
     if kind in getattr(topo, "disabled", ()):
         return np.zeros_like(_arr(x))
-    return KIND_FORCES[kind](params.bonds[kind], topo.bonds[kind], x, v)
+    oracle = KIND_FORCES[kind]
+    if "time" in inspect.signature(oracle).parameters:
+        return oracle(params.bonds[kind], topo.bonds[kind], x, v, time=time)
+    return oracle(params.bonds[kind], topo.bonds[kind], x, v)
 
 
-def total_force(params, topo, x, v) -> np.ndarray:
+def total_force(params, topo, x, v, time=0.0) -> np.ndarray:
     f = uniform_field_force(params, topo, x, v)
     for kind in topo.bonds:
-        f = f + kind_force(kind, params, topo, x, v)
+        f = f + kind_force(kind, params, topo, x, v, time)
     return f
 
 
@@ -268,33 +274,34 @@ def energy(params, topo, x, v) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def euler_step(params, topo, x, v, h):
+def euler_step(params, topo, x, v, h, time=0.0):
     """Semi-implicit Euler: v <- v + h F(x, v) / m, then x <- x + h v (new v)."""
     m = _arr(params.mass)[:, None]
-    v_new = _arr(v) + h * total_force(params, topo, x, v) / m
+    v_new = _arr(v) + h * total_force(params, topo, x, v, time) / m
     return _arr(x) + h * v_new, v_new
 
 
-def verlet_step(params, topo, x, v, h):
+def verlet_step(params, topo, x, v, h, time=0.0):
     """Velocity Verlet; the second force is evaluated at (x_new, v_half)."""
     m = _arr(params.mass)[:, None]
-    v_half = _arr(v) + 0.5 * h * total_force(params, topo, x, v) / m
+    v_half = _arr(v) + 0.5 * h * total_force(params, topo, x, v, time) / m
     x_new = _arr(x) + h * v_half
-    v_new = v_half + 0.5 * h * total_force(params, topo, x_new, v_half) / m
+    v_new = v_half + 0.5 * h * total_force(params, topo, x_new, v_half, time + h) / m
     return x_new, v_new
 
 
 STEPS = {"euler": euler_step, "verlet": verlet_step}
 
 
-def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler"):
-    """Positions of n_frames frames (the first is x0), each frame dt after the previous."""
+def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler", t0=0.0):
+    """Positions of n_frames frames (the first is x0, at time t0), each frame dt after the
+    previous; substep k of frame n starts at t0 + n dt + k h."""
     step = STEPS[method]
     h = dt / substeps
     x, v = _arr(x0).copy(), _arr(v0).copy()
     frames = [x.copy()]
-    for _ in range(n_frames - 1):
-        for _ in range(substeps):
-            x, v = step(params, topo, x, v, h)
+    for n in range(n_frames - 1):
+        for k in range(substeps):
+            x, v = step(params, topo, x, v, h, t0 + n * dt + k * h)
         frames.append(x.copy())
     return np.stack(frames)

@@ -54,7 +54,7 @@ def random_topology(rng, n_particles, dim, n_unary=3, n_binary=6, n_ternary=4, n
 def random_params(rng, topo: Topology) -> Params:
     p, d = topo.n_particles, topo.dimension
     u, b, t = topo.count("unary"), topo.count("binary"), topo.count("ternary")
-    return Params(
+    params = Params(
         mass=rng.uniform(0.3, 3.0, p),
         gravity=rng.normal(0.0, 5.0, d),
         bonds={
@@ -79,6 +79,9 @@ def random_params(rng, topo: Topology) -> Params:
             },
         },
     )
+    # drawn last, so that the other parameters are those drawn before it existed
+    params.bonds["unary"]["anchor_velocity"] = rng.normal(0.0, 0.3, (u, d))
+    return params
 
 
 def replace(params: Params, gravity=None, mass=None, **kinds) -> Params:
@@ -468,6 +471,7 @@ def convergence_system():
             "stiffness": np.array([30.0, 10.0]),
             "damping": np.zeros(2),
             "anchor": x0[[0, 3]] + rng.normal(0.0, 0.05, (2, 3)),
+            "anchor_velocity": np.zeros((2, 3)),  # a moving anchor does work: not conservative
         },
     )
     return params, topo, x0, v0

@@ -25,7 +25,8 @@ def simulate(
 ) -> Trajectory:
     """Positions of ``n_frames`` frames at ``rate`` Hz, from the model's initial state or from
     the first two frames of ``start`` (position of frame 1, and the velocity the integrator
-    carries there given frames 0 and 1: see :func:`~activebonds.physics.start_velocity`)."""
+    carries there given frames 0 and 1: see :func:`~activebonds.physics.start_velocity`).
+    Time (for forces that depend on it) is 0 at the first frame written."""
     if not (np.isfinite(rate) and rate > 0):
         raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
     if integrator not in ("euler", "verlet"):
@@ -34,12 +35,14 @@ def simulate(
     if start is None:
         x0, v0 = model.initial_state()
         first = None
+        t0 = 0.0
     else:
         data = start.select(list(model.markers))
         if data.n_frames < 2 or not data.mask[:2].all():
             raise InputError(start.source, "the first two frames must hold every model marker")
         first = data.positions[0]
         x0 = data.positions[1]
+        t0 = dt  # frame 1
         v0 = start_velocity(
             model.params,
             model.topology,
@@ -48,6 +51,7 @@ def simulate(
             dt,
             substeps,
             integrator,
+            t=t0,
         )
     n_run = n_frames if first is None else n_frames - 1
     xs = np.asarray(
@@ -60,6 +64,7 @@ def simulate(
             n_run,
             substeps,
             integrator,
+            t0,
         )
     )
     if first is not None:

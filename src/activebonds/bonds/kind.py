@@ -13,6 +13,7 @@ vector, [N, N] per weights row and [N, D] per constant (unit vector) parameter.
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -78,10 +79,32 @@ class LinearPart:
     columns: Callable
 
 
+def _takes_time(forces: Callable) -> bool:
+    """Whether ``forces`` takes a fifth positional argument (the time t)."""
+    try:
+        params = inspect.signature(forces).parameters.values()
+    except (TypeError, ValueError):
+        return True
+    if any(p.kind is p.VAR_POSITIONAL for p in params):
+        return True
+    return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) >= 5
+
+
+def _timeless(forces: Callable) -> Callable:
+    def timed(params, topology, x, v, t):
+        return forces(params, topology, x, v)
+
+    return timed
+
+
 @dataclass(frozen=True)
 class BondKind:
-    """A bond kind: ``forces(params, topology, x, v) -> [P, D]`` for one individual, with
-    ``params`` and ``topology`` this kind's dicts and ``x, v`` [P, D] (pure JAX)."""
+    """A bond kind: ``forces(params, topology, x, v, t) -> [P, D]`` for one individual, with
+    ``params`` and ``topology`` this kind's dicts, ``x, v`` [P, D] and ``t`` the time in
+    seconds from the first frame of the data window (or of the simulation), a scalar (pure
+    JAX). A kind whose forces do not depend on time takes ``t`` and ignores it; a ``forces``
+    written with four arguments ``(params, topology, x, v)`` is adapted when the kind is
+    made (it ignores time)."""
 
     name: str
     arity: int
@@ -92,6 +115,10 @@ class BondKind:
     what: str = ""  # its parameters in words, for messages ("flexion springs")
     activity: Callable | None = None  # (params, topology, x, v) -> [N] neuron activations
     linear: LinearPart | None = None
+
+    def __post_init__(self):
+        if not _takes_time(self.forces):
+            object.__setattr__(self, "forces", _timeless(self.forces))
 
     @property
     def keys(self) -> tuple[str, ...]:

@@ -1,7 +1,11 @@
 """Unary spring + damper, a particle to the environment (DESIGN.md §2).
 
-F_p += -k_u (x_p - a) - c_u v_p, with the anchor ``a`` fixed or identified (genes
-``anchor[axis]``). Linear in (k, k a, c): the exact least squares solves for all three.
+F_p += -k_u (x_p - a(t)) - c_u (v_p - u), with the anchor ``a(t) = a + u t`` moving at the
+constant ``anchor_velocity`` u (default zero; e.g. a marker tied to a treadmill frame), t the
+time from the first frame of the data window; ``a`` and ``u`` fixed or identified (genes
+``anchor[axis]``, ``anchor_velocity[axis]``). Linear in (k, k a, c) for a fixed u: the exact
+least squares solves for all three, and refuses a free u (its terms k u t and c u would need
+two products of one gene).
 """
 
 from __future__ import annotations
@@ -12,34 +16,44 @@ from .accumulate import accumulate
 from .kind import NON_NEGATIVE, BondKind, LinearPart, Parameter, spread
 
 
-def forces(params, topology, x, v):
+def forces(params, topology, x, v, t):
     idx = topology["particles"][:, 0]
+    u = params["anchor_velocity"]
     f = (
-        -params["stiffness"][:, None] * (x[idx] - params["anchor"])
-        - params["damping"][:, None] * v[idx]
+        -params["stiffness"][:, None] * (x[idx] - (params["anchor"] + u * t))
+        - params["damping"][:, None] * (v[idx] - u)
     )
     return accumulate(x.shape[0], [(idx, 1, f)])
 
 
 def _switch_off(values, index, topology, genes):
+    moving = np.asarray(index["anchor_velocity"])
+    if (moving >= 0).any():
+        raise ValueError(
+            "least squares: a free anchor_velocity does not enter linearly (k u t and c u are "
+            "products of one gene with two others); fix it"
+        )
     values["stiffness"][:] = 0.0
     values["damping"][:] = 0.0
     return values
 
 
 def _columns(values, index, topology, x, v, unknowns):
-    """F_p += -k x_p + (k a) - c v_p: unknowns k, k a (per axis) and c where free."""
+    """F_p += -k x_p + (k a) + k u t - c (v_p - u): unknowns k, k a (per axis) and c where
+    free; the anchor velocity u is fixed (``_switch_off`` refuses a free one)."""
     d = x.shape[-1]
     known = unknowns.known
+    t = np.asarray(unknowns.time, np.float64)[:, None]  # [S, 1] the start frames' times
     for n, p in enumerate(np.asarray(topology["particles"][:, 0])):
         gk, gc = int(index["stiffness"][n]), int(index["damping"][n])
         k, c = float(values["stiffness"][n]), float(values["damping"][n])
         ga = [int(index["anchor"][n, a]) for a in range(d)]
         anchor = np.asarray(values["anchor"][n], np.float64)
+        u = np.asarray(values["anchor_velocity"][n], np.float64)
         if gk >= 0:
-            unknowns.gene(gk)[:, p] -= x[:, p]
+            unknowns.gene(gk)[:, p] -= x[:, p] - u * t
         else:
-            known[:, p] -= k * x[:, p]
+            known[:, p] -= k * (x[:, p] - u * t)
         for a in range(d):
             if ga[a] >= 0 and gk >= 0:
                 unknowns.product(gk, ga[a])[:, p, a] += 1.0
@@ -50,9 +64,9 @@ def _columns(values, index, topology, x, v, unknowns):
             else:
                 known[:, p, a] += k * anchor[a]
         if gc >= 0:
-            unknowns.gene(gc)[:, p] -= v[:, p]
+            unknowns.gene(gc)[:, p] -= v[:, p] - u
         else:
-            known[:, p] -= c * v[:, p]
+            known[:, p] -= c * (v[:, p] - u)
 
 
 KIND = BondKind(
@@ -62,6 +76,9 @@ KIND = BondKind(
         Parameter("stiffness", "stiffness", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
         Parameter("damping", "damping", 0.0, spread(100, (0.0, 10.0)), check=NON_NEGATIVE),
         Parameter("anchor", "anchor", 0.0, lambda v: (v - 1.0, v + 1.0), form="vector"),
+        Parameter(
+            "anchor_velocity", "anchor_velocity", 0.0, lambda v: (v - 1.0, v + 1.0), form="vector"
+        ),
     ),
     forces=forces,
     internal=False,

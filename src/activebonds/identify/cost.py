@@ -7,7 +7,9 @@ predicts. From the *real* state at a start frame s, the model
 is integrated H steps; every predicted position is compared with the recorded one. Starts are
 s = 1, 1 + H, 1 + 2H, ... so H = 1 is the paper's one-step cost and H = window length a free run.
 The local cost of particle p is its own share; the global cost is their sum. A prediction whose
-inputs (the state at s and s - 1) or target are missing contributes nothing.
+inputs (the state at s and s - 1) or target are missing contributes nothing. Each restart
+knows its time, ``s * dt`` from the window's first frame, for forces that depend on time (a
+unary bond's moving anchor).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.model import Model
-from ..physics.integrate import advance, rollout_states, start_velocity
+from ..physics.integrate import START_ITERATIONS, advance, rollout_states, start_velocity
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +34,14 @@ class Windows:
     target: np.ndarray  # [S, H, P, D] recorded positions to predict (0 where missing)
     weight: np.ndarray  # [S, H, P] 1.0 where the term counts
     dt: float
+    t0: np.ndarray | None = None  # [S] time of each start (s * dt, from the first frame)
+
+    @property
+    def times(self) -> np.ndarray:
+        """[S] the time of each start (s), zeros where none was given."""
+        if self.t0 is None:
+            return np.zeros(self.x0.shape[0])
+        return np.asarray(self.t0, np.float64)
 
     @property
     def n_terms(self) -> int:
@@ -58,7 +68,15 @@ def make_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: in
     frames_c = np.minimum(frames, n_frames - 1)
     target = x[frames_c]
     weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
-    return Windows(x0=x0, x_prev=x[starts - 1], v0=v0, target=target, weight=weight, dt=float(dt))
+    return Windows(
+        x0=x0,
+        x_prev=x[starts - 1],
+        v0=v0,
+        target=target,
+        weight=weight,
+        dt=float(dt),
+        t0=starts * float(dt),
+    )
 
 
 def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
@@ -69,6 +87,7 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     topo, layout = model.topology, model.layout
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     x_prev = jnp.asarray(windows.x_prev)
+    t0 = jnp.asarray(windows.times)
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
     dt, horizon = windows.dt, windows.horizon
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
@@ -76,18 +95,26 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     def velocities(params):
         if exact_backward:
             return v0
-        start = jax.vmap(lambda a, b: start_velocity(params, topo, a, b, dt, substeps, method))
-        return start(x_prev, x0)
+        start = jax.vmap(
+            lambda a, b, t: start_velocity(
+                params, topo, a, b, dt, substeps, method, START_ITERATIONS, t
+            )
+        )
+        return start(x_prev, x0, t0)
 
     def predict(params):
         v = velocities(params)
         if horizon == 1:
-            step = jax.vmap(lambda x, v: advance(params, topo, x, v, dt, substeps, method)[0])
-            return step(x0, v)[:, None]
+            step = jax.vmap(
+                lambda x, v, t: advance(params, topo, x, v, dt, substeps, method, t)[0]
+            )
+            return step(x0, v, t0)[:, None]
         run = jax.vmap(
-            lambda x, v: rollout_states(params, topo, x, v, dt, horizon, substeps, method)[0]
+            lambda x, v, t: rollout_states(
+                params, topo, x, v, dt, horizon, substeps, method, t
+            )[0]
         )
-        return run(x0, v)
+        return run(x0, v, t0)
 
     def cost(genome):
         params = layout.decode(genome)

@@ -114,8 +114,9 @@ def _switched_off(model: Model) -> Params:
 class _Unknowns:
     """The columns of the linear unknowns being built, and the known forces."""
 
-    def __init__(self, model: Model, known: np.ndarray):
+    def __init__(self, model: Model, known: np.ndarray, time: np.ndarray):
         self.model, self.known = model, known
+        self.time = time  # [S] the time of each start (forces that depend on time)
         self.cols: dict[str, np.ndarray] = {}
         self.bounds: dict[str, tuple[float, float]] = {}
         self.pairs: list[tuple[str, str, float, float]] = []
@@ -163,10 +164,12 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     x, v, dt = windows.x0, windows.v0, windows.dt
     n_s, n_p, d = x.shape
     with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
-        known = jax.vmap(lambda a, b: total_force(off_params, topo, a, b))(jnp.asarray(x), v)
+        known = jax.vmap(lambda a, b, t: total_force(off_params, topo, a, b, t))(
+            jnp.asarray(x), v, jnp.asarray(windows.times)
+        )
         known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
-    unknowns = _Unknowns(model, known)
+    unknowns = _Unknowns(model, known, windows.times)
     for name in topo.active():
         kind = bonds.get(name)
         if kind.linear is not None:

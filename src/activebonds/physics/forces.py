@@ -2,8 +2,9 @@
 
 The uniform field (gravity x mass) is global; every bond kind's forces come from its
 declaration in :mod:`activebonds.bonds` (``kind.forces(params.bonds[name],
-topology.bonds[name], x, v)``), summed in registry order. ``x, v`` have shape [P, D], and so
-has every force. Vectorise over a population with ``jax.vmap`` and over time with
+topology.bonds[name], x, v, t)``), summed in registry order. ``x, v`` have shape [P, D], and so
+has every force; ``t`` is the time in seconds from the first frame of the data window (or of
+the simulation), a scalar, for kinds whose forces depend on it (a unary bond's moving anchor). Vectorise over a population with ``jax.vmap`` and over time with
 ``jax.lax.scan`` (see :mod:`activebonds.physics.integrate`).
 """
 
@@ -18,23 +19,23 @@ from ..model.params import Params, Topology
 __all__ = ["bond_forces", "neuron_activity", "total_force", "uniform_field"]
 
 
-def uniform_field(params: Params, topo: Topology, x, v):
+def uniform_field(params: Params, topo: Topology, x, v, t=0.0):
     """F_p = m_p g (gravity)."""
     return jnp.broadcast_to(params.mass[:, None] * params.gravity[None, :], x.shape)
 
 
-def bond_forces(kind: str, params: Params, topo: Topology, x, v):
+def bond_forces(kind: str, params: Params, topo: Topology, x, v, t=0.0):
     """The forces of the bonds of one kind ([P, D]; zero without bonds or when disabled)."""
     if kind in topo.disabled or topo.count(kind) == 0:
         return jnp.zeros_like(x)
-    return bonds.get(kind).forces(params.bonds[kind], topo.bonds[kind], x, v)
+    return bonds.get(kind).forces(params.bonds[kind], topo.bonds[kind], x, v, t)
 
 
-def total_force(params: Params, topo: Topology, x, v):
-    """Uniform field plus every enabled kind's bond forces, [P, D]."""
+def total_force(params: Params, topo: Topology, x, v, t=0.0):
+    """Uniform field plus every enabled kind's bond forces at time ``t``, [P, D]."""
     f = uniform_field(params, topo, x, v)
     for kind in topo.active():
-        f = f + bonds.get(kind).forces(params.bonds[kind], topo.bonds[kind], x, v)
+        f = f + bonds.get(kind).forces(params.bonds[kind], topo.bonds[kind], x, v, t)
     return f
 
 

@@ -1,5 +1,11 @@
 """Time integration (DESIGN.md §2): semi-implicit Euler (default) or velocity Verlet, with
-substeps h = dt / substeps; free-run rollouts (lax.scan over time) and one-step predictions."""
+substeps h = dt / substeps; free-run rollouts (lax.scan over time) and one-step predictions.
+
+Every function takes the time of its starting state (``t``, or ``t0`` for a rollout; seconds
+from the first frame of the data window or of the simulation, default 0) and evaluates each
+force at the time of its substep: ``t + k h`` for substep k, the second force of a Verlet
+step at the step's end. Kinds that do not depend on time ignore it, so the compiled code of
+a model without them does not change."""
 
 from __future__ import annotations
 
@@ -15,21 +21,22 @@ from .forces import total_force
 Integrator = Literal["euler", "verlet"]
 
 
-def euler_step(params: Params, topo: Topology, x, v, h):
-    """Semi-implicit (symplectic) Euler: v <- v + h F/m; x <- x + h v."""
-    acc = total_force(params, topo, x, v) / params.mass[:, None]
+def euler_step(params: Params, topo: Topology, x, v, h, t=0.0):
+    """Semi-implicit (symplectic) Euler: v <- v + h F(x, v, t)/m; x <- x + h v."""
+    acc = total_force(params, topo, x, v, t) / params.mass[:, None]
     v = v + h * acc
     return x + h * v, v
 
 
-def verlet_step(params: Params, topo: Topology, x, v, h):
+def verlet_step(params: Params, topo: Topology, x, v, h, t=0.0):
     """Velocity Verlet. With velocity-dependent forces the second force uses the
-    half-step velocity (exact Verlet when forces do not depend on velocity)."""
+    half-step velocity (exact Verlet when forces do not depend on velocity); it is
+    evaluated at the step's end, t + h."""
     inv_m = 1.0 / params.mass[:, None]
-    acc = total_force(params, topo, x, v) * inv_m
+    acc = total_force(params, topo, x, v, t) * inv_m
     v_half = v + 0.5 * h * acc
     x = x + h * v_half
-    acc_new = total_force(params, topo, x, v_half) * inv_m
+    acc_new = total_force(params, topo, x, v_half, t + h) * inv_m
     return x, v_half + 0.5 * h * acc_new
 
 
@@ -37,13 +44,20 @@ STEPS: dict[str, Callable] = {"euler": euler_step, "verlet": verlet_step}
 
 
 def advance(
-    params: Params, topo: Topology, x, v, dt, substeps: int = 1, method: Integrator = "euler"
+    params: Params,
+    topo: Topology,
+    x,
+    v,
+    dt,
+    substeps: int = 1,
+    method: Integrator = "euler",
+    t=0.0,
 ):
-    """Integrate over one sample interval dt in ``substeps`` steps."""
+    """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``."""
     step = STEPS[method]
     h = dt / substeps
-    for _ in range(substeps):
-        x, v = step(params, topo, x, v, h)
+    for k in range(substeps):
+        x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
     return x, v
 
 
@@ -60,9 +74,11 @@ def start_velocity(
     substeps: int = 1,
     method: Integrator = "euler",
     iterations: int = START_ITERATIONS,
+    t=0.0,
 ):
     """The velocity at a recorded frame that the integrator itself would carry there, given
-    the two recorded positions ``x_prev`` (frame t - 1) and ``x`` (frame t).
+    the two recorded positions ``x_prev`` (frame t - 1) and ``x`` (frame t); ``t`` is the
+    time of frame t (``x_prev`` is at ``t - dt``).
 
     The backward difference ``v_b = (x - x_prev) / dt`` is the *mean* velocity over the last
     interval, i.e. the velocity about half a frame earlier. Only one-substep semi-implicit
@@ -88,15 +104,16 @@ def start_velocity(
         return v_b
     inv_m = 1.0 / params.mass[:, None]
     if substeps == 1 and method == "verlet":
-        return v_b + 0.5 * dt * total_force(params, topo, x, v_b) * inv_m
+        return v_b + 0.5 * dt * total_force(params, topo, x, v_b, t) * inv_m
     # Constant acceleration a: Euler's N substeps start from v_b - dt (N+1)/(2N) a, Verlet's
     # from v_b - dt/2 a.
     lag = 0.5 * (substeps + 1) / substeps if method == "euler" else 0.5
-    v = v_b - lag * dt * total_force(params, topo, x_prev, v_b) * inv_m
+    t_prev = t - dt
+    v = v_b - lag * dt * total_force(params, topo, x_prev, v_b, t_prev) * inv_m
     for _ in range(iterations):
-        x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method)
+        x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
         v = v + (x - x_end) / dt
-    x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method)
+    x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
     residual = jnp.sqrt(jnp.sum((x - x_end) ** 2))
     scale = jnp.sqrt(jnp.sum((x - x_prev) ** 2)) + 1e-12
     converged = residual <= START_TOLERANCE * scale
@@ -112,23 +129,28 @@ def rollout(
     n_frames: int,
     substeps: int = 1,
     method: Integrator = "euler",
+    t0=0.0,
 ):
-    """Free run: positions of ``n_frames`` frames, the first being x0. Shape [n_frames, P, D]."""
+    """Free run: positions of ``n_frames`` frames, the first being x0 (at time ``t0``).
+    Shape [n_frames, P, D]."""
 
-    def body(state, _):
-        x, v = advance(params, topo, *state, dt, substeps, method)
+    def body(state, i):
+        x, v = advance(params, topo, *state, dt, substeps, method, t0 + i * dt)
         return (x, v), x
 
-    _, xs = jax.lax.scan(body, (x0, v0), None, length=n_frames - 1)
+    _, xs = jax.lax.scan(body, (x0, v0), jnp.arange(n_frames - 1))
     return jnp.concatenate([x0[None], xs], axis=0)
 
 
-def rollout_states(params, topo, x0, v0, dt, n_steps: int, substeps: int = 1, method="euler"):
-    """Free run returning (positions, velocities) of the ``n_steps`` states after (x0, v0)."""
+def rollout_states(
+    params, topo, x0, v0, dt, n_steps: int, substeps: int = 1, method="euler", t0=0.0
+):
+    """Free run returning (positions, velocities) of the ``n_steps`` states after (x0, v0),
+    (x0, v0) being at time ``t0``."""
 
-    def body(state, _):
-        state = advance(params, topo, *state, dt, substeps, method)
+    def body(state, i):
+        state = advance(params, topo, *state, dt, substeps, method, t0 + i * dt)
         return state, state
 
-    _, (xs, vs) = jax.lax.scan(body, (x0, v0), None, length=n_steps)
+    _, (xs, vs) = jax.lax.scan(body, (x0, v0), jnp.arange(n_steps))
     return xs, vs

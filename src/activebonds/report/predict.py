@@ -77,18 +77,18 @@ def neural_bonds(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("topo", "substeps", "method"))
-def _one_step(params, x_prev, x0, dt, topo: _Topo, substeps: int, method: str):
-    def step(a, b):
-        v = start_velocity(params, topo.topo, a, b, dt, substeps, method)
-        return advance(params, topo.topo, b, v, dt, substeps, method)[0]
+def _one_step(params, x_prev, x0, times, dt, topo: _Topo, substeps: int, method: str):
+    def step(a, b, t):
+        v = start_velocity(params, topo.topo, a, b, dt, substeps, method, t=t)
+        return advance(params, topo.topo, b, v, dt, substeps, method, t)[0]
 
-    return jax.vmap(step)(x_prev, x0)
+    return jax.vmap(step)(x_prev, x0, times)
 
 
 @partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
-def _free_run(params, x_prev, x0, dt, topo: _Topo, n_steps: int, substeps: int, method: str):
-    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method)
-    xs, vs = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method)
+def _free_run(params, x_prev, x0, t0, dt, topo: _Topo, n_steps: int, substeps: int, method: str):
+    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method, t=t0)
+    xs, vs = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0)
     return v0, xs, vs
 
 
@@ -103,7 +103,8 @@ def one_step(
 ) -> np.ndarray:
     """Prediction of every frame t >= 2 from the recorded frames t - 1 and t - 2, [F, P, D].
 
-    NaN where an input frame misses a marker, and for frames 0 and 1."""
+    NaN where an input frame misses a marker, and for frames 0 and 1. Time is 0 at frame 0
+    (the fitted window's first frame)."""
     x = np.asarray(positions, dtype=np.float64)
     out = np.full_like(x, np.nan)
     if x.shape[0] < 3:
@@ -116,6 +117,7 @@ def one_step(
         _params(model),
         jnp.asarray(x_prev),
         jnp.asarray(x0),
+        jnp.arange(1, x.shape[0] - 1) * float(dt),
         float(dt),
         topo=_Topo(model.topology),
         substeps=int(substeps),
@@ -155,6 +157,7 @@ def free_run(
         _params(model),
         jnp.asarray(x[s - 1]),
         jnp.asarray(x[s]),
+        s * float(dt),
         float(dt),
         topo=_Topo(model.topology),
         n_steps=max(n - s - 1, 1),
