@@ -19,10 +19,8 @@ from .kind import NON_NEGATIVE, BondKind, LinearPart, Parameter, spread
 def forces(params, topology, x, v, t):
     idx = topology["particles"][:, 0]
     u = params["anchor_velocity"]
-    f = (
-        -params["stiffness"][:, None] * (x[idx] - (params["anchor"] + u * t))
-        - params["damping"][:, None] * (v[idx] - u)
-    )
+    k, c = params["stiffness"][:, None], params["damping"][:, None]
+    f = -k * (x[idx] - (params["anchor"] + u * t)) - c * (v[idx] - u)
     return accumulate(x.shape[0], [(idx, 1, f)])
 
 

@@ -105,14 +105,10 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     def predict(params):
         v = velocities(params)
         if horizon == 1:
-            step = jax.vmap(
-                lambda x, v, t: advance(params, topo, x, v, dt, substeps, method, t)[0]
-            )
+            step = jax.vmap(lambda x, v, t: advance(params, topo, x, v, dt, substeps, method, t)[0])
             return step(x0, v, t0)[:, None]
         run = jax.vmap(
-            lambda x, v, t: rollout_states(
-                params, topo, x, v, dt, horizon, substeps, method, t
-            )[0]
+            lambda x, v, t: rollout_states(params, topo, x, v, dt, horizon, substeps, method, t)[0]
         )
         return run(x0, v, t0)
 
