@@ -5,7 +5,9 @@ crossover per bond type biased by local cost; one of four mutation variants per 
 log-normal self-adaptation; elitist, rank-biased selection from parents + children) and the same
 cost as ``activebonds.identify.cost.make_cost`` (restart from the recorded state with a
 backward-difference velocity, semi-implicit Euler or velocity Verlet, H steps; binary
-viscoelastic and mechanical-neural bonds, gravity). Random numbers come from NumPy's PCG64, so
+viscoelastic and mechanical-neural bonds, gravity: a fixed vector or a free magnitude along a
+fixed direction; masses, free as ratios of a total mass or not). None of these forces depends
+on time, so the restart windows' times (``windows.times``) are not needed here. Random numbers come from NumPy's PCG64, so
 runs are statistically, not bitwise, equal to the package's.
 
 Everything is vectorised over the population with broadcasting on [N, S, P, D] arrays (N
@@ -46,6 +48,7 @@ class NumpyCost:
         self.method, self.substeps = method, int(substeps)
         self.n_genes = layout.n_genes
         self.log = layout.log
+        self.gravity_direction, self.mass_rest = layout.gravity_direction, layout.mass_rest
         self.base = {f: np.asarray(v, np.float64) for f, v in _fields(layout.base).items()}
         self.index = {f: np.asarray(v) for f, v in _fields(layout.index).items()}
         n_b = topo.count("binary")
@@ -76,6 +79,13 @@ class NumpyCost:
             else:
                 gathered = padded[:, np.where(index >= 0, index, self.n_genes)]
                 out[field] = np.where(index >= 0, gathered, base)
+        if self.gravity_direction is not None:  # a free magnitude along a fixed direction
+            out["gravity"] = out["gravity"] * self.gravity_direction
+        if self.mass_rest is not None:  # free masses as weights of total_mass less the fixed
+            free = self.index["mass"] >= 0
+            w = out["mass"]
+            total = np.sum(np.where(free, w, 0.0), axis=-1, keepdims=True)
+            out["mass"] = np.where(free, self.mass_rest * (w / total), w)
         return out
 
     def force(self, p, x, v):

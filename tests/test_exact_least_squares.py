@@ -118,7 +118,7 @@ def test_equation_error_recovers_masses_with_a_known_total(tetra):
     text = TETRA.read_text()
     for m in ("1.0", "1.5", "2.0", "0.8"):
         text = text.replace(f"mass = {m}\n", "mass = { value = 1.0, min = 0.1, max = 10.0 }\n")
-    free = loads_model(text)
+    free = loads_model("total_mass = 5.3\n" + text)  # every mass free: the scale is the total
     assert (np.asarray(free.layout.index.mass) >= 0).all()
     result = equation_error_fit(free, windows, total_mass=5.3)
     np.testing.assert_allclose(result.masses, [1.0, 1.5, 2.0, 0.8], rtol=1e-8)
@@ -127,8 +127,9 @@ def test_equation_error_recovers_masses_with_a_known_total(tetra):
     for g, v in result.values.items():
         assert v == pytest.approx(truth[names[g]], rel=1e-8), names[g]
     assert result.rms_force < 1e-9
-    with pytest.raises(Exception, match="total mass"):
-        equation_error_fit(free, windows)
+    assert equation_error_fit(free, windows).masses == pytest.approx(result.masses)  # the file's
+    with pytest.raises(InputError, match="total_mass"):  # every mass free, no scale: refused
+        loads_model(text)
 
 
 def _floor_by_slsqp(resid, x, mass):

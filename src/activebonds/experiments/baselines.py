@@ -106,5 +106,7 @@ def model_floor_rms_mm(model: Model, positions: np.ndarray, mask: np.ndarray, dt
     external = [k for k in model.topology.active() if not bonds.get(k).internal]
     if external or (np.asarray(model.layout.index.mass) >= 0).any():
         return None
+    if model.layout.gravity_direction is not None:  # a free field: its floor is no floor
+        return None
     gravity = np.asarray(model.params.gravity, np.float64)
     return momentum_floor_rms_mm(positions, mask, dt, model.params.mass, gravity)

@@ -70,7 +70,7 @@ def nonlinear_genes(model: Model) -> list[int]:
     """The genes outside the linear families (neural terms, masses, flexion springs): where
     there is one, the least-squares optimum is no optimum of the model's own family."""
     index = model.layout.index
-    arrays = [index.mass, index.gravity]
+    arrays = [index.mass]  # a free gravity magnitude is linear (m_p n per unit of it)
     for kind, fields in index.bonds.items():
         arrays += [a for f, a in fields.items() if f not in _linear_fields(kind)]
     return sorted({int(g) for a in arrays for g in np.asarray(a).ravel() if g >= 0})
@@ -106,9 +106,10 @@ def _switched_off(model: Model) -> Params:
             )
         except ValueError as err:
             raise InputError(model.name, str(err)) from None
-    return Params(
-        mass=np.array(base.mass, np.float64), gravity=np.array(base.gravity), bonds=values
-    )
+    gravity = np.array(base.gravity, np.float64)
+    if layout.gravity_direction is not None:  # a free magnitude: a column of its own
+        gravity[:] = 0.0
+    return Params(mass=np.array(base.mass, np.float64), gravity=gravity, bonds=values)
 
 
 class _Unknowns:
@@ -176,6 +177,9 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
             kind.linear.columns(
                 base.bonds[name], index.bonds[name], topo.bonds[name], x, v, unknowns
             )
+    if layout.gravity_direction is not None:  # F_p += m_p n g: linear in the magnitude g
+        column = unknowns.gene(int(np.asarray(index.gravity)[0]))
+        column += np.asarray(base.mass, np.float64)[None, :, None] * layout.gravity_direction
     cols, bounds, pairs = unknowns.cols, unknowns.bounds, unknowns.pairs
 
     # A gene that multiplies a free stiffness in one bond and a fixed one in another (bonds of
@@ -341,6 +345,12 @@ def equation_error_fit(
     free_mass = np.asarray(layout.index.mass) >= 0
     if not free_mass.any():
         raise InputError(model.name, "equation_error_fit: no free mass")
+    if layout.gravity_direction is not None:
+        raise InputError(
+            model.name, "equation_error_fit: a free gravity with free masses is not linear"
+        )
+    if total_mass is None:
+        total_mass = model.spec.total_mass
     if free_mass.all() and total_mass is None:
         raise InputError(model.name, "every mass is free: give the total mass")
     from ..model.model import build

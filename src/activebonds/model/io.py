@@ -26,7 +26,8 @@ _FORM_EXPECTED = {
 _EXPECTED = {
     "length": "expected a number or a list of numbers (one per bond of the kind)",
     "rate": "expected a number or a list of numbers (one per bond of the kind)",
-    "gravity": "expected a list of numbers",
+    "gravity": "expected a list of numbers or a table { value = .., min = .., max = .., "
+    "direction = [..] }",
     "position": "expected a list of numbers",
     "velocity": "expected a list of numbers",
     "mass": _PARAMETER,

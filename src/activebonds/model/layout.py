@@ -3,7 +3,10 @@
 DESIGN.md §3: genes are grouped by bond type (all occurrences of a type share one parameter
 set); every gene has bounds; positive quantities with wide bounds are searched in log space.
 ``decode`` maps a genome (search space) to :class:`Params` with one gather per leaf, so it
-vmaps over a population at no cost.
+vmaps over a population at no cost; then (:meth:`Layout.derive`) a free gravity magnitude
+becomes the vector ``magnitude * direction``, and with ``total_mass`` the free masses'
+genes (positive weights w_i, log-scaled) become ``m_i = (total - fixed) * w_i / sum(w)``, so
+the total holds exactly whatever the genes.
 """
 
 from __future__ import annotations
@@ -22,6 +25,11 @@ from .params import Params
 # theirs: activebonds.bonds).
 def mass_bounds(v: float) -> tuple[float, float]:
     return (v / 10, v * 10)
+
+
+# Bounds of a free gravity magnitude given without min/max, from the file value g.
+def gravity_bounds(g: float) -> tuple[float, float]:
+    return (g / 2, g * 2) if g > 0 else (g - 10.0, g + 10.0)
 
 
 @dataclass(frozen=True)
@@ -43,6 +51,10 @@ class Layout:
     group_slots: np.ndarray  # [n_groups, S] particles at the extremities of each occurrence, -1 pad
     base: Params  # fixed values (and file values of free ones)
     index: Params  # same shapes, int: gene index or -1 for fixed entries
+    # a free gravity magnitude: every axis of index.gravity is its gene, times this unit vector
+    gravity_direction: np.ndarray | None = None
+    # total_mass less the fixed masses: the free masses' genes are weights of this remainder
+    mass_rest: float | None = None
 
     @property
     def n_genes(self) -> int:
@@ -84,7 +96,20 @@ class Layout:
             gathered = padded[np.where(index >= 0, index, len(self.genes))]
             return jnp.where(index >= 0, gathered, jnp.asarray(base, values.dtype))
 
-        return jax.tree_util.tree_map(leaf, self.base, self.index)
+        return self.derive(jax.tree_util.tree_map(leaf, self.base, self.index), jnp)
+
+    def derive(self, params: Params, xp=np) -> Params:
+        """Params whose gathered genes are turned into the model's numbers: the gravity vector
+        from its magnitude, the free masses from their weights (``xp``: numpy or jax.numpy).
+        The identity for a model with neither."""
+        if self.gravity_direction is not None:
+            params = params._replace(gravity=params.gravity * self.gravity_direction)
+        if self.mass_rest is not None:
+            free = np.asarray(self.index.mass) >= 0
+            w = params.mass
+            total = xp.sum(xp.where(free, w, 0.0))
+            params = params._replace(mass=xp.where(free, self.mass_rest * (w / total), w))
+        return params
 
 
 def _to_search(x: float, log: bool) -> float:

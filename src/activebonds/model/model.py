@@ -9,9 +9,9 @@ import jax
 import numpy as np
 
 from .. import bonds
-from .layout import Gene, Layout, mass_bounds, pick_log
+from .layout import Gene, Layout, gravity_bounds, mass_bounds, pick_log
 from .params import Params, Topology
-from .schema import ModelSpec, Param, VectorParam, Weights
+from .schema import GravityParam, ModelSpec, Param, VectorParam, Weights
 
 
 def _value(p: float | Param | None, default: float = 0.0) -> float:
@@ -117,7 +117,11 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
         },
     )
     index = jax.tree_util.tree_map(lambda a: np.full(a.shape, -1, np.int32), base)
-    if spec.gravity is not None:
+    direction = None  # the unit vector of a gravity given as a magnitude
+    if isinstance(spec.gravity, GravityParam):
+        direction = np.array(spec.gravity.unit(d), np.float64)
+        base.gravity[:] = spec.gravity.value * direction
+    elif spec.gravity is not None:
         base.gravity[:] = spec.gravity
 
     genes: list[Gene] = []
@@ -152,13 +156,33 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
             genes.append(Gene(f"{groups[g]}.{key}", g, lo, hi, use_log, value))
         indices[where] = gene_of[(g, key)]
 
+    # With total_mass, a free mass's gene is a positive weight w_i (log-scaled, its file value
+    # and bounds in kg up to a common scale) and m_i = (total - fixed) * w_i / sum(w).
+    ratios = spec.total_mass is not None and any(spec.free_masses())
     for i, p in enumerate(spec.particle):
         m = p.mass
         base.mass[i] = _value(m)
         if _is_free(m):
             g = group(f"mass:{p.name}")
             slots[g].append(i)
-            put(base.mass, index.mass, i, mass_bounds, m, g, "mass", m.value, m.min, m.max, m.log)
+            key, log = ("weight", True) if ratios else ("mass", m.log)
+            put(base.mass, index.mass, i, mass_bounds, m, g, key, m.value, m.min, m.max, log)
+    mass_rest = None
+    if ratios:
+        free = np.asarray(index.mass) >= 0
+        mass_rest = float(spec.total_mass) - float(base.mass[~free].sum())
+        base.mass[free] = mass_rest * (base.mass[free] / base.mass[free].sum())
+
+    gravity_direction = None
+    if isinstance(spec.gravity, GravityParam) and _is_free(spec.gravity):
+        gp = spec.gravity
+        g = group("gravity")
+        slots[g].extend(range(len(spec.particle)))  # the field acts on every particle
+        for ax in range(d):
+            put(base.gravity, index.gravity, ax, gravity_bounds, gp, g, "magnitude", gp.value,
+                gp.min, gp.max, gp.log)  # fmt: skip
+        base.gravity[:] = gp.value * direction
+        gravity_direction = direction
 
     counters = {k.name: 0 for k in kinds}
     for bi, b in enumerate(spec.bond):
@@ -212,6 +236,8 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
         group_slots=group_slots,
         base=base,
         index=index,
+        gravity_direction=gravity_direction,
+        mass_rest=mass_rest,
     )
     return Model(spec=spec, topology=topology, layout=layout)
 
@@ -225,7 +251,7 @@ def with_values(model: Model, values: np.ndarray) -> ModelSpec:
         i = np.asarray(i)
         return np.where(i >= 0, values[np.maximum(i, 0)], b) if i.size else b
 
-    params = jax.tree_util.tree_map(leaf, layout.base, layout.index)
+    params = layout.derive(jax.tree_util.tree_map(leaf, layout.base, layout.index), np)
     return spec_with_params(model.spec, params, keep=model.disabled)
 
 
@@ -241,10 +267,14 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
             return None
         return float(v)
 
-    particles = [
-        p.model_copy(update={"mass": setp(p.mass, params.mass[i])})
-        for i, p in enumerate(spec.particle)
-    ]
+    masses = [setp(p.mass, params.mass[i]) for i, p in enumerate(spec.particle)]
+    if spec.total_mass is not None and any(spec.free_masses()):
+        masses = _ratio_masses(spec, np.asarray(params.mass, np.float64))
+    particles = [p.model_copy(update={"mass": masses[i]}) for i, p in enumerate(spec.particle)]
+    update_spec: dict[str, Any] = {}
+    if isinstance(spec.gravity, GravityParam):
+        unit = np.array(spec.gravity.unit(spec.dimension))
+        update_spec["gravity"] = setp(spec.gravity, float(np.dot(params.gravity, unit)))
     counters: dict[str, int] = {}
     out = []
     for b in spec.bond:
@@ -277,4 +307,28 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
             if isinstance(value, dict):  # the weights table's rows
                 update[key] = getattr(b, key).model_copy(update=value)
         out.append(b.model_copy(update=update))
-    return spec.model_copy(update={"particle": particles, "bond": out})
+    return spec.model_copy(update={"particle": particles, "bond": out, **update_spec})
+
+
+def _ratio_masses(spec: ModelSpec, mass: np.ndarray) -> list:
+    """The particles' masses written back under ``total_mass``: the free ones at their values
+    in kg, unclamped (they sum to the total), with any file bounds rescaled by one common
+    factor s, as close to 1 as keeps every value inside (the weights' box is defined up to a
+    scale, so the same models are searched); widened only where no common factor fits."""
+    free = spec.free_masses()
+    s_lo, s_hi = 0.0, np.inf
+    for p, f, m in zip(spec.particle, free, mass, strict=True):
+        if f and p.mass.max is not None:
+            s_lo = max(s_lo, m / p.mass.max)
+        if f and p.mass.min is not None:
+            s_hi = min(s_hi, m / p.mass.min)
+    s = min(max(1.0, s_lo), s_hi) if s_lo <= s_hi else float(np.sqrt(s_lo * s_hi))
+    out = []
+    for p, f, m in zip(spec.particle, free, mass, strict=True):
+        if not f:
+            out.append(p.mass)
+            continue
+        lo = None if p.mass.min is None else min(p.mass.min * s, float(m))
+        hi = None if p.mass.max is None else max(p.mass.max * s, float(m))
+        out.append(p.mass.model_copy(update={"value": float(m), "min": lo, "max": hi}))
+    return out

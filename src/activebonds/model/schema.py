@@ -1,6 +1,9 @@
 """The model file's schema (DESIGN.md §4), validated with pydantic.
 
-A model file is TOML: top-level ``name``, ``dimension``, optional ``gravity``; ``[[particle]]``
+A model file is TOML: top-level ``name``, ``dimension``, optional ``gravity`` (a fixed vector,
+or a table ``{ value, min, max, direction }``: a magnitude, free or fixed, along a fixed
+direction) and ``total_mass`` (kg: the free masses are then identified as ratios of it);
+``[[particle]]``
 tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
@@ -130,6 +133,23 @@ class Weights(_Strict):
         return self
 
 
+class GravityParam(Param):
+    """Gravity as a magnitude (m/s^2, fixed or free within [min, max]) along a fixed
+    ``direction`` (any non-zero vector, normalised; default minus the last axis). Its one gene
+    is ``gravity.magnitude``."""
+
+    direction: list[FiniteFloat] | None = None
+
+    def unit(self, dimension: int) -> list[float]:
+        """The normalised direction (minus the last axis when none is given)."""
+        if self.direction is None:
+            return [0.0] * (dimension - 1) + [-1.0]
+        norm = math.sqrt(sum(x * x for x in self.direction))
+        return [x / norm for x in self.direction]
+
+
+GRAVITY_ZERO = 1e-12  # a gravity direction this short is refused as zero
+
 Scalar = FiniteFloat | Param
 Vector = list[FiniteFloat] | VectorParam
 
@@ -247,7 +267,8 @@ class ModelSpec(_Strict):
 
     name: str = "model"
     dimension: Literal[2, 3] = 3
-    gravity: list[float] | None = None
+    gravity: list[float] | GravityParam | None = None
+    total_mass: FiniteFloat | None = None  # kg; fixes the mass scale when masses are free
     particle: list[Particle] = Field(min_length=1)
     bond: list[Bond] = Field(default_factory=list)
 
@@ -269,11 +290,20 @@ class ModelSpec(_Strict):
                     f"'{followed[m]}'"
                 )
             followed[m] = p.name
-        if self.gravity is not None:
+        if isinstance(self.gravity, GravityParam):
+            direction = self.gravity.direction
+            if direction is not None and len(direction) != d:
+                raise ValueError(
+                    f"gravity.direction: expected {d} components, got {len(direction)}"
+                )
+            if direction is not None and math.sqrt(sum(x * x for x in direction)) <= GRAVITY_ZERO:
+                raise ValueError(f"gravity.direction: must be a non-zero vector, got {direction}")
+        elif self.gravity is not None:
             if len(self.gravity) != d:
                 raise ValueError(f"gravity: expected {d} components, got {len(self.gravity)}")
             for g in self.gravity:
                 _finite(g, "gravity")
+        self._check_mass_scale()
         for i, p in enumerate(self.particle):
             for field in ("position", "velocity"):
                 vec = getattr(p, field)
@@ -329,3 +359,47 @@ class ModelSpec(_Strict):
                     )
                 types[b.type] = sig
         return self
+
+    def free_masses(self) -> list[bool]:
+        """Which particles' masses are free (searched)."""
+        return [isinstance(p.mass, Param) and not p.mass.fixed for p in self.particle]
+
+    def mass_scale(self) -> str:
+        """What fixes the scale of the identified masses, in words (the run report)."""
+        free = self.free_masses()
+        if not any(free):
+            return "not identified: no free masses"
+        if self.total_mass is not None:
+            return f"total_mass = {self.total_mass:g} kg"
+        name = next(p.name for p, f in zip(self.particle, free, strict=True) if not f)
+        return f"particle {name}'s mass (fixed)"
+
+    def _check_mass_scale(self) -> None:
+        """Scaling every mass, stiffness, damping and gain by one factor leaves every trajectory
+        unchanged: free masses need a fixed one or ``total_mass`` to fix the scale."""
+        free = self.free_masses()
+        fixed = sum(
+            float(p.mass.value if isinstance(p.mass, Param) else p.mass)
+            for p, f in zip(self.particle, free, strict=True)
+            if not f
+        )
+        if self.total_mass is None:
+            if all(free):
+                raise ValueError(
+                    "particle: every mass is free, but scaling all masses, stiffnesses, "
+                    "dampings and gains by one factor leaves every trajectory unchanged: fix "
+                    "one particle's mass or give total_mass (kg)"
+                )
+            return
+        total = self.total_mass
+        if not total > 0:
+            raise ValueError(f"total_mass: must be > 0 kg, got {total}")
+        if any(free) and total <= fixed:
+            raise ValueError(
+                f"total_mass: must exceed the fixed masses' sum ({fixed:g} kg), got {total:g}"
+            )
+        if not any(free) and abs(total - fixed) > 1e-9 * total:
+            raise ValueError(
+                f"total_mass: {total:g} kg differs from the particles' masses' sum ({fixed:g} "
+                "kg), and no mass is free"
+            )

@@ -231,6 +231,7 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("status", st.get("status", "unknown") + ("" if record.has_best else " (no best model)")),
         ("model", f"{record.model.name} ({inputs.get('model', {}).get('path', 'in memory')})"),
         ("bond variant", s.bonds),
+        ("mass scale fixed by", record.model.spec.mass_scale()),
         ("data", inputs.get("data", {}).get("path", w.source or "in memory")),
         ("markers (particle ← marker)", _markers_text(pred)),
         (
