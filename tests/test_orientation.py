@@ -51,3 +51,13 @@ def test_info_shows_the_guess(tmp_path):
     assert ground["height"] == pytest.approx(guess_ground(read_trajectory(csv)).height)
     table = subprocess.run([str(exe), "info", str(csv)], capture_output=True, text=True)
     assert "up = +Z, ground at -0.0105 m" in table.stdout
+
+
+def test_a_human_walk_from_opensim_is_y_up():
+    """OpenSim's convention (y up), found from the data alone: 41 markers over the walk, the
+    lowest a toe marker a few centimetres above the floor (marker radius and shoe)."""
+    trc = Path(__file__).resolve().parent / "data" / "human_opensim" / "subject01_walk1.trc"
+    g = guess_ground(read_trajectory(trc))
+    assert (g.axis, g.up) == (1, 1.0) and g.clear
+    assert 0.0 < g.height < 0.06
+    assert "Toe" in g.lowest or "Heel" in g.lowest
