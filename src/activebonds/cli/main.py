@@ -109,7 +109,8 @@ def fit(
     optimizer: Annotated[
         str,
         typer.Option(
-            help="es (the paper's evolution strategy) or random (pure random search, a baseline)."
+            help="es (the paper's evolution strategy), random (pure random search, a "
+            "baseline) or cmaes (CMA-ES, evosax)."
         ),
     ] = "es",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,

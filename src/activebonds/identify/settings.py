@@ -29,7 +29,7 @@ class FitSettings(BaseModel):
     sigma_init: float = Field(0.1, gt=0, le=1)
     adapt_variants: bool = False
     init: Literal["uniform", "lsq"] = "uniform"  # lsq: one individual at the linear optimum
-    optimizer: str = "es"  # a name of identify.strategies: "es" (the paper's) or "random"
+    optimizer: str = "es"  # a name of identify.strategies: "es" (the paper's), "random", "cmaes"
     chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call, at most
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
     precision: Literal["float32", "float64"] = "float64"

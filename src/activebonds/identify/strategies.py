@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from .cmaes import CMAES
 from .es import PaperES
 from .random_search import RandomSearch
 from .strategy import Problem, Strategy
@@ -15,6 +16,7 @@ from .strategy import Problem, Strategy
 BUILDERS: dict[str, Callable[[Problem, object, object], Strategy]] = {
     "es": lambda problem, settings, dtype: PaperES(problem, settings.es(), dtype),
     "random": lambda problem, settings, dtype: RandomSearch(problem, settings.population, dtype),
+    "cmaes": lambda p, s, dtype: CMAES(p, s.population, s.sigma_init, dtype),
 }
 
 
