@@ -8,7 +8,7 @@ Importing it changes nothing in the process (``XLA_FLAGS``, JAX's x64 mode, matp
 backend stay as they were): entry points make such choices (:mod:`activebonds.runtime`).
 """
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 # The public face, imported on first use (importing the package stays light): everything else
 # lives in its subpackage (model, physics, data, identify, report, experiments, cli).
