@@ -103,3 +103,26 @@ gain = { value = 2.0, min = 0.0, max = 20.0 }
 threshold = { value = 0.3, min = -1.0, max = 1.0 }
 weights = { length = [-2.0, 1.5, 0.0], rate = [0.3, -0.5, 0.0], min = -5.0, max = 5.0 }
 """
+
+
+def bowl_problem(n_genes: int = 3):
+    """A strategy Problem whose cost is the squared distance to (0.2 ... 0.8) in [0, 1]^n,
+    each gene its own group and local cost."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from activebonds.identify.strategy import Problem
+
+    target = jnp.linspace(0.2, 0.8, n_genes)
+
+    def evaluate(g):
+        local = (g - target) ** 2
+        return jnp.sum(local), local
+
+    return Problem(
+        evaluate=evaluate,
+        lower=np.zeros(n_genes),
+        upper=np.ones(n_genes),
+        gene_group=np.arange(n_genes, dtype=np.int32),
+        group_slots=np.arange(n_genes, dtype=np.int32)[:, None],
+    )

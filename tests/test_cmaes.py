@@ -21,25 +21,14 @@ from activebonds.identify import evolve, fit, resume, rundir
 from activebonds.identify.cmaes import CMAES
 from activebonds.identify.cost import Display
 from activebonds.identify.strategy import Problem
+from helpers import bowl_problem
 from reliability_runner import EXAMPLES
 
 pytestmark = pytest.mark.timeout(120)
 
 
 def _bowl(n_genes: int = 5) -> Problem:
-    target = jnp.linspace(0.2, 0.8, n_genes)
-
-    def evaluate(g):
-        local = (g - target) ** 2
-        return jnp.sum(local), local
-
-    return Problem(
-        evaluate=evaluate,
-        lower=np.zeros(n_genes),
-        upper=np.ones(n_genes),
-        gene_group=np.arange(n_genes, dtype=np.int32),
-        group_slots=np.arange(n_genes, dtype=np.int32)[:, None],
-    )
+    return bowl_problem(n_genes)
 
 
 def _run(problem, strategy, generations, seed=0):

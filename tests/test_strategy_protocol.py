@@ -29,6 +29,7 @@ from activebonds.identify import evolve, fit, operators, strategies
 from activebonds.identify.cost import Display
 from activebonds.identify.random_search import RandomSearch
 from activebonds.identify.strategy import Problem
+from helpers import bowl_problem
 from reliability_runner import (
     EXAMPLES,
     FIT,
@@ -45,19 +46,7 @@ pytestmark = pytest.mark.timeout(300)
 
 
 def _bowl(n_genes: int = 3) -> Problem:
-    target = jnp.linspace(0.2, 0.8, n_genes)
-
-    def evaluate(g):
-        local = (g - target) ** 2
-        return jnp.sum(local), local
-
-    return Problem(
-        evaluate=evaluate,
-        lower=np.zeros(n_genes),
-        upper=np.ones(n_genes),
-        gene_group=np.arange(n_genes, dtype=np.int32),
-        group_slots=np.arange(n_genes, dtype=np.int32)[:, None],
-    )
+    return bowl_problem(n_genes)
 
 
 def test_random_search_keeps_the_best_of_every_genome_it_drew():
