@@ -92,6 +92,13 @@ def fit(
     generations: Annotated[int, typer.Option(help="Generations.")] = 1000,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     horizon: Annotated[int, typer.Option(help="Frames between restarts from the data.")] = 1,
+    smooth: Annotated[
+        int,
+        typer.Option(
+            help="Savitzky-Golay window (odd number of frames >= 5) applied to the restart "
+            "states of the cost (not to the targets); 0: off. Reduces the noise bias."
+        ),
+    ] = 0,
     substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = 1,
     integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 5000,
@@ -136,6 +143,7 @@ def fit(
             generations=generations,
             seed=seed,
             horizon=horizon,
+            smooth=smooth,
             substeps=substeps,
             integrator=integrator,
             checkpoint_every=checkpoint_every,

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..data.smoothing import smooth_positions
 from ..model.model import Model
 from ..physics.integrate import START_ITERATIONS, advance, rollout_states, start_velocity
 
@@ -52,16 +53,25 @@ class Windows:
         return int(self.target.shape[1])
 
 
-def make_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: int = 1) -> Windows:
-    """Cut restart windows from positions [F, P, D] (NaN where missing) and mask [F, P]."""
+def make_windows(
+    positions: np.ndarray, mask: np.ndarray, dt: float, horizon: int = 1, smooth: int = 0
+) -> Windows:
+    """Cut restart windows from positions [F, P, D] (NaN where missing) and mask [F, P].
+
+    ``smooth``: a Savitzky-Golay window (frames; 0: off) applied to the restart states only
+    (the positions at and one frame before each start, hence the velocities), never to the
+    targets: see :mod:`activebonds.data.smoothing`."""
     n_frames = positions.shape[0]
     if n_frames < 3:
         raise ValueError("the cost needs at least 3 frames (two to start, one to predict)")
     horizon = max(1, min(int(horizon), n_frames - 2))
     x = np.where(mask[..., None], positions, 0.0)
+    inputs = x
+    if smooth:
+        inputs = np.where(mask[..., None], smooth_positions(positions, mask, smooth), 0.0)
     starts = np.arange(1, n_frames - 1, horizon)
-    x0 = x[starts]
-    v0 = (x[starts] - x[starts - 1]) / dt
+    x0 = inputs[starts]
+    v0 = (inputs[starts] - inputs[starts - 1]) / dt
     ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
     frames = starts[:, None] + np.arange(1, horizon + 1)[None, :]  # [S, H]
     inside = frames < n_frames
@@ -70,7 +80,7 @@ def make_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: in
     weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
     return Windows(
         x0=x0,
-        x_prev=x[starts - 1],
+        x_prev=inputs[starts - 1],
         v0=v0,
         target=target,
         weight=weight,

@@ -59,14 +59,14 @@ def identification(model: Model, traj: Trajectory, settings: FitSettings) -> Ide
     if model.layout.n_genes == 0:
         raise InputError(model.name, "the model has no free parameter to identify")
     data = select_data(model, traj, settings)
-    windows = make_windows(data.positions, data.mask, data.dt, settings.horizon)
+    windows = make_windows(data.positions, data.mask, data.dt, settings.horizon, settings.smooth)
     if windows.n_terms == 0:
         raise InputError(traj.source, "no frame of the window can be predicted (gaps everywhere)")
     cost = make_cost(model, windows, settings.substeps, settings.integrator)
     layout = model.layout
     start = None
     if settings.init == "lsq":
-        one_step = make_windows(data.positions, data.mask, data.dt, 1)
+        one_step = make_windows(data.positions, data.mask, data.dt, 1, settings.smooth)
         try:
             start = least_squares(model, one_step).genome[None, :]
         except InputError as err:

@@ -21,6 +21,7 @@ class FitSettings(BaseModel):
     generations: int = Field(1000, ge=1, le=100_000_000)
     seed: int = Field(0, ge=0, le=2**31 - 1)
     horizon: int = Field(1, ge=1)
+    smooth: int = Field(0, ge=0, le=1001)  # Savitzky-Golay window of the restart states, 0: off
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["euler", "verlet"] = "euler"
     elite_fraction: float = Field(0.1, gt=0, lt=1)
@@ -33,6 +34,13 @@ class FitSettings(BaseModel):
     chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call, at most
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
     precision: Literal["float32", "float64"] = "float64"
+
+    @field_validator("smooth")
+    @classmethod
+    def _smooth(cls, v):
+        from ..data.smoothing import check_window
+
+        return check_window(v)
 
     @field_validator("frames")
     @classmethod
