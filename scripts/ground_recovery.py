@@ -1,7 +1,7 @@
 """Recovery of a synthetic hopper with gravity, ground contact and friction (issue 11).
 
     python scripts/ground_recovery.py [--population 200] [--generations 4000] [--seeds 0,1]
-                                      [--noise-mm 0,1] [--json out.json]
+                                      [--noise-mm 0,1] [--smooth 0] [--json out.json]
 
 The truth (``TRUTH`` below): a body particle (4 kg) on two feet (1 kg each) in 3D, joined by
 viscoelastic bonds (two "leg" bonds sharing one type, one "foot" bond between the feet), each
@@ -14,7 +14,8 @@ The fit starts from the same file with every parameter free inside wide bounds (
 in the file are not the truth), the masses free as ratios of the known total (6 kg), and the
 gravity magnitude free (5 .. 15 m/s^2); one-step cost, the paper's ES. Reported: the relative
 error of every identified parameter, without noise and with Gaussian marker noise of the given
-standard deviation (mm, per axis).
+standard deviation (mm, per axis); ``--smooth N`` fits with the restart states smoothed
+(``fit --smooth``).
 """
 
 from __future__ import annotations
@@ -154,6 +155,7 @@ def main(argv=None) -> int:
     ap.add_argument("--generations", type=int, default=4000)
     ap.add_argument("--seeds", default="0,1")
     ap.add_argument("--noise-mm", default="0,1")
+    ap.add_argument("--smooth", type=int, default=0, help="fit --smooth window (0: off)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
 
@@ -178,7 +180,7 @@ def main(argv=None) -> int:
             data = Trajectory(positions=x, mask=clean.mask, markers=clean.markers, rate=200.0)
             res = fit(
                 to_fit, data, population=args.population, generations=args.generations,
-                seed=seed,
+                seed=seed, smooth=args.smooth,
             )  # fmt: skip
             err = errors(identified(res.model), TRUTH)
             rows.append({"noise_mm": noise, "seed": seed, "rms_mm": res.rms_mm, "errors": err})
