@@ -13,7 +13,6 @@ vector, [N, N] per weights row and [N, D] per constant (unit vector) parameter.
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -79,17 +78,6 @@ class LinearPart:
     columns: Callable
 
 
-def _takes_time(forces: Callable) -> bool:
-    """Whether ``forces`` takes a fifth positional argument (the time t)."""
-    try:
-        params = inspect.signature(forces).parameters.values()
-    except (TypeError, ValueError):
-        return True
-    if any(p.kind is p.VAR_POSITIONAL for p in params):
-        return True
-    return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) >= 5
-
-
 def _timeless(forces: Callable) -> Callable:
     def timed(params, topology, x, v, t):
         return forces(params, topology, x, v)
@@ -102,9 +90,9 @@ class BondKind:
     """A bond kind: ``forces(params, topology, x, v, t) -> [P, D]`` for one individual, with
     ``params`` and ``topology`` this kind's dicts, ``x, v`` [P, D] and ``t`` the time in
     seconds from the first frame of the data window (or of the simulation), a scalar (pure
-    JAX). A kind whose forces do not depend on time takes ``t`` and ignores it; a ``forces``
-    written with four arguments ``(params, topology, x, v)`` is adapted when the kind is
-    made (it ignores time)."""
+    JAX). A kind whose forces depend on time says so (``timed=True``) and writes them with
+    five arguments; the others write ``forces(params, topology, x, v)`` and are adapted when
+    the kind is made."""
 
     name: str
     arity: int
@@ -115,9 +103,10 @@ class BondKind:
     what: str = ""  # its parameters in words, for messages ("flexion springs")
     activity: Callable | None = None  # (params, topology, x, v) -> [N] neuron activations
     linear: LinearPart | None = None
+    timed: bool = False  # forces take the time t as a fifth argument
 
     def __post_init__(self):
-        if not _takes_time(self.forces):
+        if not self.timed:
             object.__setattr__(self, "forces", _timeless(self.forces))
 
     @property

@@ -79,6 +79,7 @@ KIND = BondKind(
         ),
     ),
     forces=forces,
+    timed=True,
     internal=False,
     what="unary springs",
     linear=LinearPart(frozenset({"stiffness", "damping", "anchor"}), _switch_off, _columns),

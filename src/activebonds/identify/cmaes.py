@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from . import operators as ops
-from .strategy import Column, Problem
+from .strategy import COST_COLUMN_NAMES, COST_COLUMNS, Column, Problem
 
 
 class CMAESState(NamedTuple):
@@ -58,13 +58,8 @@ class CMAES:
     dtype: object = None
 
     name = "cmaes"
-    columns = (
-        Column("best_cost", "best"),
-        Column("median_cost", "median"),
-        Column("worst_cost", "worst"),
-        Column("sigma", "sigma"),
-    )
-    cost_columns = ("best_cost", "median_cost", "worst_cost")
+    columns = (*COST_COLUMNS, Column("sigma", "sigma"))
+    cost_columns = COST_COLUMN_NAMES
 
     @property
     def noise_bytes(self) -> int:

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import operators as ops
-from .strategy import Column, Problem, uniform_population
+from .strategy import COST_COLUMN_NAMES, COST_COLUMNS, Column, Problem, uniform_population
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,7 @@ class Children(NamedTuple):
 
 
 def _columns() -> tuple[Column, ...]:
-    cols = [Column("best_cost", "best"), Column("median_cost", "median")]
-    cols.append(Column("worst_cost", "worst"))
+    cols = list(COST_COLUMNS)
     for field in ("trials", "successes"):
         for i, v in enumerate(ops.VARIANTS):
             cols.append(Column(f"{field}_{v.name}", field, i, integer=True))
@@ -90,7 +89,7 @@ class PaperES:
 
     name = "es"
     columns = _columns()
-    cost_columns = ("best_cost", "median_cost", "worst_cost")
+    cost_columns = COST_COLUMN_NAMES
 
     def init(self, key, evaluate) -> ESState:
         """Population drawn uniformly within the bounds (search space), the problem's

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .strategy import Column, Problem, uniform_population
+from .strategy import COST_COLUMN_NAMES, COST_COLUMNS, Problem, uniform_population
 
 
 class SearchState(NamedTuple):
@@ -29,12 +29,8 @@ class RandomSearch:
     dtype: object = None
 
     name = "random"
-    columns = (
-        Column("best_cost", "best"),
-        Column("median_cost", "median"),
-        Column("worst_cost", "worst"),
-    )
-    cost_columns = ("best_cost", "median_cost", "worst_cost")
+    columns = COST_COLUMNS
+    cost_columns = COST_COLUMN_NAMES
 
     @property
     def noise_bytes(self) -> int:

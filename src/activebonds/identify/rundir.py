@@ -224,7 +224,7 @@ def flatten_state(state) -> dict[str, np.ndarray]:
     out = {k: np.asarray(getattr(state, k)) for k in LOOP_KEYS}
     leaves = jax.tree_util.tree_flatten_with_path(state.strategy)[0]
     for path, leaf in leaves:
-        name = ".".join(_key_name(k) for k in path) or "strategy"
+        name = _path_name(path)
         if name in out:
             raise ValueError(f"a strategy state may not have an entry named {name!r}")
         out[name] = np.asarray(leaf)
@@ -236,10 +236,7 @@ def unflatten_state(arrays: dict[str, np.ndarray], template):
     import jax.numpy as jnp
 
     leaves = jax.tree_util.tree_flatten_with_path(template.strategy)
-    strategy = [
-        jnp.asarray(arrays[".".join(_key_name(k) for k in path) or "strategy"], leaf.dtype)
-        for path, leaf in leaves[0]
-    ]
+    strategy = [jnp.asarray(arrays[_path_name(path)], leaf.dtype) for path, leaf in leaves[0]]
     loop = {k: jnp.asarray(arrays[k], getattr(template, k).dtype) for k in LOOP_KEYS}
     return template._replace(strategy=jax.tree_util.tree_unflatten(leaves[1], strategy), **loop)
 
@@ -248,8 +245,13 @@ def state_shapes(template) -> dict[str, tuple]:
     """The shape of every entry of a checkpointed state, from a template (eval_shape)."""
     flat = {k: getattr(template, k) for k in LOOP_KEYS}
     for path, leaf in jax.tree_util.tree_flatten_with_path(template.strategy)[0]:
-        flat[".".join(_key_name(k) for k in path) or "strategy"] = leaf
+        flat[_path_name(path)] = leaf
     return {k: tuple(v.shape) for k, v in flat.items()}
+
+
+def _path_name(path) -> str:
+    """A strategy-state leaf's checkpoint name: its pytree path joined by '.'."""
+    return ".".join(_key_name(k) for k in path) or "strategy"
 
 
 def _key_name(key) -> str:

@@ -49,6 +49,15 @@ class Column(NamedTuple):
     integer: bool = False
 
 
+# The cost columns every strategy's rows fill (fields "best", "median" and "worst").
+COST_COLUMNS = (
+    Column("best_cost", "best"),
+    Column("median_cost", "median"),
+    Column("worst_cost", "worst"),
+)
+COST_COLUMN_NAMES = tuple(c.name for c in COST_COLUMNS)
+
+
 class Strategy(Protocol):
     name: str
     columns: tuple[Column, ...]
