@@ -91,7 +91,29 @@ def fit(
     population: Annotated[int, typer.Option(help="Population size.")] = 100,
     generations: Annotated[int, typer.Option(help="Generations.")] = 1000,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    horizon: Annotated[int, typer.Option(help="Frames between restarts from the data.")] = 1,
+    horizon: Annotated[
+        str,
+        typer.Option(
+            help="Frames predicted from each start: the ES's cost uses the first; with "
+            "--refine lm, one refinement stage per entry, each from the previous one's "
+            "result (a curriculum, e.g. 1,5,20). As long as the window: a free run."
+        ),
+    ] = "1",
+    refine: Annotated[
+        str,
+        typer.Option(
+            help="none, or lm: Levenberg-Marquardt (optimistix) polishes the ES's best on "
+            "the residuals of --cost, one stage per --horizon entry."
+        ),
+    ] = "none",
+    cost: Annotated[
+        str,
+        typer.Option(
+            help="The refinement's cost: restart (from the recorded states every horizon "
+            "frames; 1: the paper's one-step cost) or shooting (multiple shooting: windows "
+            "of horizon frames whose start states are fitted too; unbiased by noise)."
+        ),
+    ] = "restart",
     smooth: Annotated[
         int,
         typer.Option(
@@ -142,7 +164,9 @@ def fit(
             population=population,
             generations=generations,
             seed=seed,
-            horizon=horizon,
+            horizon=parse_horizons(horizon),
+            refine=refine,
+            cost=cost,
             smooth=smooth,
             substeps=substeps,
             integrator=integrator,
@@ -195,6 +219,31 @@ def _progress(total: int):
     return fit_progress(total, out)
 
 
+def refinement_lines(result) -> list[str]:
+    """One line per refinement stage: its cost, horizon, RMS before and after, steps."""
+    lines = []
+    for i, st in enumerate(result.refinement, 1):
+        joined = (
+            "" if st.continuity_mm is None else f", windows join within {st.continuity_mm:.2g} mm"
+        )
+        lines.append(
+            f"refinement {i}/{len(result.refinement)} ({st.cost}, horizon {st.horizon}): "
+            f"{st.start_rms_mm:.4g} -> {st.end_rms_mm:.4g} mm in {st.steps} steps, "
+            f"{st.seconds:.3g} s{joined}; {st.message}"
+        )
+    return lines
+
+
+def parse_horizons(text: str) -> tuple[int, ...]:
+    """'1,5,20' -> (1, 5, 20), or a one-line error."""
+    try:
+        return tuple(int(h) for h in text.split(","))
+    except ValueError:
+        raise InputError(
+            "--horizon", f"expected integers separated by commas, got '{text}'"
+        ) from None
+
+
 def _validation_window(model, traj, settings, text: str):
     """(frames, data) of ``--validate START:STOP``, checked before the fit starts."""
     from ..data import read_trajectory
@@ -236,6 +285,8 @@ def _summary(result, held_out=None) -> None:
         f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
         f"zero-force baseline on the same frames {zero:.4g} mm"
     )
+    for line in refinement_lines(result):
+        out.print(line, markup=False, highlight=False)
     s = result.settings
     fitted = window_metrics(result.model, data, s.substeps, s.integrator)
     out.print(_metrics_line("fitted frames", fitted), markup=False, highlight=False)

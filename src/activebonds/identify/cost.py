@@ -89,16 +89,12 @@ def make_windows(
     )
 
 
-def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
-    """A pure function ``genome -> (global cost, local costs [P])`` for one individual.
-
-    Costs are sums of squared position errors (m^2); a non-finite prediction gives +inf.
-    """
-    topo, layout = model.topology, model.layout
+def _predictor(model: Model, windows: Windows, substeps: int, method: str):
+    """``params -> predicted positions [S, H, P, D]`` from every restart state."""
+    topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     x_prev = jnp.asarray(windows.x_prev)
     t0 = jnp.asarray(windows.times)
-    target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
     dt, horizon = windows.dt, windows.horizon
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
 
@@ -122,6 +118,18 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
         )
         return run(x0, v, t0)
 
+    return predict
+
+
+def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
+    """A pure function ``genome -> (global cost, local costs [P])`` for one individual.
+
+    Costs are sums of squared position errors (m^2); a non-finite prediction gives +inf.
+    """
+    layout = model.layout
+    target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
+    predict = _predictor(model, windows, substeps, method)
+
     def cost(genome):
         params = layout.decode(genome)
         err2 = jnp.sum((predict(params) - target) ** 2, axis=-1)  # [S, H, P]
@@ -130,6 +138,20 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
         return jnp.sum(local), local
 
     return cost
+
+
+def make_residuals(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
+    """``genome -> residuals [S, H, P, D]`` (m): predicted minus recorded positions, 0 where
+    the term does not count. Their sum of squares is :func:`make_cost`'s global cost."""
+    layout = model.layout
+    target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
+    predict = _predictor(model, windows, substeps, method)
+
+    def residuals(genome):
+        err = predict(layout.decode(genome)) - target
+        return jnp.where(weight[..., None] > 0, err, 0.0)
+
+    return residuals
 
 
 def rms_mm(cost, n_terms: int):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import jax
@@ -26,6 +26,7 @@ from . import rundir, strategies
 from .cost import Display
 from .evolve import Evolution, history_columns, keys
 from .problem import Identification, identification
+from .refine import Refinement, Stage
 from .settings import FitSettings
 
 Progress = Callable[[int, int, float], None]  # (generation, total, best RMS mm)
@@ -45,6 +46,8 @@ class FitResult:
     settings: FitSettings
     status: str
     run: Path | None = None
+    refinement: list[Stage] = field(default_factory=list)  # the stages after the ES, if any
+    es_genome: np.ndarray | None = None  # the ES's best, before any refinement
 
 
 def _precision(settings: FitSettings):
@@ -273,10 +276,21 @@ def _checkpoint(run, ident, settings, strategy, state, history, integer, status,
 def _finish(ident, settings, run, strategy, state, history, integer, status, started=None):
     genome, cost, local = _best(strategy, state)
     display = Display(ident.windows.n_terms)
-    per_particle = ident.windows.weight.sum(axis=(0, 1))
-    model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
     if run is not None:
         _checkpoint(run, ident, settings, strategy, state, history, integer, status, started)
+    es_genome, stages = genome, []
+    if status == "completed" and settings.refine != "none" and np.isfinite(cost):
+        if run is not None:
+            rundir.write_status(run, **{**rundir.read_status(run), "status": "refining"})
+        genome, stages = _refine(ident, settings, run, genome, int(state.generation))
+        cost, local = (np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(genome))
+        cost = float(cost)
+        if run is not None:
+            rundir.save_best_model(run, ident.model.with_genome(genome))
+            done = {"status": status, "best_rms_mm": float(display(cost))}
+            rundir.write_status(run, **{**rundir.read_status(run), **done})
+    per_particle = ident.windows.weight.sum(axis=(0, 1))
+    model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
     return FitResult(
         model=model,
         genome=genome,
@@ -291,7 +305,40 @@ def _finish(ident, settings, run, strategy, state, history, integer, status, sta
         settings=settings,
         status=status,
         run=run,
+        refinement=stages,
+        es_genome=es_genome,
     )
+
+
+def _refine(ident, settings, run, genome, generation) -> tuple[np.ndarray, list[Stage]]:
+    """The refinement stages after the ES's best ``genome`` (generation ``generation``): those
+    a resumed run already finished are read back, the others run and are saved one by one."""
+    refinement = Refinement(ident, settings)
+    stages: list[Stage] = []
+    record, states = rundir.load_refinement(run) if run is not None else (None, None)
+    start = [float(g) for g in genome]
+    if (
+        record is not None
+        and record.get("from_generation") == generation
+        and record.get("from_genome") == start
+    ):
+        stages = [Stage(**r) for r in record["stages"]][: len(settings.horizon)]
+        refinement.states = states
+    current = np.asarray(stages[-1].genome) if stages else genome
+    for horizon in settings.horizon[len(stages) :]:
+        stage = refinement.stage(horizon, current)
+        stages.append(stage)
+        current = np.asarray(stage.genome)
+        if run is not None:
+            record = {
+                "from_generation": generation,
+                "from_genome": start,
+                "cost": settings.cost,
+                "horizons": list(settings.horizon),
+                "stages": [s.record() for s in stages],
+            }
+            rundir.save_refinement(run, record, refinement.states)
+    return current, stages
 
 
 __all__ = ["FitResult", "FitSettings", "fit", "resume"]

@@ -59,7 +59,7 @@ def identification(model: Model, traj: Trajectory, settings: FitSettings) -> Ide
     if model.layout.n_genes == 0:
         raise InputError(model.name, "the model has no free parameter to identify")
     data = select_data(model, traj, settings)
-    windows = make_windows(data.positions, data.mask, data.dt, settings.horizon, settings.smooth)
+    windows = make_windows(data.positions, data.mask, data.dt, settings.es_horizon, settings.smooth)
     if windows.n_terms == 0:
         raise InputError(traj.source, "no frame of the window can be predicted (gaps everywhere)")
     cost = make_cost(model, windows, settings.substeps, settings.integrator)

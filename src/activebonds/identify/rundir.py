@@ -10,6 +10,8 @@ Layout of RUN/::
     status.json         state, generation, best RMS, wall times (not part of the result)
     best_model.toml     the best model so far, in the model-file format
     validation.json     free-run metrics on frames not fitted (``fit --validate``), optional
+    refine.json         the refinement's stages (``fit --refine lm``), for people
+    refine.npz          the same record and the last shooting stage's frame states, for resume
     checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
 This module is the only one that writes or reads these files. A checkpoint stores the loop
@@ -398,6 +400,46 @@ def read_validation(run: Path) -> dict | None:
     if not isinstance(record, dict):
         raise InputError(path, "unreadable validation (not a JSON object)")
     return record
+
+
+def save_refinement(run: Path, record: dict, states=None) -> None:
+    """The refinement so far: refine.npz (the record and the shooting states, one atomic
+    write: what resume reads) then refine.json (the same record, for people)."""
+    text = json.dumps(record, indent=2, sort_keys=True, allow_nan=True) + "\n"
+    arrays = {"record": np.frombuffer(text.encode(), np.uint8)}
+    if states is not None:
+        arrays["states_x"], arrays["states_v"] = (np.asarray(a) for a in states)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    write_atomic(run / "refine.npz", lambda fh: fh.write(buf.getvalue()))
+    write_text_atomic(run / "refine.json", text)
+
+
+def load_refinement(run: Path):
+    """(record, states or None) of the refinement so far, or (None, None) if there is none or
+    it is unreadable (the refinement is then run again)."""
+    path = run / "refine.npz"
+    if not path.is_file():
+        return None, None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            record = json.loads(bytes(z["record"]).decode())
+            states = (z["states_x"], z["states_v"]) if "states_x" in z else None
+    except (OSError, ValueError, KeyError, UnicodeDecodeError, json.JSONDecodeError):
+        return None, None
+    return (record, states) if isinstance(record, dict) else (None, None)
+
+
+def read_refinement_record(run: Path) -> dict | None:
+    """refine.json for reports, or None."""
+    path = run / "refine.json"
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise InputError(path, f"unreadable refinement record ({err})") from None
+    return record if isinstance(record, dict) else None
 
 
 def python_command() -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from .es import ESSettings
 
@@ -20,7 +20,10 @@ class FitSettings(BaseModel):
     population: int = Field(100, ge=4, le=100_000)
     generations: int = Field(1000, ge=1, le=100_000_000)
     seed: int = Field(0, ge=0, le=2**31 - 1)
-    horizon: int = Field(1, ge=1)
+    # frames per prediction: the ES's cost uses the first; ``refine`` runs a stage per entry
+    horizon: tuple[int, ...] = (1,)
+    cost: Literal["restart", "shooting"] = "restart"  # the refinement's cost (ES: restart)
+    refine: Literal["none", "lm"] = "none"
     smooth: int = Field(0, ge=0, le=1001)  # Savitzky-Golay window of the restart states, 0: off
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["euler", "verlet"] = "euler"
@@ -41,6 +44,33 @@ class FitSettings(BaseModel):
         from ..data.smoothing import check_window
 
         return check_window(v)
+
+    @field_validator("horizon", mode="before")
+    @classmethod
+    def _horizon(cls, v):
+        return (v,) if isinstance(v, int) else v
+
+    @field_validator("horizon")
+    @classmethod
+    def _horizons(cls, v):
+        if not v or any(h < 1 for h in v):
+            raise ValueError(f"horizons must be integers >= 1, got {list(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _stages(self):
+        if self.refine == "none" and len(self.horizon) > 1:
+            raise ValueError(
+                "a horizon curriculum (several horizons) is run by the refinement; add --refine lm"
+            )
+        if self.refine == "none" and self.cost == "shooting":
+            raise ValueError("the shooting cost is the refinement's; add --refine lm")
+        return self
+
+    @property
+    def es_horizon(self) -> int:
+        """The horizon of the ES's cost."""
+        return self.horizon[0]
 
     @field_validator("frames")
     @classmethod

@@ -310,7 +310,7 @@ def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
             zero(fit - 2, pred.n_frames) if beyond else None,
         ),
     ]
-    plain = s.horizon == 1 and s.substeps == 1 and s.integrator == "euler"
+    plain = s.es_horizon == 1 and s.substeps == 1 and s.integrator == "euler"
     if plain:
         floor = model_floor_rms_mm(record.model, *window(0, fit), dt)
         rows.append(("momentum floor (internal forces)", floor, None))

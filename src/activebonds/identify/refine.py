@@ -1,0 +1,193 @@
+"""Gradient refinement: Levenberg-Marquardt (optimistix) on the residual vector, in stages.
+
+After the evolution strategy, ``fit --refine lm`` polishes its best genome with one
+Levenberg-Marquardt stage per horizon of ``--horizon`` (a curriculum: each stage starts from
+the previous stage's result), on the cost ``--cost`` names:
+
+* ``restart``: the ES's own cost at that horizon (restarts from the recorded states every H
+  frames; H = 1 is the paper's one-step cost); the variables are the genes;
+* ``shooting``: multiple shooting with windows of H frames (:mod:`.shooting`); the variables
+  are the genes and every window's start state. A shooting stage after another starts its
+  states from the previous stage's trajectory.
+
+Bounds are kept through the search space: a gene is ``lo + (hi - lo) (1 + sin u) / 2`` of an
+unbounded variable u (the transform of MINUIT), so no step can leave them. A stage whose
+result is non-finite, outside the bounds, or costs more than its start is rejected: the
+previous result is kept and the stage's record says why in one line.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .cost import make_residuals, make_windows, rms_mm
+from .problem import Identification
+from .settings import FitSettings
+from .shooting import CONTINUITY_WEIGHT, frame_states, make_shooting, shooting_windows, start_states
+
+MAX_STEPS = 200  # Levenberg-Marquardt steps per stage, at most
+RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
+EDGE = 1e-9  # a start on a bound is moved this far (of the span) inside, where sin' != 0
+
+
+@dataclass
+class Stage:
+    """One refinement stage, as recorded in RUN/refine.json."""
+
+    horizon: int
+    cost: str  # "restart" or "shooting"
+    accepted: bool
+    message: str  # one line: how it ended
+    steps: int
+    start_rms_mm: float  # of this stage's position residuals, at its start
+    end_rms_mm: float  # ... at its end (the start value if rejected)
+    continuity_mm: float | None  # largest continuity defect in position (shooting), at the end
+    seconds: float
+    genome: list[float] = field(default_factory=list)  # the result (the start if rejected)
+
+    def record(self) -> dict:
+        return asdict(self)
+
+
+class Bounded:
+    """The search space's box as an unbounded space: g = lo + span (1 + sin u) / 2."""
+
+    def __init__(self, lower, upper):
+        self.lower = np.asarray(lower, np.float64)
+        self.span = np.asarray(upper, np.float64) - self.lower
+
+    def to_genome(self, u):
+        return self.lower + self.span * 0.5 * (1.0 + jnp.sin(u))
+
+    def from_genome(self, genome):
+        s = 2.0 * (np.asarray(genome, np.float64) - self.lower) / self.span - 1.0
+        return np.arcsin(np.clip(s, -1.0 + EDGE, 1.0 - EDGE))
+
+    def inside(self, genome) -> bool:
+        g = np.asarray(genome)
+        return bool(np.all((g >= self.lower) & (g <= self.lower + self.span)))
+
+
+def _sum_squares(tree) -> float:
+    return float(sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(tree)))
+
+
+def _solve(residual, y0, max_steps: int):
+    """Levenberg-Marquardt from y0: (y, number of steps, optimistix's result message)."""
+    solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
+    sol = optx.least_squares(lambda y, _: residual(y), solver, y0, max_steps=max_steps, throw=False)
+    steps = int(sol.stats["num_steps"])
+    if sol.result == optx.RESULTS.successful:
+        message = "converged"
+    elif sol.result == optx.RESULTS.max_steps_reached:
+        message = f"stopped at the step limit ({max_steps}) before converging"
+    else:
+        message = "stopped: " + str(optx.RESULTS[sol.result]).strip().split(".")[0][:100]
+    return sol.value, steps, message
+
+
+class Refinement:
+    """The stages of one identification's refinement, run one at a time."""
+
+    def __init__(self, ident: Identification, settings: FitSettings):
+        self.ident = ident
+        self.settings = settings
+        self.bounded = Bounded(ident.problem.lower, ident.problem.upper)
+        data = ident.data
+        self.positions, self.mask, self.dt = data.positions, data.mask, data.dt
+        self.states = None  # per-frame states of the last shooting stage
+
+    def stage(self, horizon: int, genome: np.ndarray, max_steps: int = MAX_STEPS) -> Stage:
+        started = time.time()
+        genome = np.asarray(genome, np.float64)
+        if self.settings.cost == "shooting":
+            stage = self._shooting(horizon, genome, max_steps)
+        else:
+            stage = self._restart(horizon, genome, max_steps)
+        stage.seconds = round(time.time() - started, 3)
+        return stage
+
+    def _restart(self, horizon, genome, max_steps) -> Stage:
+        s = self.settings
+        windows = make_windows(self.positions, self.mask, self.dt, horizon, s.smooth)
+        residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+        to_genome = self.bounded.to_genome
+
+        def residual(u):
+            return residuals(to_genome(u))
+
+        u0 = jnp.asarray(self.bounded.from_genome(genome))
+        start = _sum_squares(residual(u0))
+        u, steps, message = _solve(residual, u0, max_steps)
+        end = _sum_squares(residual(u))
+        result = np.asarray(to_genome(u), np.float64)
+        return self._judge(horizon, genome, result, start, end, windows.n_terms, steps, message)
+
+    def _shooting(self, horizon, genome, max_steps) -> Stage:
+        s = self.settings
+        windows = shooting_windows(self.positions, self.mask, self.dt, horizon)
+        residuals, trajectory = make_shooting(self.ident.model, windows, s.substeps, s.integrator)
+        if self.states is None:
+            self.states = frame_states(self.positions, self.mask, self.dt)
+        x0, v0 = start_states(windows, *self.states)
+        to_genome = self.bounded.to_genome
+
+        def residual(y):
+            u, xs, vs = y
+            return residuals(to_genome(u), (xs, vs))
+
+        y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
+        start_tree = residual(y0)
+        start = float(jnp.sum(jnp.square(start_tree[0])))
+        y, steps, message = _solve(residual, y0, max_steps)
+        end_tree = residual(y)
+        end = float(jnp.sum(jnp.square(end_tree[0])))
+        total_ok = _sum_squares(end_tree) <= _sum_squares(start_tree) * (1 + 1e-12)
+        result = np.asarray(to_genome(y[0]), np.float64)
+        stage = self._judge(
+            horizon,
+            genome,
+            result,
+            start,
+            end if total_ok else np.inf,
+            windows.n_terms,
+            steps,
+            message,
+        )
+        if stage.accepted:
+            gap = float(jnp.max(jnp.abs(end_tree[1]))) if end_tree[1].size else 0.0
+            stage.continuity_mm = gap / CONTINUITY_WEIGHT * 1000.0
+            xs, vs = trajectory(to_genome(y[0]), (y[1], y[2]), self.positions.shape[0])
+            self.states = (np.asarray(xs), np.asarray(vs))
+        return stage
+
+    def _judge(self, horizon, start_genome, result, start, end, n_terms, steps, message):
+        def mm(c):
+            return float(rms_mm(c, n_terms)) if np.isfinite(c) else float("inf")
+
+        why = None
+        if not np.all(np.isfinite(result)) or not np.isfinite(end):
+            why = "the refinement diverged (non-finite cost)"
+        elif not self.bounded.inside(result):
+            why = "the refinement stepped out of the bounds"
+        elif end > start * (1 + 1e-12):
+            why = f"the refinement made the cost worse ({mm(start):.4g} -> {mm(end):.4g} mm)"
+        accepted = why is None
+        return Stage(
+            horizon=int(horizon),
+            cost=self.settings.cost,
+            accepted=accepted,
+            message=message if accepted else f"{why}; kept the previous result",
+            steps=steps,
+            start_rms_mm=mm(start),
+            end_rms_mm=mm(end) if accepted else mm(start),
+            continuity_mm=None,
+            seconds=0.0,
+            genome=[float(g) for g in (result if accepted else start_genome)],
+        )

@@ -1,0 +1,137 @@
+"""Multiple shooting (Bock 1981; e.g. Carbonell et al. 2015): windows of H frames whose start
+states are free variables.
+
+The recording (F frames) is cut into windows starting at frames s_k = 0, H, 2H, ...; window k
+is integrated H steps from its own state (X_k, V_k) at s_k, which is a variable of the fit
+like the model's parameters, not a recorded state. The residuals are
+
+* the position errors of every window at every frame it covers, its start frame included
+  (a frame shared by two windows counts once, in the later one), 0 where a marker is missing;
+* the continuity defects between consecutive windows, ``w (x_end,k - X_k+1)`` and
+  ``w dt (v_end,k - V_k+1)``, with ``w = CONTINUITY_WEIGHT``, so that at the optimum the
+  windows join into one trajectory of the model.
+
+No state is taken from the noisy record, so (unlike the restart cost) the noise does not bias
+the forces: this is the output-error estimate, made well-posed for long records by the
+windows. H = 1 makes every frame's state a variable; H >= F - 1 is single shooting (a free
+run from a free first state). The variables' start values come from the record (gaps filled
+by linear interpolation) or from a previous stage's trajectory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model.model import Model
+from ..physics.integrate import rollout_states
+
+CONTINUITY_WEIGHT = 100.0  # weight of a continuity defect against a position error
+
+
+@dataclass(frozen=True, eq=False)
+class ShootingWindows:
+    """Windows of a recording for multiple shooting (NumPy, float64)."""
+
+    starts: np.ndarray  # [K] start frame of each window
+    target: np.ndarray  # [K, H + 1, P, D] recorded positions at s_k .. s_k + H (0 if missing)
+    weight: np.ndarray  # [K, H + 1, P] 1.0 where the term counts
+    dt: float
+
+    @property
+    def horizon(self) -> int:
+        return int(self.target.shape[1] - 1)
+
+    @property
+    def n_terms(self) -> int:
+        return int(self.weight.sum())
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.starts * self.dt
+
+
+def shooting_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon: int):
+    """Windows of ``horizon`` frames over positions [F, P, D] (NaN where missing), mask [F, P]."""
+    n_frames = positions.shape[0]
+    if n_frames < 2:
+        raise ValueError("multiple shooting needs at least 2 frames")
+    h = max(1, min(int(horizon), n_frames - 1))
+    starts = np.arange(0, n_frames - 1, h)
+    frames = starts[:, None] + np.arange(h + 1)[None, :]  # [K, H + 1]
+    inside = frames < n_frames
+    frames_c = np.minimum(frames, n_frames - 1)
+    x = np.where(mask[..., None], positions, 0.0)
+    last = np.zeros(frames.shape, bool)
+    last[:-1, -1] = True  # a junction frame counts in the next window (its start)
+    weight = mask[frames_c] & (inside & ~last)[..., None]
+    return ShootingWindows(starts, x[frames_c], weight.astype(np.float64), float(dt))
+
+
+def filled(positions: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Positions with every gap filled by linear interpolation in time (ends held)."""
+    out = np.array(positions, dtype=np.float64)
+    frames = np.arange(positions.shape[0])
+    for p in range(positions.shape[1]):
+        ok = mask[:, p]
+        if not ok.any():
+            raise ValueError(f"particle {p} is never recorded")
+        for d in range(positions.shape[2]):
+            out[:, p, d] = np.interp(frames, frames[ok], positions[ok, p, d])
+    return out
+
+
+def frame_states(positions: np.ndarray, mask: np.ndarray, dt: float):
+    """Start values of every frame's state from the record: filled positions and their
+    central-difference velocities. [F, P, D] each."""
+    x = filled(positions, mask)
+    return x, np.gradient(x, dt, axis=0)
+
+
+def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, method: str = "euler"):
+    """``(genome, states) -> residuals`` (a pytree of arrays, metres) and
+    ``(genome, states) -> frame states`` of the windows' trajectories.
+
+    ``states = (X [K, P, D], V [K, P, D])``: each window's start state."""
+    topo, layout = model.topology, model.layout
+    target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
+    t0 = jnp.asarray(windows.times)
+    dt, h = windows.dt, windows.horizon
+
+    def run(genome, states):
+        params = layout.decode(genome)
+        xs0, vs0 = states
+
+        def window(x, v, t):
+            xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t)
+            return jnp.concatenate([x[None], xs]), jnp.concatenate([v[None], vs])
+
+        return jax.vmap(window)(xs0, vs0, t0)  # [K, H + 1, P, D] each
+
+    def residuals(genome, states):
+        xs0, vs0 = states
+        pos, vel = run(genome, states)
+        measured = jnp.where(weight[..., None] > 0, pos - target, 0.0)
+        w = CONTINUITY_WEIGHT
+        gap_x = w * (pos[:-1, -1] - xs0[1:])
+        gap_v = w * dt * (vel[:-1, -1] - vs0[1:])
+        return measured, gap_x, gap_v
+
+    def trajectory(genome, states, n_frames: int):
+        """Per-frame (positions, velocities) [F, P, D] along the windows."""
+        pos, vel = run(genome, states)
+        flat_x = pos[:, :-1].reshape(-1, *pos.shape[2:])
+        flat_v = vel[:, :-1].reshape(-1, *vel.shape[2:])
+        xs = jnp.concatenate([flat_x, pos[-1:, -1]])[:n_frames]
+        vs = jnp.concatenate([flat_v, vel[-1:, -1]])[:n_frames]
+        return xs, vs
+
+    return residuals, trajectory
+
+
+def start_states(windows: ShootingWindows, x: np.ndarray, v: np.ndarray):
+    """Each window's start state, from per-frame states [F, P, D]."""
+    return np.asarray(x)[windows.starts], np.asarray(v)[windows.starts]

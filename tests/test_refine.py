@@ -1,0 +1,226 @@
+"""Levenberg-Marquardt refinement (fit --refine lm): restart and multiple-shooting costs, the
+bounds, the curriculum, a divergent stage, interruption and resume."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import activebonds
+from activebonds.data import Trajectory
+from activebonds.identify import refine as refine_mod
+from activebonds.identify import rundir
+from activebonds.identify.refine import Bounded
+from activebonds.identify.shooting import shooting_windows
+from activebonds.model import load_model, loads_model
+from helpers import EXAMPLES, cli
+
+# The triangle of examples/triangle.toml (its file values are the truth), 60 frames at 60 Hz,
+# fitted with standard bonds: 9 genes (stiffness, rest length, damping of 3 bond types).
+FAST = dict(bonds="standard", generations=3, population=16, seed=0)
+
+
+@pytest.fixture(scope="module")
+def triangle():
+    model = load_model(EXAMPLES / "triangle.toml")
+    traj = activebonds.simulate(model, 60, 60.0)
+    truth = np.array([g.value for g in model.layout.genes])
+    return model, traj, truth
+
+
+def rel_error(model, genome, truth) -> float:
+    return float(np.max(np.abs(model.layout.natural(genome) - truth) / np.abs(truth)))
+
+
+def test_restart_refinement_recovers_the_truth_from_a_poor_es_result(triangle):
+    model, traj, truth = triangle
+    result = activebonds.fit(model, traj, refine="lm", **FAST)
+    assert rel_error(model, result.es_genome, truth) > 0.1  # three generations: far off
+    assert rel_error(model, result.genome, truth) < 1e-8
+    (stage,) = result.refinement
+    assert stage.accepted and stage.cost == "restart" and stage.horizon == 1
+    assert stage.end_rms_mm < 1e-9 < stage.start_rms_mm
+    # the result's cost is the fit's own (one-step) cost at the refined genome
+    assert result.rms_mm == pytest.approx(stage.end_rms_mm, rel=1e-6, abs=1e-12)
+
+
+def test_shooting_refinement_recovers_the_truth_and_joins_the_windows(triangle):
+    model, traj, truth = triangle
+    options = dict(refine="lm", cost="shooting", horizon=(10,), init="lsq")
+    result = activebonds.fit(model, traj, **options, **FAST)
+    assert rel_error(model, result.genome, truth) < 1e-8
+    (stage,) = result.refinement
+    assert stage.accepted and stage.continuity_mm < 1e-9
+
+
+def test_shooting_windows_count_every_frame_once():
+    pos = np.random.default_rng(0).normal(size=(23, 2, 3))
+    mask = np.ones((23, 2), bool)
+    mask[7, 1] = False
+    for h in (1, 4, 10, 22, 100):
+        w = shooting_windows(pos, mask, 0.01, h)
+        assert w.n_terms == mask.sum()
+        frames = w.starts[:, None] + np.arange(w.horizon + 1)
+        counted = frames[w.weight[..., 0] > 0]
+        assert sorted(counted.tolist()) == list(range(23))
+
+
+def test_the_bounded_transform_keeps_every_gene_inside():
+    b = Bounded(np.array([0.0, -1.0]), np.array([1.0, 2.0]))
+    u = np.linspace(-50, 50, 1001)[:, None] * np.ones(2)
+    g = np.asarray(b.to_genome(u))
+    assert (g >= b.lower).all() and (g <= b.lower + b.span).all()
+    inner = np.array([0.3, 1.5])
+    assert np.allclose(b.to_genome(b.from_genome(inner)), inner, atol=1e-12)
+
+
+def test_an_optimum_beyond_a_bound_ends_on_the_bound(triangle):
+    """The damping of bond A-B (truth 0.5) is bounded to [0.01, 0.25]: the refinement stops
+    at the upper bound, never beyond, and the stage is accepted."""
+    _, traj, _ = triangle
+    text = (EXAMPLES / "triangle.toml").read_text()
+    old = "damping = { value = 0.5, min = 0.01, max = 10.0 }"
+    assert text.count(old) == 1
+    capped = loads_model(text.replace(old, "damping = { value = 0.2, min = 0.01, max = 0.25 }"))
+    result = activebonds.fit(capped, traj, refine="lm", **FAST)
+    g = [gene.name for gene in capped.layout.genes].index("bond[0].damping")
+    upper = capped.layout.upper[g]
+    assert result.genome[g] <= upper
+    assert result.genome[g] == pytest.approx(upper, rel=1e-6)
+    assert result.refinement[0].accepted
+
+
+def test_a_horizon_curriculum_starts_each_stage_from_the_last(triangle):
+    model, traj, truth = triangle
+    result = activebonds.fit(model, traj, refine="lm", horizon=(1, 5), **FAST)
+    first, second = result.refinement
+    assert (first.horizon, second.horizon) == (1, 5)
+    assert second.start_rms_mm < 1e-8  # it starts at the first stage's (exact) result
+    assert rel_error(model, result.genome, truth) < 1e-8
+
+
+def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
+    triangle, tmp_path, monkeypatch
+):
+    model, traj, _ = triangle
+    data = tmp_path / "tri.npz"
+    activebonds.data.write_trajectory(traj, data)
+    model_path = EXAMPLES / "triangle.toml"
+
+    def diverge(residual, y0, max_steps):
+        return (
+            type(y0)(np.full_like(np.asarray(leaf), np.nan) for leaf in y0)
+            if isinstance(y0, tuple)
+            else np.full_like(np.asarray(y0), np.nan),
+            7,
+            "converged",
+        )
+
+    monkeypatch.setattr(refine_mod, "_solve", diverge)
+    run = tmp_path / "run"
+    result = activebonds.fit(model_path, data, refine="lm", out=run, **FAST)
+    (stage,) = result.refinement
+    assert not stage.accepted
+    assert stage.message == "the refinement diverged (non-finite cost); kept the previous result"
+    np.testing.assert_array_equal(result.genome, result.es_genome)
+    best = rundir.read_best_model(run)
+    np.testing.assert_allclose(
+        best.layout.natural(best.layout.initial()),
+        model.layout.natural(result.es_genome),
+        rtol=1e-12,
+    )
+    monkeypatch.undo()
+    again = activebonds.resume(run)  # the record is complete: nothing is run again
+    np.testing.assert_array_equal(again.genome, result.es_genome)
+    assert [s.message for s in again.refinement] == [stage.message]
+
+
+def test_the_cli_says_a_divergent_stage_in_one_line(triangle, tmp_path, monkeypatch):
+    _, traj, _ = triangle
+    data = tmp_path / "tri.npz"
+    activebonds.data.write_trajectory(traj, data)
+
+    def diverge(residual, y0, max_steps):
+        return np.full_like(np.asarray(y0), np.nan), 3, "converged"
+
+    monkeypatch.setattr(refine_mod, "_solve", diverge)
+    from activebonds.cli.main import app
+
+    args = ["fit", str(EXAMPLES / "triangle.toml"), str(data), "--out", str(tmp_path / "r")]
+    args += ["--bonds", "standard", "--generations", "3", "--population", "16", "--refine", "lm"]
+    res = CliRunner().invoke(app, args, env={"COLUMNS": "300"})
+    assert res.exit_code == 0, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.startswith("refinement 1/1")]
+    assert len(lines) == 1 and lines[0].endswith(
+        "the refinement diverged (non-finite cost); kept the previous result"
+    )
+
+
+def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path, monkeypatch):
+    model, traj, _ = triangle
+    data = tmp_path / "tri.npz"
+    activebonds.data.write_trajectory(traj, data)
+    model_path = EXAMPLES / "triangle.toml"
+    options = dict(refine="lm", cost="shooting", horizon=(2, 6), init="lsq", frames=(0, 30))
+    options |= FAST
+    whole = activebonds.fit(model_path, data, **options)
+
+    calls = []
+    original = refine_mod.Refinement.stage
+
+    def interrupt_second(self, horizon, genome, max_steps=refine_mod.MAX_STEPS):
+        calls.append(horizon)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return original(self, horizon, genome, max_steps)
+
+    monkeypatch.setattr(refine_mod.Refinement, "stage", interrupt_second)
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        activebonds.fit(model_path, data, out=run, **options)
+    assert rundir.read_status(run)["status"] == "refining"
+    assert len(rundir.read_refinement_record(run)["stages"]) == 1
+    monkeypatch.undo()
+    resumed = activebonds.resume(run)
+    assert [s.horizon for s in resumed.refinement] == [2, 6]
+    np.testing.assert_array_equal(resumed.genome, whole.genome)
+    assert rundir.read_status(run)["status"] == "completed"
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--horizon", "1,5"], "a horizon curriculum (several horizons) is run by the refinement"),
+        (["--cost", "shooting"], "the shooting cost is the refinement's; add --refine lm"),
+        (["--horizon", "0", "--refine", "lm"], "horizons must be integers >= 1"),
+        (["--horizon", "1,x"], "expected integers separated by commas"),
+        (["--refine", "newton"], "--refine"),
+    ],
+)
+def test_bad_refinement_options_are_one_line(tmp_path, triangle, options, message):
+    data = tmp_path / "tri.npz"
+    activebonds.data.write_trajectory(triangle[1], data)
+    res = cli("fit", EXAMPLES / "triangle.toml", data, "--out", tmp_path / "r", *options)
+    assert res.returncode == 2
+    assert message in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "r").exists()
+
+
+def test_noise_does_not_bias_the_shooting_fit_as_it_biases_the_one_step_fit(triangle):
+    """0.5 mm of marker noise on the triangle: the exact one-step optimum's dampings are far
+    off (the noisy restart states), multiple shooting's are close."""
+    model, traj, truth = triangle
+    rng = np.random.default_rng(3)
+    pos = traj.positions + rng.normal(0, 0.0005, traj.positions.shape)
+    noisy = Trajectory(positions=pos, mask=traj.mask, markers=traj.markers, rate=traj.rate)
+    one_step = activebonds.fit(model, noisy, init="lsq", **FAST)
+    shot = activebonds.fit(
+        model, noisy, init="lsq", refine="lm", cost="shooting", horizon=(20,), **FAST
+    )
+    damping = [i for i, g in enumerate(model.layout.genes) if g.name.endswith("damping")]
+
+    def err(genome):
+        return np.abs(model.layout.natural(genome) - truth)[damping] / truth[damping]
+
+    assert np.median(err(shot.genome)) < 0.5 * np.median(err(one_step.genome))
