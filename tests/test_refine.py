@@ -131,6 +131,10 @@ def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
         rtol=1e-12,
     )
     monkeypatch.undo()
+    from activebonds.report import write_report
+
+    html = write_report(run).read_text()
+    assert "rejected: the refinement diverged (non-finite cost)" in html
     again = activebonds.resume(run)  # the record is complete: nothing is run again
     np.testing.assert_array_equal(again.genome, result.es_genome)
     assert [s.message for s in again.refinement] == [stage.message]

@@ -245,8 +245,9 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("seed", s.seed),
         (
             "cost",
-            f"horizon {s.horizon}, {s.integrator} with {s.substeps} substep(s), {s.precision}",
+            f"horizon {s.es_horizon}, {s.integrator} with {s.substeps} substep(s), {s.precision}",
         ),
+        ("refinement", _refinement_text(s)),
         ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),
         ("best RMS per particle (one-step)", f"{per} mm"),
         ("failed evaluations", st.get("failed_evaluations", "—")),
@@ -257,6 +258,51 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("command", meta.get("command", "—")),
     ]
     return Table(columns=("", ""), rows=rows, key_value=True, caption="Run")
+
+
+def _refinement_text(s) -> str:
+    if s.refine == "none":
+        return "none"
+    horizons = ", ".join(str(h) for h in s.horizon)
+    return f"Levenberg-Marquardt (optimistix), {s.cost} cost, horizons {horizons}"
+
+
+def refinement_table(record: RunRecord) -> Table | None:
+    """One row per refinement stage (RUN/refine.json): its cost and horizon, the RMS of its
+    own residuals before and after, steps, time, and how it ended."""
+    rec = record.refinement
+    if not rec:
+        return None
+    rows = [
+        (
+            i,
+            st["cost"],
+            st["horizon"],
+            st["start_rms_mm"],
+            st["end_rms_mm"],
+            "—" if st.get("continuity_mm") is None else st["continuity_mm"],
+            st["steps"],
+            st["seconds"],
+            ("" if st["accepted"] else "rejected: ") + st["message"],
+        )
+        for i, st in enumerate(rec.get("stages", []), 1)
+    ]
+    return Table(
+        (
+            "stage",
+            "cost",
+            "horizon",
+            "start RMS (mm)",
+            "end RMS (mm)",
+            "windows join (mm)",
+            "steps",
+            "seconds",
+            "outcome",
+        ),
+        rows,
+        f"Refinement after generation {rec.get('from_generation')} of the ES: each stage "
+        "starts from the previous one's result; RMS of the stage's own position residuals.",
+    )
 
 
 def errors_table(pred: Prediction, caption: str = "RMS position error per particle (mm)") -> Table:
@@ -458,6 +504,7 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         Section(
             "Convergence",
             figures=[Figure(conv[0], "Best and population-median cost as RMS position error.")],
+            tables=[t for t in (refinement_table(record),) if t is not None],
             anchor="convergence",
         ),
         Section(

@@ -32,6 +32,7 @@ class RunRecord:
     has_best: bool  # best_model.toml was found
     window: Trajectory  # the fitted window (data.npz)
     validation: dict | None = None  # validation.json (fit --validate), if any
+    refinement: dict | None = None  # refine.json (fit --refine lm), if any
 
     @property
     def label(self) -> str:
@@ -69,6 +70,7 @@ def load_run(run: str | Path) -> RunRecord:
         has_best=has_best,
         window=window,
         validation=rundir.read_validation(run),
+        refinement=rundir.read_refinement_record(run),
     )
 
 
