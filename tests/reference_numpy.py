@@ -15,7 +15,9 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
   t the time (an oracle that depends on time takes it as the keyword ``time``)
 * binary bond i-j: d = x_j - x_i, L = |d|, u = d / L, Ldot = (v_j - v_i) . u,
   tension f = k (L - l0) + c Ldot (+ g_b a_b if neural), F_i += f u, F_j -= f u
-* neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b), e_j = L_j - l0_j
+* neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b
+  + w_b sin(2 pi f t + phi_b)), e_j = L_j - l0_j; the rhythmic drive's weight w_b, phase phi_b
+  and (model-wide) frequency f are 0 when ``p`` lacks them
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
 * contact of p with the plane n . x = h (n a unit vector): d = h - n . x_p; while d > 0,
   Fn = max(0, k d - c n . v_p) along n, friction Ft = -mu Fn vt / sqrt(|vt|^2 + eps^2) with
@@ -82,30 +84,36 @@ def bond_state(t, x, v):
     return lengths, rates, units
 
 
-def neuron_activations(p, t, x, v) -> np.ndarray:
-    """a_b for every binary bond (computed for all; only neural bonds use it)."""
+def neuron_activations(p, t, x, v, time=0.0) -> np.ndarray:
+    """a_b for every binary bond (computed for all; only neural bonds use it) at ``time``."""
     lengths, rates, _ = bond_state(t, x, v)
     e = lengths - _arr(p["rest_length"])
     w_len, w_rate = _arr(p["length_weights"]), _arr(p["rate_weights"])
     n = len(lengths)
+    zeros = np.zeros(n)
+    w_drive = _arr(p.get("drive_weight", zeros))
+    phi = _arr(p.get("drive_phase", zeros))
+    freq = _arr(p.get("drive_frequency", zeros))
     acts = np.zeros(n)
     for b in range(n):
         s = 0.0
         for j in range(n):
             if j != b:
                 s += w_len[b, j] * e[j] + w_rate[b, j] * rates[j]
-        acts[b] = math.tanh(s - float(p["threshold"][b]))
+        s -= float(p["threshold"][b])
+        s += float(w_drive[b]) * math.sin(2.0 * math.pi * float(freq[b]) * time + float(phi[b]))
+        acts[b] = math.tanh(s)
     return acts
 
 
-def binary_force(p, t, x, v) -> np.ndarray:
+def binary_force(p, t, x, v, time=0.0) -> np.ndarray:
     x = _arr(x)
     f = np.zeros_like(x)
     pairs = _particles(t, 2)
     if pairs.shape[0] == 0:
         return f
     lengths, rates, units = bond_state(t, x, v)
-    acts = neuron_activations(p, t, x, v)
+    acts = neuron_activations(p, t, x, v, time)
     neural = np.asarray(t["neural"]).reshape(-1)
     for b, (i, j) in enumerate(pairs):
         tension = float(p["stiffness"][b]) * (lengths[b] - float(p["rest_length"][b]))

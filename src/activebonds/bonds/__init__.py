@@ -6,7 +6,7 @@ report follow from its declaration.
 """
 
 from . import binary, contact, ternary, unary
-from .kind import ANGLE, NON_NEGATIVE, BondKind, Check, LinearPart, Parameter, spread
+from .kind import ANGLE, NON_NEGATIVE, POSITIVE, BondKind, Check, LinearPart, Parameter, spread
 from .registry import get, kinds, names, register, registered, unregister
 
 register(unary.KIND)
@@ -17,6 +17,7 @@ register(contact.KIND)
 __all__ = [
     "ANGLE",
     "NON_NEGATIVE",
+    "POSITIVE",
     "BondKind",
     "Check",
     "LinearPart",

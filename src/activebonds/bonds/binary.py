@@ -3,19 +3,26 @@
 Between particles i and j: d = x_j - x_i, L = |d|, u = d / L, Ldot = (v_j - v_i) . u; tension
 f = k (L - l0) + c Ldot, F_i += f u, F_j -= f u (positive tension pulls together). A neural
 bond's neuron b reads every other binary bond j: a_b = tanh(sum_{j != b} (wL_bj e_j +
-wV_bj Ldot_j) - theta_b) with e_j = L_j - l0_j, and its tension gains g_b a_b.
+wV_bj Ldot_j) - theta_b + w_b sin(2 pi f t + phi_b)) with e_j = L_j - l0_j, and its tension
+gains g_b a_b. The last term is the rhythmic drive (a phase oscillator, central-pattern-
+generator style): drive weight w_b and phase phi_b per bond (``drive_weight``,
+``drive_phase``), one frequency f for the whole model (the model file's ``[drive] frequency``,
+gene ``drive.frequency``), t the time from the first frame. Without a ``[drive]`` table every
+w_b is 0 and the term adds exactly zero.
 
 The passive part is linear in (k, k l0, c), which the exact least squares solves for; the
-neurons are switched off there (their gains at 0).
+neurons are switched off there (their gains and drive weights at 0).
 """
 
 from __future__ import annotations
+
+import math
 
 import jax.numpy as jnp
 import numpy as np
 
 from .accumulate import accumulate
-from .kind import NON_NEGATIVE, BondKind, LinearPart, Parameter, spread
+from .kind import NON_NEGATIVE, POSITIVE, BondKind, LinearPart, Parameter, spread
 
 
 def kinematics(topology, x, v):
@@ -28,51 +35,62 @@ def kinematics(topology, x, v):
     return u, length, rate
 
 
-def activation(params, n: int, elongation, rate):
-    """Neuron b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b)."""
+def activation(params, n: int, elongation, rate, t=0.0):
+    """Neuron b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b
+    + w_b sin(2 pi f t + phi_b)) (the drive term only where ``params`` has drive weights)."""
     off = 1.0 - np.eye(n)
     drive = jnp.sum(params["length_weights"] * off * elongation[None, :], axis=-1) + jnp.sum(
         params["rate_weights"] * off * rate[None, :], axis=-1
     )
-    return jnp.tanh(drive - params["threshold"])
+    net = drive - params["threshold"]
+    if "drive_weight" in params:  # absent from hand-made parameter dicts (older tests)
+        phase = 2.0 * jnp.pi * params["drive_frequency"] * t + params["drive_phase"]
+        net = net + params["drive_weight"] * jnp.sin(phase)
+    return jnp.tanh(net)
 
 
-def forces(params, topology, x, v):
+def forces(params, topology, x, v, t):
     u, length, rate = kinematics(topology, x, v)
     elongation = length - params["rest_length"]
     tension = params["stiffness"] * elongation + params["damping"] * rate
     neural = topology["neural"]
     if neural.any():
-        a = activation(params, len(neural), elongation, rate)
+        a = activation(params, len(neural), elongation, rate, t)
         tension = tension + jnp.where(neural, params["gain"] * a, 0.0)
     f = tension[:, None] * u
     pairs = topology["particles"]
     return accumulate(x.shape[0], [(pairs[:, 0], 1, f), (pairs[:, 1], -1, f)])
 
 
-def activity(params, topology, x, v):
-    """Activations of the bonds' neurons at a state (0 for non-neural bonds)."""
+def activity(params, topology, x, v, t=0.0):
+    """Activations of the bonds' neurons at a state and time (0 for non-neural bonds)."""
     _, length, rate = kinematics(topology, x, v)
     neural = topology["neural"]
-    a = activation(params, len(neural), length - params["rest_length"], rate)
+    a = activation(params, len(neural), length - params["rest_length"], rate, t)
     return jnp.where(neural, a, 0.0)
+
+
+def _cannot_be_zero(field, values, index, genes, neural) -> bool:
+    """Whether some neural bond's ``field`` is fixed non-zero or free with 0 outside its bounds."""
+    ids = np.asarray(index[field])
+    free = ids >= 0
+    lows = np.array([genes[g].lower if g >= 0 else 0.0 for g in ids])
+    highs = np.array([genes[g].upper if g >= 0 else 0.0 for g in ids])
+    fixed_on = neural & ~free & (np.asarray(values[field]) != 0)
+    no_zero = neural & free & ((lows > 0) | (highs < 0))
+    return bool(fixed_on.any() or no_zero.any())
 
 
 def _switch_off(values, index, topology, genes):
     neural = np.asarray(topology["neural"], bool)
     if neural.any():
-        gains = np.asarray(index["gain"])
-        gain_free = gains >= 0
-        lows = np.array([genes[g].lower if g >= 0 else 0.0 for g in gains])
-        highs = np.array([genes[g].upper if g >= 0 else 0.0 for g in gains])
-        fixed_on = neural & ~gain_free & (np.asarray(values["gain"]) != 0)
-        no_zero = neural & gain_free & ((lows > 0) | (highs < 0))
-        if fixed_on.any() or no_zero.any():
-            raise ValueError(
-                "least squares: a neural bond's gain must be able to be 0 (the neurons are "
-                "switched off; their terms do not enter linearly)"
-            )
-        values["gain"] = np.where(neural, 0.0, values["gain"])
+        for field in ("gain", "drive_weight"):
+            if _cannot_be_zero(field, values, index, genes, neural):
+                raise ValueError(
+                    f"least squares: a neural bond's {field} must be able to be 0 (the neurons "
+                    "are switched off; their terms do not enter linearly)"
+                )
+            values[field] = np.where(neural, 0.0, values[field])
     values["stiffness"][:] = 0.0
     values["damping"][:] = 0.0
     return values
@@ -132,8 +150,37 @@ KIND = BondKind(
         Parameter(
             "weights", "rate_weights", 0.0, log=False, form="weights", part="rate", when=_NEURAL
         ),
+        Parameter(
+            "drive_weight",
+            "drive_weight",
+            0.0,
+            lambda v: (-5.0, 5.0),
+            log=False,
+            when=_NEURAL,
+            needs="drive",
+        ),
+        Parameter(
+            "drive_phase",
+            "drive_phase",
+            0.0,
+            lambda v: (-math.pi, math.pi),
+            log=False,
+            when=_NEURAL,
+            needs="drive",
+        ),
+    ),
+    shared=(
+        Parameter(
+            "drive.frequency",
+            "drive_frequency",
+            0.0,
+            lambda v: (v / 2, v * 2),
+            check=POSITIVE,
+            when=_NEURAL,
+        ),
     ),
     forces=forces,
+    timed=True,
     flags=(_NEURAL,),
     what="binary bonds",
     activity=activity,

@@ -8,7 +8,8 @@ declarations; none of them names a kind.
 Array conventions: a kind with N bonds in a model of P particles in D dimensions has
 ``topology["particles"]`` [N, arity] (int32) and one [N] bool array per flag (e.g.
 ``topology["neural"]``); its parameters are ``{field: array}`` with [N] per scalar, [N, D] per
-vector, [N, N] per weights row and [N, D] per constant (unit vector) parameter.
+vector, [N, N] per weights row and [N, D] per constant (unit vector) parameter, and [N] per
+shared (model-level) parameter, one copy per bond that takes it.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class Check:
 
 
 NON_NEGATIVE = Check(lambda v: v >= 0, ">= 0")
+POSITIVE = Check(lambda v: v > 0, "> 0")
 ANGLE = Check(lambda v: 0.0 <= v <= math.pi, "in [0, pi] radians")
 
 
@@ -50,6 +52,12 @@ class Parameter:
     and ``"constant"`` (a fixed per-bond vector of D finite numbers, never a gene, e.g. a
     contact's ``normal``: refused when zero, stored normalised in ``params.bonds[kind]``,
     written back as the file gave it).
+
+    A *shared* parameter (:attr:`BondKind.shared`) is a model-level number, not a key of the
+    bond table: ``key`` is ``"table.name"``, the entry ``name`` of the model file's top-level
+    ``[table]`` (e.g. ``"drive.frequency"``), one value for every bond that takes it (its
+    ``when`` flag), one gene named ``key`` when free; ``default`` is its value when the model
+    has no such table.
     """
 
     key: str
@@ -62,6 +70,7 @@ class Parameter:
     part: str | None = None  # weights form: "length" or "rate"
     when: str | None = None  # a flag the bond must set to take this parameter (e.g. "neural")
     note: str = ""  # added to the 'needs <key>' message of a required parameter
+    needs: str | None = None  # a top-level table the model file must have (e.g. "drive")
 
 
 @dataclass(frozen=True)
@@ -92,7 +101,8 @@ class BondKind:
     seconds from the first frame of the data window (or of the simulation), a scalar (pure
     JAX). A kind whose forces depend on time says so (``timed=True``) and writes them with
     five arguments; the others write ``forces(params, topology, x, v)`` and are adapted when
-    the kind is made."""
+    the kind is made. ``shared`` are its model-level parameters (see :class:`Parameter`),
+    held in ``params`` beside its own as [N] copies."""
 
     name: str
     arity: int
@@ -101,9 +111,10 @@ class BondKind:
     flags: tuple[str, ...] = ()  # boolean keys of the bond table, one [N] array each
     internal: bool = True  # forces sum to zero without torque (momentum floor applies)
     what: str = ""  # its parameters in words, for messages ("flexion springs")
-    activity: Callable | None = None  # (params, topology, x, v) -> [N] neuron activations
+    activity: Callable | None = None  # (params, topology, x, v[, t]) -> [N] neuron activations
     linear: LinearPart | None = None
     timed: bool = False  # forces take the time t as a fifth argument
+    shared: tuple[Parameter, ...] = ()  # model-level parameters ("drive.frequency")
 
     def __post_init__(self):
         if not self.timed:
@@ -116,4 +127,5 @@ class BondKind:
 
     @property
     def fields(self) -> tuple[str, ...]:
-        return tuple(p.field for p in self.parameters)
+        """Its arrays in ``params.bonds[kind]``: its parameters', then its shared ones'."""
+        return tuple(p.field for p in (*self.parameters, *self.shared))

@@ -31,6 +31,8 @@ _EXPECTED = {
     "position": "expected a list of numbers",
     "velocity": "expected a list of numbers",
     "mass": _PARAMETER,
+    "frequency": _PARAMETER,
+    "drive": "expected a table { frequency = .. } (Hz: a number or { value, min, max })",
 }
 
 

@@ -111,7 +111,7 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
         bonds={
             k.name: {
                 p.field: np.full(_shape(p, len(of_kind[k.name]), d), p.default or 0.0, np.float64)
-                for p in k.parameters
+                for p in (*k.parameters, *k.shared)
             }
             for k in kinds
         },
@@ -184,6 +184,26 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
         base.gravity[:] = gp.value * direction
         gravity_direction = direction
 
+    # A kind's shared parameters (e.g. the drive's frequency): one number of a top-level table,
+    # copied into every bond that takes it, all copies one gene named by its key.
+    for k in kinds:
+        for par in k.shared:
+            table, key = par.key.split(".", 1)
+            p = _shared(spec, par)
+            takers = [pos for pos, b in enumerate(of_kind[k.name]) if _takes(b, par)]
+            if p is None or not takers:
+                continue
+            g = None
+            if k.name not in disable and _is_free(p):
+                g = group(table)
+                slots[g].extend(names[n] for pos in takers for n in of_kind[k.name][pos].particles)
+            lo = p.min if isinstance(p, Param) else None
+            hi = p.max if isinstance(p, Param) else None
+            lg = p.log if isinstance(p, Param) and par.log is None else par.log
+            vals, ids = base.bonds[k.name][par.field], index.bonds[k.name][par.field]
+            for pos in takers:
+                put(vals, ids, pos, par.bounds, p, g, key, _value(p), lo, hi, lg)
+
     counters = {k.name: 0 for k in kinds}
     for bi, b in enumerate(spec.bond):
         kind = bonds.get(b.kind)
@@ -242,6 +262,16 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
     return Model(spec=spec, topology=topology, layout=layout)
 
 
+def _shared(spec: ModelSpec, par: bonds.Parameter):
+    """A shared parameter's entry in its top-level table (None without the table)."""
+    table, key = par.key.split(".", 1)
+    return getattr(getattr(spec, table, None), key, None)
+
+
+def _takes(bond, par: bonds.Parameter) -> bool:
+    return not par.when or bool(getattr(bond, par.when))
+
+
 def with_values(model: Model, values: np.ndarray) -> ModelSpec:
     """A spec equal to the model's, with every free parameter set to ``values`` (natural units)."""
     layout = model.layout
@@ -275,6 +305,18 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
     if isinstance(spec.gravity, GravityParam):
         unit = np.array(spec.gravity.unit(spec.dimension))
         update_spec["gravity"] = setp(spec.gravity, float(np.dot(params.gravity, unit)))
+    for kind in bonds.kinds():  # shared parameters: the value of the first bond taking it
+        if kind.name in keep or kind.name not in params.bonds:
+            continue
+        for par in kind.shared:
+            table, key = par.key.split(".", 1)
+            p = _shared(spec, par)
+            takers = [_takes(b, par) for b in spec.bond if b.kind == kind.name]
+            if p is None or not any(takers):
+                continue
+            value = float(np.asarray(params.bonds[kind.name][par.field])[takers.index(True)])
+            current = update_spec.get(table, getattr(spec, table))
+            update_spec[table] = current.model_copy(update={key: setp(p, value)})
     counters: dict[str, int] = {}
     out = []
     for b in spec.bond:

@@ -2,8 +2,9 @@
 
 A model file is TOML: top-level ``name``, ``dimension``, optional ``gravity`` (a fixed vector,
 or a table ``{ value, min, max, direction }``: a magnitude, free or fixed, along a fixed
-direction) and ``total_mass`` (kg: the free masses are then identified as ratios of it);
-``[[particle]]``
+direction) and ``total_mass`` (kg: the free masses are then identified as ratios of it),
+an optional ``[drive]`` table (``frequency`` in Hz, > 0, fixed or free: the rhythmic drive of
+the neurons, whose ``drive_weight`` and ``drive_phase`` need it); ``[[particle]]``
 tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
@@ -150,6 +151,15 @@ class GravityParam(Param):
 
 GRAVITY_ZERO = 1e-12  # a gravity direction this short is refused as zero
 
+
+class Drive(_Strict):
+    """The rhythmic drive (DESIGN.md §2): one phase oscillator sin(2 pi f t + phi_b) read by
+    every neuron with a ``drive_weight``; ``frequency`` f in Hz (> 0), fixed or free (gene
+    ``drive.frequency``)."""
+
+    frequency: FiniteFloat | Param
+
+
 Scalar = FiniteFloat | Param
 Vector = list[FiniteFloat] | VectorParam
 
@@ -269,6 +279,7 @@ class ModelSpec(_Strict):
     dimension: Literal[2, 3] = 3
     gravity: list[float] | GravityParam | None = None
     total_mass: FiniteFloat | None = None  # kg; fixes the mass scale when masses are free
+    drive: Drive | None = None  # the neurons' rhythmic drive (its frequency)
     particle: list[Particle] = Field(min_length=1)
     bond: list[Bond] = Field(default_factory=list)
 
@@ -304,6 +315,7 @@ class ModelSpec(_Strict):
             for g in self.gravity:
                 _finite(g, "gravity")
         self._check_mass_scale()
+        self._check_shared()
         for i, p in enumerate(self.particle):
             for field in ("position", "velocity"):
                 vec = getattr(p, field)
@@ -324,6 +336,10 @@ class ModelSpec(_Strict):
                 value = getattr(b, p.key)
                 if value is None:
                     continue
+                if p.needs and getattr(self, p.needs) is None:
+                    raise ValueError(
+                        f"bond[{i}].{p.key}: needs the model's top-level [{p.needs}] table"
+                    )
                 if p.form == "vector":
                     vals = value if isinstance(value, list) else value.value
                     if len(vals) != d:
@@ -359,6 +375,22 @@ class ModelSpec(_Strict):
                     )
                 types[b.type] = sig
         return self
+
+    def _check_shared(self) -> None:
+        """The kinds' shared (model-level) parameters in their top-level tables: the value and
+        any bounds pass the parameter's check (the drive's frequency > 0)."""
+        for kind in bonds.kinds():
+            for p in kind.shared:
+                table, name = p.key.split(".", 1)
+                value = getattr(getattr(self, table, None), name, None)
+                if value is None or p.check is None:
+                    continue
+                if not p.check.test(_value_of(value)):
+                    raise ValueError(f"{p.key}: must be {p.check.text}, got {_value_of(value)}")
+                for bound in ("min", "max"):
+                    b = getattr(value, bound, None)
+                    if b is not None and not p.check.test(b):
+                        raise ValueError(f"{p.key}.{bound}: must be {p.check.text}, got {b}")
 
     def free_masses(self) -> list[bool]:
         """Which particles' masses are free (searched)."""

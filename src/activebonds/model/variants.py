@@ -7,13 +7,10 @@ from .schema import Param, Weights
 
 
 def as_standard(model: Model) -> Model:
-    """Every binary bond a plain viscoelastic bond: neurons removed."""
-    bonds = [
-        b.model_copy(update={"neural": False, "gain": None, "weights": None, "threshold": None})
-        if b.kind == "binary"
-        else b
-        for b in model.spec.bond
-    ]
+    """Every binary bond a plain viscoelastic bond: neurons (and their drive) removed."""
+    off = {"neural": False, "gain": None, "weights": None, "threshold": None}
+    off |= {"drive_weight": None, "drive_phase": None}
+    bonds = [b.model_copy(update=off) if b.kind == "binary" else b for b in model.spec.bond]
     return build(model.spec.model_copy(update={"bond": bonds}), disable=model.disabled)
 
 
