@@ -297,7 +297,7 @@ def test_run_directory_contents(cli_ref, tmp_path):
     settings = meta["settings"]
     assert settings["population"] == 40 and settings["generations"] == 3000
     assert settings["checkpoint_every"] == 250 and settings["seed"] == 7
-    assert settings["bonds"] == "model" and settings["horizon"] == 1
+    assert settings["bonds"] == "model" and settings["horizon"] == [1]
     assert settings["precision"] == "float64"
     assert meta["seed"] == 7
     assert meta["inputs"]["model"]["sha256"] == sha256(model)

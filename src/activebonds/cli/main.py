@@ -81,7 +81,13 @@ def simulate(
 @app.command()
 def fit(
     model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    traj: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Recorded trajectory; several (trials of one subject, one frame rate) are "
+            "fitted at once, their costs added."
+        ),
+    ],
     out_dir: Annotated[Path, typer.Option("--out", help="Run directory to create.")] = ...,
     markers: Annotated[
         str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
@@ -176,10 +182,12 @@ def fit(
             init=init,
             optimizer=optimizer,
         )
-        held_out = _validation_window(model, traj, settings, validate) if validate else None
+        first = traj[0]
+        held_out = _validation_window(model, first, settings, validate) if validate else None
+        data = traj if len(traj) > 1 else first
         with _progress(generations) as progress:
             result = run_fit(
-                model, traj, settings, out=out_dir, overwrite=overwrite, progress=progress
+                model, data, settings, out=out_dir, overwrite=overwrite, progress=progress
             )
     except InputError as e:
         fail(e)
@@ -272,19 +280,41 @@ def _metrics_line(label: str, found: dict) -> str:
     )
 
 
+def _zero_force_all(recordings) -> float:
+    """The zero-force baseline's RMS (mm) over every fitted recording's one-step terms."""
+    import numpy as np
+
+    from ..experiments.baselines import zero_force_rms_mm
+    from ..identify.cost import make_windows
+
+    sq = n = 0.0
+    for d in recordings:
+        terms = make_windows(d.positions, d.mask, d.dt, 1).n_terms
+        sq += zero_force_rms_mm(d.positions, d.mask, d.dt) ** 2 * terms
+        n += terms
+    return float(np.sqrt(sq / max(n, 1)))
+
+
 def _summary(result, held_out=None) -> None:
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
-    from ..experiments.baselines import zero_force_rms_mm
     from ..report.metrics import read_validation, validation_record, window_metrics
 
     data = result.identification.data
-    zero = zero_force_rms_mm(data.positions, data.mask, data.dt)
+    zero = _zero_force_all(result.identification.all_data)
     out.print(
         f"[bold]{result.status}[/]: best RMS error {result.rms_mm:.4g} mm "
         f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
         f"zero-force baseline on the same frames {zero:.4g} mm"
     )
+    n_recordings = len(result.identification.all_data)
+    if n_recordings > 1:
+        out.print(
+            f"fitted on {n_recordings} recordings at once; the lines below are of the first "
+            f"({data.source})",
+            markup=False,
+            highlight=False,
+        )
     for line in refinement_lines(result):
         out.print(line, markup=False, highlight=False)
     s = result.settings

@@ -89,6 +89,28 @@ def make_windows(
     )
 
 
+def join_windows(parts: list[Windows]) -> Windows:
+    """The restart windows of several recordings (one frame rate) as one set; each keeps the
+    times of its own recording."""
+    if len(parts) == 1:
+        return parts[0]
+    horizon = max(w.horizon for w in parts)
+
+    def pad(a, w):  # [S, H, ...] -> [S, horizon, ...] with zeros (weight 0: not counted)
+        extra = horizon - a.shape[1]
+        return np.concatenate([a, np.zeros((a.shape[0], extra, *a.shape[2:]))], axis=1)
+
+    return Windows(
+        x0=np.concatenate([w.x0 for w in parts]),
+        x_prev=np.concatenate([w.x_prev for w in parts]),
+        v0=np.concatenate([w.v0 for w in parts]),
+        target=np.concatenate([pad(w.target, w) for w in parts]),
+        weight=np.concatenate([pad(w.weight, w) for w in parts]),
+        dt=parts[0].dt,
+        t0=np.concatenate([w.times for w in parts]),
+    )
+
+
 def _predictor(model: Model, windows: Windows, substeps: int, method: str):
     """``params -> predicted positions [S, H, P, D]`` from every restart state."""
     topo = model.topology

@@ -61,7 +61,7 @@ def _dtype(settings: FitSettings):
 
 def fit(
     model: Model | str | Path,
-    data: Trajectory | str | Path,
+    data: Trajectory | str | Path | list,
     settings: FitSettings | None = None,
     out: str | Path | None = None,
     *,
@@ -71,7 +71,8 @@ def fit(
 ) -> FitResult:
     """Identify the free parameters of ``model`` from ``data``.
 
-    ``model`` and ``data`` are objects or file paths; ``settings`` a :class:`FitSettings`
+    ``model`` and ``data`` are objects or file paths (``data`` may be a list of several
+    recordings, fitted at once: their costs add up); ``settings`` a :class:`FitSettings`
     (or its fields as keyword ``options``). With ``out``, a run directory is written
     (settings, hashes, history, checkpoints, best model) and the run can be resumed.
     """
@@ -82,20 +83,25 @@ def fit(
 
 def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress) -> FitResult:
     model_path = Path(model) if isinstance(model, str | Path) else None
-    data_path = Path(data) if isinstance(data, str | Path) else None
+    many = isinstance(data, list | tuple)
+    items = list(data) if many else [data]
+    paths = [Path(d) if isinstance(d, str | Path) else None for d in items]
     model_obj = load_model(model_path) if model_path else model
-    traj = read_trajectory(data_path) if data_path else data
-    ident = identification(model_obj, traj, settings)
+    trajs = [read_trajectory(p) if p else d for p, d in zip(paths, items, strict=True)]
+    ident = identification(model_obj, trajs if many else trajs[0], settings)
     run = None
     if out is not None:
         model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
-        run = _create_run(out, model_text, ident, settings, model_path, data_path, overwrite)
+        run = _create_run(out, model_text, ident, settings, model_path, paths, overwrite)
     return _evolve(ident, settings, run, progress)
 
 
-def _create_run(out, model_text, ident, settings, model_path, data_path, overwrite) -> Path:
+def _create_run(out, model_text, ident, settings, model_path, data_paths, overwrite) -> Path:
     inputs = {}
-    for name, path in (("model", model_path), ("data", data_path)):
+    named = [("model", model_path)] + [
+        ("data" if i == 0 else f"data-{i + 1}", p) for i, p in enumerate(data_paths)
+    ]
+    for name, path in named:
         if path is not None:
             inputs[name] = {"path": str(path.resolve()), "sha256": rundir.sha256_file(path)}
     strategy = strategies.make(settings.optimizer, ident.problem, settings, _dtype(settings))
@@ -103,13 +109,16 @@ def _create_run(out, model_text, ident, settings, model_path, data_path, overwri
     meta = rundir.new_meta(
         settings, inputs, strategy.name, history_columns(strategy, display), display
     )
-    files = {"model.toml": model_text, "data.npz": render_npz(ident.data, Path("data.npz"))}
+    files = {"model.toml": model_text}
+    for i, d in enumerate(ident.all_data):
+        files[rundir.data_name(i)] = render_npz(d, Path(rundir.data_name(i)))
     return rundir.create(out, files, meta, overwrite)
 
 
 def _stored_identification(run: Path, settings: FitSettings) -> Identification:
-    model, window = rundir.read_input_model(run), rundir.read_window(run)
-    return identification(model, window, settings.model_copy(update={"frames": (0, None)}))
+    model, windows = rundir.read_input_model(run), rundir.read_windows(run)
+    data = windows if len(windows) > 1 else windows[0]
+    return identification(model, data, settings.model_copy(update={"frames": (0, None)}))
 
 
 def resume(

@@ -318,7 +318,7 @@ def least_squares(model: Model, windows: Windows, bounded: bool = True) -> Linea
         if g in values:
             natural[g] = min(max(values[g], gene.lower), gene.upper)
     for g in nonlinear_genes(model):
-        if layout.genes[g].name.endswith(".gain"):
+        if layout.genes[g].name.endswith((".gain", ".drive_weight")):  # neurons off
             natural[g] = 0.0
     genome = np.where(layout.log, np.log(np.maximum(natural, 1e-300)), natural)
     resid = problem.columns @ theta + problem.offset - problem.target

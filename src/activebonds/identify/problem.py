@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,7 +10,7 @@ import numpy as np
 from ..data.trajectory import Trajectory
 from ..errors import InputError
 from ..model import Model, as_neural, as_standard
-from .cost import Windows, make_cost, make_windows
+from .cost import Windows, join_windows, make_cost, make_windows
 from .es import Problem
 from .lsq import least_squares
 from .settings import FitSettings
@@ -20,9 +21,14 @@ class Identification:
     """The model to fit, the recorded window it is fitted to, and the ES problem."""
 
     model: Model
-    data: Trajectory  # selected markers (model particle order), frame window
-    windows: Windows
+    data: Trajectory  # selected markers (model particle order), frame window; the first
+    windows: Windows  # of every recording, one after the other
     problem: Problem
+    recordings: tuple[Trajectory, ...] = ()  # every recording fitted (data is the first)
+
+    @property
+    def all_data(self) -> tuple[Trajectory, ...]:
+        return self.recordings or (self.data,)
 
 
 def variant(model: Model, bonds: str) -> Model:
@@ -54,21 +60,49 @@ def select_data(model: Model, traj: Trajectory, settings: FitSettings) -> Trajec
     return data
 
 
-def identification(model: Model, traj: Trajectory, settings: FitSettings) -> Identification:
+def select_recordings(
+    model: Model, recordings: Sequence[Trajectory], settings: FitSettings
+) -> tuple[Trajectory, ...]:
+    """Each recording cut to the model's markers and the frame window; one model fitted on
+    several recordings needs them at one frame rate."""
+    data = tuple(select_data(model, t, settings) for t in recordings)
+    for d in data[1:]:
+        if abs(d.dt - data[0].dt) > 1e-9 * data[0].dt:
+            raise InputError(
+                d.source or "trajectory",
+                f"recorded at {d.rate:g} Hz but {data[0].source or 'the first'} at "
+                f"{data[0].rate:g} Hz; one fit needs one frame rate (resample first)",
+            )
+    return data
+
+
+def identification(
+    model: Model, traj: Trajectory | Sequence[Trajectory], settings: FitSettings
+) -> Identification:
+    """The problem of fitting ``model`` to one recording or to several at once (their costs
+    add up; each is cut to the same markers and frame window)."""
     model = variant(model, settings.bonds)
     if model.layout.n_genes == 0:
         raise InputError(model.name, "the model has no free parameter to identify")
-    data = select_data(model, traj, settings)
-    windows = make_windows(data.positions, data.mask, data.dt, settings.es_horizon, settings.smooth)
+    recordings = (traj,) if isinstance(traj, Trajectory) else tuple(traj)
+    data = select_recordings(model, recordings, settings)
+
+    def cut(horizon):
+        return join_windows(
+            [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in data]
+        )
+
+    windows = cut(settings.es_horizon)
     if windows.n_terms == 0:
-        raise InputError(traj.source, "no frame of the window can be predicted (gaps everywhere)")
+        raise InputError(
+            recordings[0].source, "no frame of the window can be predicted (gaps everywhere)"
+        )
     cost = make_cost(model, windows, settings.substeps, settings.integrator)
     layout = model.layout
     start = None
     if settings.init == "lsq":
-        one_step = make_windows(data.positions, data.mask, data.dt, 1, settings.smooth)
         try:
-            start = least_squares(model, one_step).genome[None, :]
+            start = least_squares(model, cut(1)).genome[None, :]
         except InputError as err:
             raise InputError("--init lsq", err.message) from None
     problem = Problem(
@@ -79,4 +113,10 @@ def identification(model: Model, traj: Trajectory, settings: FitSettings) -> Ide
         group_slots=np.asarray(layout.group_slots),
         start=start,
     )
-    return Identification(model=model, data=data, windows=windows, problem=problem)
+    return Identification(
+        model=model,
+        data=data[0],
+        windows=windows,
+        problem=problem,
+        recordings=data if len(data) > 1 else (),
+    )

@@ -26,10 +26,17 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .cost import make_residuals, make_windows, rms_mm
+from .cost import join_windows, make_residuals, make_windows, rms_mm
 from .problem import Identification
 from .settings import FitSettings
-from .shooting import CONTINUITY_WEIGHT, frame_states, make_shooting, shooting_windows, start_states
+from .shooting import (
+    CONTINUITY_WEIGHT,
+    frame_states,
+    join_shooting,
+    make_shooting,
+    shooting_windows,
+    start_states,
+)
 
 MAX_STEPS = 200  # Levenberg-Marquardt steps per stage, at most
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
@@ -99,9 +106,8 @@ class Refinement:
         self.ident = ident
         self.settings = settings
         self.bounded = Bounded(ident.problem.lower, ident.problem.upper)
-        data = ident.data
-        self.positions, self.mask, self.dt = data.positions, data.mask, data.dt
-        self.states = None  # per-frame states of the last shooting stage
+        self.recordings = ident.all_data
+        self.states = None  # per recording, per-frame states of the last shooting stage
 
     def stage(self, horizon: int, genome: np.ndarray, max_steps: int = MAX_STEPS) -> Stage:
         started = time.time()
@@ -115,7 +121,9 @@ class Refinement:
 
     def _restart(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
-        windows = make_windows(self.positions, self.mask, self.dt, horizon, s.smooth)
+        windows = join_windows(
+            [make_windows(d.positions, d.mask, d.dt, horizon, s.smooth) for d in self.recordings]
+        )
         residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
         to_genome = self.bounded.to_genome
 
@@ -131,11 +139,13 @@ class Refinement:
 
     def _shooting(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
-        windows = shooting_windows(self.positions, self.mask, self.dt, horizon)
+        windows = join_shooting(
+            [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
+        )
         residuals, trajectory = make_shooting(self.ident.model, windows, s.substeps, s.integrator)
         if self.states is None:
-            self.states = frame_states(self.positions, self.mask, self.dt)
-        x0, v0 = start_states(windows, *self.states)
+            self.states = [frame_states(d.positions, d.mask, d.dt) for d in self.recordings]
+        x0, v0 = start_states(windows, self.states)
         to_genome = self.bounded.to_genome
 
         def residual(y):
@@ -163,8 +173,7 @@ class Refinement:
         if stage.accepted:
             gap = float(jnp.max(jnp.abs(end_tree[1]))) if end_tree[1].size else 0.0
             stage.continuity_mm = gap / CONTINUITY_WEIGHT * 1000.0
-            xs, vs = trajectory(to_genome(y[0]), (y[1], y[2]), self.positions.shape[0])
-            self.states = (np.asarray(xs), np.asarray(vs))
+            self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
         return stage
 
     def _judge(self, horizon, start_genome, result, start, end, n_terms, steps, message):

@@ -12,6 +12,7 @@ Layout of RUN/::
     validation.json     free-run metrics on frames not fitted (``fit --validate``), optional
     refine.json         the refinement's stages (``fit --refine lm``), for people
     refine.npz          the same record and the last shooting stage's frame states, for resume
+    data-2.npz, ...     further recordings fitted at once (``fit MODEL A B ...``)
     checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
 This module is the only one that writes or reads these files. A checkpoint stores the loop
@@ -373,12 +374,25 @@ def read_input_model(run: Path):
 
 
 def read_window(run: Path):
-    """The recorded window that is fitted."""
+    """The recorded window that is fitted (the first, if there are several)."""
+    return read_windows(run)[0]
+
+
+def read_windows(run: Path) -> list:
+    """Every recorded window that is fitted: data.npz, then data-2.npz, data-3.npz, ..."""
     from ..data import read_trajectory
 
     if not (run / "data.npz").is_file():
         raise InputError(run, "not a complete run directory (no data.npz)")
-    return read_trajectory(run / "data.npz")
+    out = [read_trajectory(run / "data.npz")]
+    while (run / data_name(len(out))).is_file():
+        out.append(read_trajectory(run / data_name(len(out))))
+    return out
+
+
+def data_name(i: int) -> str:
+    """The run's copy of recording i (0-based): data.npz, data-2.npz, ..."""
+    return "data.npz" if i == 0 else f"data-{i + 1}.npz"
 
 
 def write_validation(run: Path, record: dict) -> None:
@@ -407,8 +421,8 @@ def save_refinement(run: Path, record: dict, states=None) -> None:
     write: what resume reads) then refine.json (the same record, for people)."""
     text = json.dumps(record, indent=2, sort_keys=True, allow_nan=True) + "\n"
     arrays = {"record": np.frombuffer(text.encode(), np.uint8)}
-    if states is not None:
-        arrays["states_x"], arrays["states_v"] = (np.asarray(a) for a in states)
+    for i, (x, v) in enumerate(states or ()):  # per recording
+        arrays[f"states_x_{i}"], arrays[f"states_v_{i}"] = np.asarray(x), np.asarray(v)
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     write_atomic(run / "refine.npz", lambda fh: fh.write(buf.getvalue()))
@@ -424,7 +438,8 @@ def load_refinement(run: Path):
     try:
         with np.load(path, allow_pickle=False) as z:
             record = json.loads(bytes(z["record"]).decode())
-            states = (z["states_x"], z["states_v"]) if "states_x" in z else None
+            n = sum(1 for k in z.files if k.startswith("states_x_"))
+            states = [(z[f"states_x_{i}"], z[f"states_v_{i}"]) for i in range(n)] or None
     except (OSError, ValueError, KeyError, UnicodeDecodeError, json.JSONDecodeError):
         return None, None
     return (record, states) if isinstance(record, dict) else (None, None)

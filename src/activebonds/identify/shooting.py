@@ -36,10 +36,12 @@ CONTINUITY_WEIGHT = 100.0  # weight of a continuity defect against a position er
 class ShootingWindows:
     """Windows of a recording for multiple shooting (NumPy, float64)."""
 
-    starts: np.ndarray  # [K] start frame of each window
+    starts: np.ndarray  # [K] start frame of each window (in its recording)
     target: np.ndarray  # [K, H + 1, P, D] recorded positions at s_k .. s_k + H (0 if missing)
     weight: np.ndarray  # [K, H + 1, P] 1.0 where the term counts
     dt: float
+    link: np.ndarray | None = None  # [K - 1] 1.0 where window k + 1 continues window k
+    segments: tuple[tuple[int, int, int], ...] = ()  # per recording: (first window, end, frames)
 
     @property
     def horizon(self) -> int:
@@ -68,7 +70,41 @@ def shooting_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon
     last = np.zeros(frames.shape, bool)
     last[:-1, -1] = True  # a junction frame counts in the next window (its start)
     weight = mask[frames_c] & (inside & ~last)[..., None]
-    return ShootingWindows(starts, x[frames_c], weight.astype(np.float64), float(dt))
+    k = len(starts)
+    return ShootingWindows(
+        starts,
+        x[frames_c],
+        weight.astype(np.float64),
+        float(dt),
+        link=np.ones(k - 1),
+        segments=((0, k, n_frames),),
+    )
+
+
+def join_shooting(parts: list[ShootingWindows]) -> ShootingWindows:
+    """The windows of several recordings as one set; no continuity joins two recordings."""
+    if len(parts) == 1:
+        return parts[0]
+    h = max(w.horizon for w in parts)
+
+    def pad(a):
+        extra = h + 1 - a.shape[1]
+        return np.concatenate([a, np.zeros((a.shape[0], extra, *a.shape[2:]))], axis=1)
+
+    links, segments, k0 = [], [], 0
+    for i, w in enumerate(parts):
+        links += [w.link, np.zeros(1)] if i < len(parts) - 1 else [w.link]
+        k = len(w.starts)
+        segments.append((k0, k0 + k, w.segments[0][2]))
+        k0 += k
+    return ShootingWindows(
+        np.concatenate([w.starts for w in parts]),
+        np.concatenate([pad(w.target) for w in parts]),
+        np.concatenate([pad(w.weight) for w in parts]),
+        parts[0].dt,
+        link=np.concatenate(links),
+        segments=tuple(segments),
+    )
 
 
 def filled(positions: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -100,6 +136,7 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
     t0 = jnp.asarray(windows.times)
     dt, h = windows.dt, windows.horizon
+    link = jnp.asarray(windows.link)[:, None, None]
 
     def run(genome, states):
         params = layout.decode(genome)
@@ -116,22 +153,29 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
         pos, vel = run(genome, states)
         measured = jnp.where(weight[..., None] > 0, pos - target, 0.0)
         w = CONTINUITY_WEIGHT
-        gap_x = w * (pos[:-1, -1] - xs0[1:])
-        gap_v = w * dt * (vel[:-1, -1] - vs0[1:])
+        gap_x = link * w * (pos[:-1, -1] - xs0[1:])
+        gap_v = link * w * dt * (vel[:-1, -1] - vs0[1:])
         return measured, gap_x, gap_v
 
-    def trajectory(genome, states, n_frames: int):
-        """Per-frame (positions, velocities) [F, P, D] along the windows."""
+    def trajectory(genome, states):
+        """Per recording, per-frame (positions, velocities) [F, P, D] along the windows."""
         pos, vel = run(genome, states)
-        flat_x = pos[:, :-1].reshape(-1, *pos.shape[2:])
-        flat_v = vel[:, :-1].reshape(-1, *vel.shape[2:])
-        xs = jnp.concatenate([flat_x, pos[-1:, -1]])[:n_frames]
-        vs = jnp.concatenate([flat_v, vel[-1:, -1]])[:n_frames]
-        return xs, vs
+        out = []
+        for k0, k1, n_frames in windows.segments:
+            p, v = pos[k0:k1], vel[k0:k1]
+            xs = jnp.concatenate([p[:, :-1].reshape(-1, *p.shape[2:]), p[-1:, -1]])
+            vs = jnp.concatenate([v[:, :-1].reshape(-1, *v.shape[2:]), v[-1:, -1]])
+            out.append((np.asarray(xs[:n_frames]), np.asarray(vs[:n_frames])))
+        return out
 
     return residuals, trajectory
 
 
-def start_states(windows: ShootingWindows, x: np.ndarray, v: np.ndarray):
-    """Each window's start state, from per-frame states [F, P, D]."""
-    return np.asarray(x)[windows.starts], np.asarray(v)[windows.starts]
+def start_states(windows: ShootingWindows, states):
+    """Each window's start state, from per-recording, per-frame states [(x, v) [F, P, D]]."""
+    xs, vs = [], []
+    for (k0, k1, _), (x, v) in zip(windows.segments, states, strict=True):
+        starts = windows.starts[k0:k1]
+        xs.append(np.asarray(x)[starts])
+        vs.append(np.asarray(v)[starts])
+    return np.concatenate(xs), np.concatenate(vs)

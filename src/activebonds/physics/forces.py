@@ -39,9 +39,10 @@ def total_force(params: Params, topo: Topology, x, v, t=0.0):
     return f
 
 
-def neuron_activity(params: Params, topo: Topology, x, v):
-    """Activations of the neurons of every kind that has them, bonds in registry order (0 for
-    bonds without a neuron, and for a disabled kind); for saturation reports."""
+def neuron_activity(params: Params, topo: Topology, x, v, t=0.0):
+    """Activations of the neurons of every kind that has them at a state and time ``t``, bonds
+    in registry order (0 for bonds without a neuron, and for a disabled kind); for saturation
+    reports."""
     parts = []
     for name in topo.bonds:
         kind = bonds.get(name)
@@ -50,7 +51,8 @@ def neuron_activity(params: Params, topo: Topology, x, v):
         if name in topo.disabled or topo.count(name) == 0:
             parts.append(jnp.zeros((topo.count(name),), x.dtype))
         else:
-            parts.append(kind.activity(params.bonds[name], topo.bonds[name], x, v))
+            args = (x, v, t) if kind.timed else (x, v)
+            parts.append(kind.activity(params.bonds[name], topo.bonds[name], *args))
     if not parts:
         return jnp.zeros((0,), x.dtype)
     return parts[0] if len(parts) == 1 else jnp.concatenate(parts)

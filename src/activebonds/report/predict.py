@@ -93,8 +93,8 @@ def _free_run(params, x_prev, x0, t0, dt, topo: _Topo, n_steps: int, substeps: i
 
 
 @partial(jax.jit, static_argnames=("topo",))
-def _activations(params, xs, vs, topo: _Topo):
-    return jax.vmap(lambda x, v: neuron_activity(params, topo.topo, x, v))(xs, vs)
+def _activations(params, xs, vs, ts, topo: _Topo):
+    return jax.vmap(lambda x, v, t: neuron_activity(params, topo.topo, x, v, t))(xs, vs, ts)
 
 
 @float64
@@ -211,9 +211,9 @@ def error_mm(predicted: np.ndarray, recorded: np.ndarray) -> np.ndarray:
 
 
 @float64
-def activations(model: Model, xs: np.ndarray, vs: np.ndarray) -> np.ndarray:
-    """Neuron activations at each state (x, v), [F, B]; 0 for non-neural bonds, NaN where the
-    state is unknown."""
+def activations(model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0) -> np.ndarray:
+    """Neuron activations at each state (x, v) of frames 0, 1, ... (time ``frame * dt``, for
+    a rhythmic drive), [F, B]; 0 for non-neural bonds, NaN where the state is unknown."""
     xs = np.asarray(xs, np.float64)
     vs = np.asarray(vs, np.float64)
     n_b = len(neural_bonds(model.topology)[1])
@@ -223,8 +223,9 @@ def activations(model: Model, xs: np.ndarray, vs: np.ndarray) -> np.ndarray:
     ok = np.isfinite(xs).all(axis=(1, 2)) & np.isfinite(vs).all(axis=(1, 2))
     if not ok.any():
         return out
+    ts = jnp.asarray(np.arange(xs.shape[0])[ok] * float(dt))
     act = _activations(
-        _params(model), jnp.asarray(xs[ok]), jnp.asarray(vs[ok]), topo=_Topo(model.topology)
+        _params(model), jnp.asarray(xs[ok]), jnp.asarray(vs[ok]), ts, topo=_Topo(model.topology)
     )
     out[ok] = np.asarray(act, np.float64)
     return out
@@ -344,7 +345,7 @@ def predict(
     dt = traj.dt
     one = one_step(model, rec, dt, substeps, method)
     xs, vs = free_run(model, rec, dt, n, substeps, method)
-    act = activations(model, xs, vs)
+    act = activations(model, xs, vs, dt)
     pairs_of_bonds, neural = neural_bonds(model.topology)
     sat, per = saturation_share(act, neural)
     complete = np.isfinite(rec).all(axis=(1, 2))
