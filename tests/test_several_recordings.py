@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import EXAMPLES, cli
 
 import activebonds
 from activebonds.data import Trajectory, write_trajectory
@@ -14,6 +13,7 @@ from activebonds.identify import rundir
 from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model, loads_model
+from helpers import EXAMPLES, cli
 
 FAST = dict(bonds="standard", generations=3, population=16, seed=0)
 
