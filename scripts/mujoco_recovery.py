@@ -73,7 +73,13 @@ def noisy(traj: Trajectory, noise_mm: float, seed: int) -> Trajectory:
 
 
 def one(seed: int, noise_mm: float, args) -> dict:
-    truth = mujoco_truth.tendon_system(n_particles=4, rate=100.0, seconds=2.0, seed=seed)
+    truth = mujoco_truth.tendon_system(
+        n_particles=4,
+        rate=100.0,
+        seconds=args.seconds,
+        seed=seed,
+        damping_scale=args.damping_scale,
+    )
     model = loads_model(truth.model_toml("start"), "mujoco")
     traj = noisy(truth.trajectory(), noise_mm, seed)
     base = dict(init="lsq", generations=args.generations, population=args.population, seed=seed)
@@ -114,17 +120,18 @@ def main(argv=None) -> int:
     ap.add_argument("--horizon", default="10", help="comma-separated curriculum")
     ap.add_argument("--generations", type=int, default=1)
     ap.add_argument("--population", type=int, default=20)
+    ap.add_argument("--seconds", type=float, default=2.0)
+    ap.add_argument("--damping-scale", type=float, default=1.0, help="dampings x this")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     args.horizon = [int(h) for h in args.horizon.split(",")]
-    rows = [
-        one(int(s), float(n), args) for n in args.noise_mm.split(",") for s in args.seeds.split(",")
-    ]
-    if args.json:
-        args.json.write_text(
-            json.dumps({"args": vars(args) | {"json": str(args.json)}, "rows": rows}, indent=2)
-            + "\n"
-        )
+    rows = []
+    for n in args.noise_mm.split(","):
+        for seed in args.seeds.split(","):
+            rows.append(one(int(seed), float(n), args))
+            if args.json:  # after every row: a long run keeps what it measured
+                record = {"args": vars(args) | {"json": str(args.json)}, "rows": rows}
+                args.json.write_text(json.dumps(record, indent=2) + "\n")
     return 0
 
 

@@ -195,9 +195,15 @@ def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path
 @pytest.mark.parametrize(
     "options, message",
     [
-        (["--horizon", "1,5"], "a horizon curriculum (several horizons) is run by the refinement"),
-        (["--cost", "shooting"], "the shooting cost is the refinement's; add --refine lm"),
-        (["--horizon", "0", "--refine", "lm"], "horizons must be integers >= 1"),
+        (
+            ["--horizon", "1,5", "--refine", "none"],
+            "a horizon curriculum (several horizons) is run by the refinement",
+        ),
+        (
+            ["--cost", "shooting", "--refine", "none"],
+            "the shooting cost is the refinement's; add --refine lm",
+        ),
+        (["--horizon", "0"], "horizons must be integers >= 1"),
         (["--horizon", "1,x"], "expected integers separated by commas"),
         (["--refine", "newton"], "--refine"),
     ],

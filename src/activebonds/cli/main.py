@@ -108,10 +108,10 @@ def fit(
     refine: Annotated[
         str,
         typer.Option(
-            help="none, or lm: Levenberg-Marquardt (optimistix) polishes the ES's best on "
-            "the residuals of --cost, one stage per --horizon entry."
+            help="lm (the default): Levenberg-Marquardt (optimistix) polishes the ES's best "
+            "on the residuals of --cost, one stage per --horizon entry; none: the ES only."
         ),
-    ] = "none",
+    ] = "lm",
     cost: Annotated[
         str,
         typer.Option(

@@ -81,8 +81,9 @@ class Layout:
         return np.array([_to_search(g.value, g.log) for g in self.genes], dtype=np.float64)
 
     def natural(self, genome: np.ndarray) -> np.ndarray:
-        genome = np.asarray(genome, dtype=np.float64)
-        return np.where(self.log, np.exp(genome), genome)
+        out = np.array(genome, dtype=np.float64)
+        out[..., self.log] = np.exp(out[..., self.log])  # only the log genes (no overflow)
+        return out
 
     def decode(self, genome):
         """Genome (search space, [G]) -> Params. Pure JAX; vmap it over a population."""
