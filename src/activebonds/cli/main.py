@@ -100,9 +100,10 @@ def fit(
     horizon: Annotated[
         str,
         typer.Option(
-            help="Frames predicted from each start: the ES's cost uses the first; with "
-            "--refine lm, one refinement stage per entry, each from the previous one's "
-            "result (a curriculum, e.g. 1,5,20). As long as the window: a free run."
+            help="Frames predicted from each start: the ES's cost uses the first (1 with "
+            "--cost shooting); with --refine lm, one refinement stage per entry, each from "
+            "the previous one's result (a curriculum, e.g. 1,5,20). As long as the window: "
+            "a free run."
         ),
     ] = "1",
     refine: Annotated[

@@ -135,7 +135,13 @@ class Refinement:
         u, steps, message = _solve(residual, u0, max_steps)
         end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
-        return self._judge(horizon, genome, result, start, end, windows.n_terms, steps, message)
+
+        def mm(c):
+            return float(rms_mm(c, windows.n_terms)) if np.isfinite(c) else float("inf")
+
+        return self._judge(
+            horizon, genome, result, (start, end), (mm(start), mm(end)), steps, message
+        )
 
     def _shooting(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
@@ -154,19 +160,19 @@ class Refinement:
 
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
         start_tree = residual(y0)
-        start = float(jnp.sum(jnp.square(start_tree[0])))
         y, steps, message = _solve(residual, y0, max_steps)
         end_tree = residual(y)
-        end = float(jnp.sum(jnp.square(end_tree[0])))
-        total_ok = _sum_squares(end_tree) <= _sum_squares(start_tree) * (1 + 1e-12)
         result = np.asarray(to_genome(y[0]), np.float64)
+
+        def positions_mm(tree):  # the position residuals only, as an RMS
+            return float(rms_mm(float(jnp.sum(jnp.square(tree[0]))), windows.n_terms))
+
         stage = self._judge(
             horizon,
             genome,
             result,
-            start,
-            end if total_ok else np.inf,
-            windows.n_terms,
+            (_sum_squares(start_tree), _sum_squares(end_tree)),
+            (positions_mm(start_tree), positions_mm(end_tree)),
             steps,
             message,
         )
@@ -176,17 +182,18 @@ class Refinement:
             self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
         return stage
 
-    def _judge(self, horizon, start_genome, result, start, end, n_terms, steps, message):
-        def mm(c):
-            return float(rms_mm(c, n_terms)) if np.isfinite(c) else float("inf")
-
+    def _judge(self, horizon, start_genome, result, objective, rms, steps, message):
+        """Accept or reject a stage on its own objective (its whole residual vector, so
+        continuity defects count for shooting); ``rms``: its position residuals' RMS (mm) at
+        the start and the end, for people."""
+        start, end = objective
         why = None
         if not np.all(np.isfinite(result)) or not np.isfinite(end):
             why = "the refinement diverged (non-finite cost)"
         elif not self.bounded.inside(result):
             why = "the refinement stepped out of the bounds"
         elif end > start * (1 + 1e-12):
-            why = f"the refinement made the cost worse ({mm(start):.4g} -> {mm(end):.4g} mm)"
+            why = f"the refinement made its objective worse ({start:.4g} -> {end:.4g} m^2)"
         accepted = why is None
         return Stage(
             horizon=int(horizon),
@@ -194,8 +201,8 @@ class Refinement:
             accepted=accepted,
             message=message if accepted else f"{why}; kept the previous result",
             steps=steps,
-            start_rms_mm=mm(start),
-            end_rms_mm=mm(end) if accepted else mm(start),
+            start_rms_mm=rms[0],
+            end_rms_mm=rms[1] if accepted else rms[0],
             continuity_mm=None,
             seconds=0.0,
             genome=[float(g) for g in (result if accepted else start_genome)],

@@ -69,8 +69,9 @@ class FitSettings(BaseModel):
 
     @property
     def es_horizon(self) -> int:
-        """The horizon of the ES's cost."""
-        return self.horizon[0]
+        """The horizon of the ES's cost: the first of ``horizon``; 1 (the one-step cost) when
+        the refinement shoots, as a shooting state cannot be evolved."""
+        return 1 if self.cost == "shooting" else self.horizon[0]
 
     @field_validator("frames")
     @classmethod
