@@ -480,6 +480,7 @@ def test_same_seed_fresh_processes_are_byte_identical(tmp_path, tmp_path_factory
                         *("fit", ws["base"] / spec["model"], ws["base"] / spec["data"]),
                         *("--out", via_cli, "--seed", FIT["seed"]),
                         *("--population", FIT["population"], "--generations", FIT["generations"]),
+                        *("--refine", "none"),  # the runner fits with the ES alone
                     ),
                 ),
             ],

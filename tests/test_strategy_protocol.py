@@ -218,6 +218,9 @@ def _as_format_1(run) -> None:
         meta.pop(key)
     meta["format"] = 1
     meta["settings"].pop("optimizer")
+    for key in ("cost", "refine", "smooth"):  # settings added after format 1
+        meta["settings"].pop(key, None)
+    meta["settings"]["horizon"] = meta["settings"]["horizon"][0]  # an int in format 1
     (run / "run.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
     status = json.loads((run / "status.json").read_text())
     status["job"].pop("optimizer")

@@ -7,7 +7,8 @@ the previous stage's result), on the cost ``--cost`` names:
 * ``restart``: the ES's own cost at that horizon (restarts from the recorded states every H
   frames; H = 1 is the paper's one-step cost); the variables are the genes;
 * ``shooting``: multiple shooting with windows of H frames (:mod:`.shooting`); the variables
-  are the genes and every window's start state. A shooting stage after another starts its
+  are the genes and every window's start state (after a warm start of the genes alone on the
+  restart cost of that horizon). A shooting stage after another starts its
   states from the previous stage's trajectory.
 
 Bounds are kept through the search space: a gene is ``lo + (hi - lo) (1 + sin u) / 2`` of an
@@ -92,7 +93,7 @@ def _solve(residual, y0, max_steps: int):
     steps = int(sol.stats["num_steps"])
     if sol.result == optx.RESULTS.successful:
         message = "converged"
-    elif sol.result == optx.RESULTS.max_steps_reached:
+    elif sol.result == optx.RESULTS.nonlinear_max_steps_reached:
         message = f"stopped at the step limit ({max_steps}) before converging"
     else:
         message = "stopped: " + str(optx.RESULTS[sol.result]).strip().split(".")[0][:100]
@@ -145,6 +146,13 @@ class Refinement:
 
     def _shooting(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
+        # Warm start: the parameters alone on the restart cost of this horizon (cheap: no
+        # state is a variable), so the shooting solve starts near its optimum rather than
+        # at the one-step cost's, which marker noise biases (dampings several times over).
+        original = genome
+        warm = self._restart(horizon, genome, max_steps)
+        if warm.accepted:
+            genome = np.asarray(warm.genome)
         windows = join_shooting(
             [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
         )
@@ -169,11 +177,11 @@ class Refinement:
 
         stage = self._judge(
             horizon,
-            genome,
+            original,
             result,
             (_sum_squares(start_tree), _sum_squares(end_tree)),
             (positions_mm(start_tree), positions_mm(end_tree)),
-            steps,
+            warm.steps + steps,
             message,
         )
         if stage.accepted:

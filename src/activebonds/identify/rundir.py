@@ -130,7 +130,8 @@ def _upgrade_meta(run: Path, meta: dict) -> dict:
     from .evolve import history_columns
 
     try:
-        horizon = int(meta["settings"].get("horizon", 1))
+        horizon = meta["settings"].get("horizon", 1)  # an int in format 1; a curriculum later
+        horizon = int(horizon[0] if isinstance(horizon, list) else horizon)
         window = read_window(run)
         n_terms = make_windows(window.positions, window.mask, window.dt, horizon).n_terms
     except (KeyError, TypeError, ValueError, AttributeError) as err:
