@@ -1,7 +1,8 @@
 """Recovery of MuJoCo's tendon parameters: the one-step cost against multiple shooting (issue 12).
 
     python scripts/mujoco_recovery.py [--seeds 0] [--noise-mm 0,0.5] [--substeps 10]
-                                      [--horizon 10] [--json out.json]
+                                      [--horizon 10] [--rate 100] [--seconds 2] [--trials 1]
+                                      [--excitation 1] [--damping-scale 1] [--json out.json]
 
 The truth comes from an independent simulator (``tests/mujoco_truth.py``): 4 free point
 masses joined by 6 MuJoCo spatial tendons (stiffness, damping, springlength), no gravity or
@@ -17,7 +18,8 @@ masses fixed at the truth. Each row fits the same data two ways:
 
 Reported: the relative error of every stiffness, rest length and damping (max and median per
 kind). With ``--noise-mm`` Gaussian noise (standard deviation per axis, mm) is added to the
-markers, the same draw for both fits.
+markers, the same draw for both fits. ``--trials N`` records N starts of the same system
+(a subject's trials) and fits them at once (``fit MODEL A B ...``).
 """
 
 from __future__ import annotations
@@ -73,15 +75,22 @@ def noisy(traj: Trajectory, noise_mm: float, seed: int) -> Trajectory:
 
 
 def one(seed: int, noise_mm: float, args) -> dict:
-    truth = mujoco_truth.tendon_system(
-        n_particles=4,
-        rate=100.0,
-        seconds=args.seconds,
-        seed=seed,
-        damping_scale=args.damping_scale,
-    )
+    truths = [
+        mujoco_truth.tendon_system(
+            n_particles=4,
+            rate=args.rate,
+            seconds=args.seconds,
+            seed=seed,
+            damping_scale=args.damping_scale,
+            trial=trial,
+            excitation=args.excitation,
+        )
+        for trial in range(args.trials)
+    ]
+    truth = truths[0]
     model = loads_model(truth.model_toml("start"), "mujoco")
-    traj = noisy(truth.trajectory(), noise_mm, seed)
+    trajs = [noisy(t.trajectory(), noise_mm, seed + 7919 * i) for i, t in enumerate(truths)]
+    traj = trajs[0] if len(trajs) == 1 else trajs  # several recordings are fitted at once
     base = dict(init="lsq", generations=args.generations, population=args.population, seed=seed)
     t = time.time()
     plain = activebonds.fit(model, traj, **base)
@@ -122,6 +131,16 @@ def main(argv=None) -> int:
     ap.add_argument("--population", type=int, default=20)
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--damping-scale", type=float, default=1.0, help="dampings x this")
+    ap.add_argument("--rate", type=float, default=100.0, help="sample rate, Hz")
+    ap.add_argument(
+        "--trials",
+        type=int,
+        default=1,
+        help="recordings of the system (other starts), fitted at once",
+    )
+    ap.add_argument(
+        "--excitation", type=float, default=1.0, help="start perturbation and speed x this"
+    )
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     args.horizon = [int(h) for h in args.horizon.split(",")]

@@ -258,6 +258,8 @@ def tendon_system(
     seed: int = 0,
     timestep: float = 1e-4,
     damping_scale: float = 1.0,
+    trial: int = 0,
+    excitation: float = 1.0,
 ) -> MujocoTruth:
     """Free point masses, every pair joined by a spring-damper tendon (2: one bond, 3: a
     triangle, 4: a tetrahedron; more: the complete graph), simulated by MuJoCo.
@@ -268,7 +270,9 @@ def tendon_system(
     The start perturbs every position by ~10 % of the mean bond length and gives velocities
     of ~0.3 m/s, the total momentum removed (the centre of mass stays at the origin).
     Samples every ``1 / rate`` s for ``seconds`` s (frame 0 included); ``1 / rate`` must be a
-    whole number of MuJoCo steps.
+    whole number of MuJoCo steps. ``trial`` > 0 draws another start of the same system (the
+    same parameters: a further recording of one subject); ``excitation`` scales the start's
+    perturbation and velocities.
     """
     if n_particles < 2:
         raise ValueError("need at least 2 particles")
@@ -293,9 +297,12 @@ def tendon_system(
         for (i, j), k, c in zip(pairs, stiffness, damping, strict=True)
     )
     scale = np.mean([b.rest_length for b in bonds])
-    x0 = rest + rng.normal(0.0, 0.1 * scale / math.sqrt(3), rest.shape)
+    if trial:
+        rng = np.random.default_rng((seed, trial))
+    amp = 0.1 * excitation * scale / math.sqrt(3)
+    x0 = rest + rng.normal(0.0, amp, rest.shape)
     x0 -= masses @ x0 / masses.sum()
-    v0 = rng.normal(0.0, 0.3 / math.sqrt(3), rest.shape)
+    v0 = rng.normal(0.0, 0.3 * excitation / math.sqrt(3), rest.shape)
     v0 -= masses @ v0 / masses.sum()
 
     xml = _mjcf(masses, rest, bonds, timestep)

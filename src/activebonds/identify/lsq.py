@@ -22,6 +22,7 @@ or one particle's mass fixes the scale: :func:`equation_error_fit`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -154,6 +155,13 @@ class _Unknowns:
         return self.cols[name]
 
 
+@partial(jax.jit, static_argnums=1)
+def _known_forces(params: Params, topo, x, v, times):
+    """The forces of everything that is not a linear unknown, at every restart state: one
+    compiled call (op by op, each of the force's primitives would compile on its own)."""
+    return jax.vmap(lambda a, b, t: total_force(params, topo, a, b, t))(x, v, times)
+
+
 def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     """The one-step cost of ``windows`` (horizon 1) as ``|columns @ theta + offset - target|^2``
     over the model's linear unknowns."""
@@ -165,8 +173,8 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     x, v, dt = windows.x0, windows.v0, windows.dt
     n_s, n_p, d = x.shape
     with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
-        known = jax.vmap(lambda a, b, t: total_force(off_params, topo, a, b, t))(
-            jnp.asarray(x), v, jnp.asarray(windows.times)
+        known = _known_forces(
+            off_params, topo, jnp.asarray(x), jnp.asarray(v), jnp.asarray(windows.times)
         )
         known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
