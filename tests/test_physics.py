@@ -386,7 +386,7 @@ def test_two_body_spring_frequency(method, record_property):
     assert len(crossings) >= 9
     measured = 2 * (crossings[-1] - crossings[0]) / (len(crossings) - 1)
     error = abs(2 * math.pi / measured - omega) / omega
-    record_property("relative_frequency_error", error)
+    record_property("relative_frequency_error", float(error))
     print(f"{method}: omega={omega:.6f}, relative frequency error {error:.2e}")
     assert error < 5e-3
 
@@ -431,7 +431,7 @@ def test_verlet_energy_band_without_drift(record_property):
         ("energy_mean_shift_rel", shift / e0),
         ("energy_max_deviation_rel", worst / e0),
     ]:
-        record_property(key, value)
+        record_property(key, float(value))
         print(f"{key} = {value:.2e}")
     # the dynamics are not trivial: energy moves between kinetic and potential
     kinetic = ref.kinetic_energy(params, np.asarray(vs))
@@ -496,7 +496,7 @@ def test_convergence_order(method, order, record_property):
     xs = rollout(params, topo, x0, v0, t_end / ns[0], ns[0] + 1, method=method)
     np.testing.assert_allclose(np.abs(np.asarray(xs[-1]) - exact).max(), errors[0], rtol=1e-9)
     slope = np.polyfit(np.log(t_end / ns), np.log(errors), 1)[0]
-    record_property("order", slope)
+    record_property("order", float(slope))
     print(f"{method}: errors {errors}, fitted order {slope:.3f}")
     assert abs(slope - order) < 0.2
 

@@ -212,7 +212,7 @@ def test_kill_at_random_moments_then_resume(tmp_path, tmp_path_factory, record_p
     """4 fits of the triangle, one SIGKILL each (mid-checkpoint, in the evolution, during
     start-up/compilation), resumed with the command line."""
     stats = _campaign(tmp_path, tmp_path_factory, 4, ["triangle"], max_kills=1)
-    record_property("kill_stats", dict(stats))
+    record_property("kill_stats", {k: int(v) for k, v in stats.items()})
 
 
 @pytest.mark.slow
@@ -221,7 +221,7 @@ def test_kill_at_random_moments_then_resume_20_fits(tmp_path, tmp_path_factory, 
     """20 fits (triangle and horse), 1-3 SIGKILLs each; later kills hit resuming processes."""
     stats = _campaign(tmp_path, tmp_path_factory, 20, ["triangle", "horse"], max_kills=3)
     assert stats["kills mid-checkpoint (.tmp- file left)"] >= 1, dict(stats)
-    record_property("kill_stats", dict(stats))
+    record_property("kill_stats", {k: int(v) for k, v in stats.items()})
 
 
 # ============================================================================ torn checkpoints
