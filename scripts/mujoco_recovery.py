@@ -64,6 +64,53 @@ def summary(errs: dict) -> dict:
     }
 
 
+def noise_floor(model, truths, noise_mm: float, substeps: int, integrator: str) -> dict:
+    """The Cramer-Rao bound: the smallest standard deviation any unbiased estimator can have
+    for each parameter, from Gaussian marker noise of ``noise_mm`` (per axis) on these
+    recordings, the unknowns being the parameters and every recording's start state (what
+    shooting fits). Relative to the truth, per kind (max and median, per cent): a floor
+    that no cost can beat, against which the fits' errors are read."""
+    import jax
+    import jax.numpy as jnp
+
+    from activebonds.physics.integrate import rollout_states
+
+    layout, topo = model.layout, model.topology
+    genome = np.array([g.value for g in layout.genes], np.float64)
+    genome[layout.log] = np.log(genome[layout.log])  # search space at the truth
+    names = [g.name for g in layout.genes]
+    blocks = []
+    for truth in truths:
+        n = truth.n_frames - 1
+        dt = 1.0 / truth.rate
+
+        def positions(y, n=n, dt=dt):
+            g, x0, v0 = y
+            xs, _ = rollout_states(layout.decode(g), topo, x0, v0, dt, n, substeps, integrator)
+            return xs.ravel()
+
+        y = (jnp.asarray(genome), jnp.asarray(truth.positions[0]), jnp.asarray(truth.velocities[0]))
+        jac = jax.jacfwd(positions)(y)
+        blocks.append([np.asarray(j).reshape(j.shape[0], -1) for j in jac])
+    # one Fisher matrix over [genes, each recording's start state]
+    n_g = len(genome)
+    n_s = blocks[0][1].shape[1] + blocks[0][2].shape[1]
+    fisher = np.zeros((n_g + n_s * len(blocks),) * 2)
+    for r, (jg, jx, jv) in enumerate(blocks):
+        cols = np.zeros((jg.shape[0], fisher.shape[0]))
+        cols[:, :n_g] = jg
+        cols[:, n_g + r * n_s : n_g + (r + 1) * n_s] = np.hstack([jx, jv])
+        fisher += cols.T @ cols
+    sigma = noise_mm / 1000.0
+    cov = sigma**2 * np.linalg.inv(fisher)
+    sd = np.sqrt(np.diag(cov)[:n_g])  # log genes: relative already; others: absolute
+    rel = np.where(layout.log, sd, sd / np.abs(genome))
+    out = {k: [] for k in KINDS}
+    for name, r in zip(names, rel, strict=True):
+        out[name.rsplit(".", 1)[1]].append(float(r))
+    return summary(out)
+
+
 def noisy(traj: Trajectory, noise_mm: float, seed: int) -> Trajectory:
     if noise_mm == 0:
         return traj
@@ -110,13 +157,24 @@ def one(seed: int, noise_mm: float, args) -> dict:
     row = {
         "seed": seed,
         "noise_mm": noise_mm,
+        "noise_floor": noise_floor(
+            loads_model(truth.model_toml("truth"), "mujoco"),
+            truths,
+            noise_mm,
+            args.substeps,
+            args.integrator,
+        )
+        if noise_mm
+        else None,
         "one_step": summary(errors(model, plain.genome, truth)),
         "shooting": summary(errors(model, shot.genome, truth)),
         "one_step_seconds": round(t_plain, 1),
         "shooting_seconds": round(t_shot, 1),
         "stages": [{k: v for k, v in s.record().items() if k != "genome"} for s in shot.refinement],
     }
-    print(json.dumps({k: row[k] for k in ("seed", "noise_mm", "one_step", "shooting")}))
+    print(
+        json.dumps({k: row[k] for k in ("seed", "noise_mm", "noise_floor", "one_step", "shooting")})
+    )
     return row
 
 
