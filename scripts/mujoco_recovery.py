@@ -178,6 +178,36 @@ def one(seed: int, noise_mm: float, args) -> dict:
     return row
 
 
+def _pct(x: float) -> str:
+    if x >= 100:
+        return f"{x:,.0f} %"
+    return f"{x:.1f} %" if x >= 10 else (f"{x:.2f} %" if x >= 0.1 else f"{x:.3f} %")
+
+
+def table(record: dict) -> str:
+    """The markdown table of docs/EXPERIMENTS.md for a JSON record of this script."""
+    lines = [
+        "| seed | estimate | stiffness max / median | rest length max | damping max / median | time |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in record["rows"]:
+        for key, label, seconds in (
+            ("noise_floor", "Cramér-Rao floor (1 s.d.)", None),
+            ("one_step", "one-step optimum", r["one_step_seconds"]),
+            ("shooting", "shooting", r["shooting_seconds"]),
+        ):
+            e = r.get(key)
+            if not e:
+                continue
+            lines.append(
+                f"| {r['seed']} | {label} | {_pct(e['stiffness']['max_pct'])} / "
+                f"{_pct(e['stiffness']['median_pct'])} | {_pct(e['rest_length']['max_pct'])} | "
+                f"{_pct(e['damping']['max_pct'])} / {_pct(e['damping']['median_pct'])} | "
+                f"{'' if seconds is None else f'{seconds:.0f} s'} |"
+            )
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--seeds", default="0")
@@ -200,7 +230,11 @@ def main(argv=None) -> int:
         "--excitation", type=float, default=1.0, help="start perturbation and speed x this"
     )
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--table", type=Path, help="print the markdown table of this JSON and stop")
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(json.loads(args.table.read_text())))
+        return 0
     args.horizon = [int(h) for h in args.horizon.split(",")]
     rows = []
     for n in args.noise_mm.split(","):

@@ -28,10 +28,9 @@ def relative_errors(model, genome, truth) -> dict[str, np.ndarray]:
     return out
 
 
-def test_multiple_shooting_recovers_mujoco_tendons_within_1_percent():
-    truth = mujoco_truth.tendon_system(n_particles=3, rate=100.0, seconds=1.0, seed=0)
-    model = loads_model(truth.model_toml("start"), "mujoco")
-    traj = truth.trajectory()
+def one_step_and_shooting(model, traj, horizon: int):
+    """The exact one-step optimum, and the same followed by the recommended refinement:
+    multiple shooting with windows of ``horizon`` frames, 5 Verlet substeps."""
     base = dict(init="lsq", generations=1, population=8, seed=0)
     one_step = activebonds.fit(model, traj, **base)
     shot = activebonds.fit(
@@ -40,10 +39,17 @@ def test_multiple_shooting_recovers_mujoco_tendons_within_1_percent():
         **base,
         refine="lm",
         cost="shooting",
-        horizon=(10,),
+        horizon=(horizon,),
         substeps=5,
         integrator="verlet",
     )
+    return one_step, shot
+
+
+def test_multiple_shooting_recovers_mujoco_tendons_within_1_percent():
+    truth = mujoco_truth.tendon_system(n_particles=3, rate=100.0, seconds=1.0, seed=0)
+    model = loads_model(truth.model_toml("start"), "mujoco")
+    one_step, shot = one_step_and_shooting(model, truth.trajectory(), horizon=10)
     assert shot.refinement[0].accepted
     errs = relative_errors(model, shot.genome, truth)
     for kind, e in errs.items():
@@ -73,18 +79,7 @@ def test_with_half_a_millimetre_of_noise_shooting_is_unbiased_and_one_step_is_no
         markers=clean.markers,
         rate=clean.rate,
     )
-    base = dict(init="lsq", generations=1, population=8, seed=0)
-    one_step = activebonds.fit(model, traj, **base)
-    shot = activebonds.fit(
-        model,
-        traj,
-        **base,
-        refine="lm",
-        cost="shooting",
-        horizon=(20,),
-        substeps=5,
-        integrator="verlet",
-    )
+    one_step, shot = one_step_and_shooting(model, traj, horizon=20)
     assert shot.refinement[0].accepted
     errs = relative_errors(model, shot.genome, truth)
     assert np.median(errs["damping"]) < 0.10, errs["damping"]

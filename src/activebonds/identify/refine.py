@@ -39,7 +39,7 @@ from .shooting import (
     start_states,
 )
 
-MAX_STEPS = 200  # Levenberg-Marquardt steps per stage, at most
+MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
 EDGE = 1e-9  # a start on a bound is moved this far (of the span) inside, where sin' != 0
 

@@ -405,15 +405,20 @@ def write_validation(run: Path, record: dict) -> None:
 def read_validation(run: Path) -> dict | None:
     """validation.json, or None if the run has none (raises :class:`InputError` if it is
     unreadable)."""
-    path = run / "validation.json"
+    return _read_record(run / "validation.json", "validation")
+
+
+def _read_record(path: Path, what: str) -> dict | None:
+    """A JSON object written by this module, or None if there is no such file; one line
+    (:class:`InputError`) if it is unreadable or not an object."""
     if not path.is_file():
         return None
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise InputError(path, f"unreadable validation ({err})") from None
+        raise InputError(path, f"unreadable {what} ({err})") from None
     if not isinstance(record, dict):
-        raise InputError(path, "unreadable validation (not a JSON object)")
+        raise InputError(path, f"unreadable {what} (not a JSON object)")
     return record
 
 
@@ -448,14 +453,7 @@ def load_refinement(run: Path):
 
 def read_refinement_record(run: Path) -> dict | None:
     """refine.json for reports, or None."""
-    path = run / "refine.json"
-    if not path.is_file():
-        return None
-    try:
-        record = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise InputError(path, f"unreadable refinement record ({err})") from None
-    return record if isinstance(record, dict) else None
+    return _read_record(run / "refine.json", "refinement record")
 
 
 def python_command() -> str:
