@@ -78,9 +78,11 @@ class LinearPart:
     """How a kind enters the exact least squares (:mod:`activebonds.identify.lsq`).
 
     ``fields`` are the parameters it solves for; ``switch_off(values, index, topology,
-    layout)`` returns the kind's parameters with those terms' forces removed (or raises
-    ValueError); ``columns(values, index, topology, x, v, unknowns)`` adds the displacement of
-    each linear unknown (and of the fixed terms) through ``unknowns``."""
+    layout)`` returns the kind's parameters with *every* force of the kind removed (or raises
+    ValueError): the fixed terms enter through ``columns`` too, so a switched-off kind
+    contributes nothing to the known forces; ``columns(values, index, topology, x, v,
+    unknowns)`` adds the displacement of each linear unknown (and of the fixed terms) through
+    ``unknowns``."""
 
     fields: frozenset[str]
     switch_off: Callable

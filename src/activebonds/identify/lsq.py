@@ -172,11 +172,18 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     off_params = _switched_off(model)
     x, v, dt = windows.x0, windows.v0, windows.dt
     n_s, n_p, d = x.shape
-    with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
-        known = _known_forces(
-            off_params, topo, jnp.asarray(x), jnp.asarray(v), jnp.asarray(windows.times)
-        )
-        known = np.array(known, np.float64)  # [S, P, D], a writable copy
+    # A switched-off linear kind exerts no force (kind.LinearPart); the known forces are those
+    # of the other kinds and of a fixed field, computed only if there are any.
+    if all(bonds.get(k).linear is not None for k in topo.active()) and not np.any(
+        off_params.gravity
+    ):
+        known = np.zeros(x.shape, np.float64)
+    else:
+        with jax.enable_x64(True):  # scoped: the process-wide setting is left as it was
+            known = _known_forces(
+                off_params, topo, jnp.asarray(x), jnp.asarray(v), jnp.asarray(windows.times)
+            )
+            known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
     unknowns = _Unknowns(model, known, windows.times)
     for name in topo.active():
