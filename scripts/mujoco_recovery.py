@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import activebonds  # noqa: E402
 import mujoco_truth  # noqa: E402
 from activebonds.data import Trajectory  # noqa: E402
+from activebonds.experiments.baselines import zero_force_rms_mm  # noqa: E402
 from activebonds.model import loads_model  # noqa: E402
 
 KINDS = ("stiffness", "rest_length", "damping")
@@ -76,8 +77,7 @@ def noise_floor(model, truths, noise_mm: float, substeps: int, integrator: str) 
     from activebonds.physics.integrate import rollout_states
 
     layout, topo = model.layout, model.topology
-    genome = np.array([g.value for g in layout.genes], np.float64)
-    genome[layout.log] = np.log(genome[layout.log])  # search space at the truth
+    genome = layout.initial()  # the truth model's values, in search space
     names = [g.name for g in layout.genes]
     blocks = []
     for truth in truths:
@@ -166,6 +166,10 @@ def one(seed: int, noise_mm: float, args) -> dict:
         )
         if noise_mm
         else None,
+        # the one-step fit's RMS beside the zero-force predictor (first recording; the
+        # shooting stage's position RMS is in "stages")
+        "zero_force_rms_mm": zero_force_rms_mm(trajs[0].positions, trajs[0].mask, trajs[0].dt),
+        "one_step_rms_mm": plain.rms_mm,
         "one_step": summary(errors(model, plain.genome, truth)),
         "shooting": summary(errors(model, shot.genome, truth)),
         "one_step_seconds": round(t_plain, 1),
