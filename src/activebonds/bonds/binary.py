@@ -130,6 +130,7 @@ def _columns(values, index, topology, x, v, unknowns):
 
 _NEURAL = "neural"
 KIND = BondKind(
+    off=("stiffness", "damping"),
     name="binary",
     arity=2,
     parameters=(

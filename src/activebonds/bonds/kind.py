@@ -117,6 +117,8 @@ class BondKind:
     linear: LinearPart | None = None
     timed: bool = False  # forces take the time t as a fifth argument
     shared: tuple[Parameter, ...] = ()  # model-level parameters ("drive.frequency")
+    off: tuple[str, ...] = ()  # fields that, all at 0, remove every force of a bond: a kind
+    # with them can be optional (``optional = true``); an absent bond has them at 0, no genes
 
     def __post_init__(self):
         if not self.timed:

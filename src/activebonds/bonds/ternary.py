@@ -30,6 +30,7 @@ def forces(params, topology, x, v):
 
 
 KIND = BondKind(
+    off=("stiffness",),
     name="ternary",
     arity=3,
     parameters=(

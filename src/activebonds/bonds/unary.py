@@ -68,6 +68,7 @@ def _columns(values, index, topology, x, v, unknowns):
 
 
 KIND = BondKind(
+    off=("stiffness", "damping"),
     name="unary",
     arity=1,
     parameters=(

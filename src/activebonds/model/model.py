@@ -210,7 +210,7 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
         pos = counters[b.kind]
         counters[b.kind] += 1
         g = None
-        if b.kind not in disable:
+        if b.kind not in disable and not b.absent:
             g = group(f"type:{b.type}" if b.type else f"bond[{bi}]")
             slots[g].extend(names[n] for n in b.particles)
         values, indices = base.bonds[b.kind], index.bonds[b.kind]
@@ -245,6 +245,9 @@ def build(spec: ModelSpec, disable=frozenset()) -> Model:
                         continue
                     key = f"{par.key}.{par.part}[{j}]"
                     put(vals, ids, (pos, j), par.bounds, p, g, key, xs[j], p.min, p.max, par.log)
+        if b.absent:  # no force: the fields that switch it off at 0 (never genes here)
+            for f in kind.off:
+                values[f][pos] = 0.0
 
     width = max([len(s) for s in slots.values()] + [1])
     group_slots = np.full((len(groups), width), -1, dtype=np.int32)
@@ -322,7 +325,7 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
     for b in spec.bond:
         pos = counters.get(b.kind, 0)
         counters[b.kind] = pos + 1
-        if b.kind in keep:
+        if b.kind in keep or b.absent:
             out.append(b)
             continue
         values = params.bonds[b.kind]

@@ -191,9 +191,16 @@ class BondBase(_Strict):
     """The keys every bond table has; each kind's class (:func:`bond_class`) adds its flags
     and parameters, from the kind's declaration in :mod:`activebonds.bonds`."""
 
+    @property
+    def absent(self) -> bool:
+        """An optional bond identified as absent: it exerts no force and has no genes."""
+        return bool(self.optional) and self.present is False
+
     kind: str
     particles: list[str]
     type: str | None = None
+    optional: bool | None = None  # structure identification decides whether it is present
+    present: bool | None = None  # an optional bond's decision; false: no force, no genes
 
     @model_validator(mode="before")
     @classmethod
@@ -228,6 +235,19 @@ class BondBase(_Strict):
             )
         if len(set(self.particles)) != arity:
             raise ValueError(f"particles: a {self.kind} bond needs {arity} distinct particles")
+        if self.present is not None and not self.optional:
+            raise ValueError("present: only an optional bond has a presence; add optional = true")
+        if self.optional and not kind.off:
+            can = ", ".join(k.name for k in bonds.kinds() if k.off)
+            raise ValueError(
+                f"optional: a {self.kind} bond cannot be optional (its forces do not switch "
+                f"off with its parameters; kinds that can: {can})"
+            )
+        if self.optional and getattr(self, "neural", False):
+            raise ValueError(
+                "optional: a neural bond cannot be optional (structure identification solves "
+                "the bonds linear in their parameters; make it a standard bond)"
+            )
         for p in kind.parameters:
             if p.when and getattr(self, p.key) is not None and not getattr(self, p.when):
                 raise ValueError(f"{p.key}: '{p.key}' needs {p.when} = true")

@@ -1,0 +1,628 @@
+"""How low can a held-out one-step error go on the bundled horse? Limits, by measurement.
+
+    python scripts/one_step_limits.py [--json docs/results/one_step_limits.json]
+                                      [--md docs/results/one_step_limits.md]
+
+For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, 7 markers, 60 Hz),
+everything is fitted on frames 0-299 and scored on frames 300-599 with the project's one-step
+metric: from frame t (position x_t, backward-difference velocity v_t = (x_t - x_{t-1}) / dt)
+predict x_{t+1} = x_t + dt v_t + dt^2 a_t, error |x_{t+1}^pred - x_{t+1}| (3D), RMS over all
+markers and predicted frames. As in ``Trajectory.window(300, 600)`` the predicted frames are
+302-599 (frames 300 and 301 start the first window); in-sample rows use window(0, 300), i.e.
+predicted frames 2-299. Measured:
+
+1. the zero-force predictor (a_t = 0) and the internal-force (momentum) floor, with the
+   package's functions (``experiments.baselines``), beside this script's own zero-force
+   computation and an independent, scale-invariant computation of the exact floor;
+2. the marker noise: sigma per marker from the residual of cubic Savitzky-Golay fits
+   (corrected for the fit's degrees of freedom) and from the high-frequency end of the
+   spectrum of the smooth markers; the one-step error that white noise alone puts into a
+   predictor of x_t and v_t (sqrt(18) sigma, 3D) and into any predictor from past frames
+   (sqrt(3) sigma, 3D);
+3. flexible, non-physical predictors of a_t from the state (k-nearest neighbours, ridge
+   regression on polynomial features, and a linear predictor on 4 frames of history).
+
+numpy and scipy only; runs in well under a minute.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.signal import savgol_coeffs, savgol_filter, welch
+from scipy.spatial import cKDTree
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "src" / "activebonds" / "datasets" / "horse_vhdc"
+GAITS = {"trot": "Horse1_M1_trot1_kinematics.csv", "walk": "Horse1_M1_walk1_kinematics.csv"}
+TABLED = ROOT / "docs" / "results" / "horse_ground.json"  # masses behind the tabled floor
+FIT, TEST = (0, 300), (300, 600)
+SMOOTH_MARKERS = ("Head", "Withers", "Sacrum")
+SG_WINDOWS = (5, 7, 9, 11)  # 7, 9, 11 as asked; 5 added as the tightest upper estimate
+SG_ORDER = 3
+SG_MAIN = 7  # the window whose sigma feeds the noise-only rows of the table
+SPECTRUM = {"nperseg": 64, "band_hz": (25.0, 30.0)}
+KS = (1, 3, 5, 10)
+FEATURES = ("rel_withers", "rel_centroid", "absolute")
+LAMBDAS = 10.0 ** np.arange(-6.0, 6.01, 0.25)  # ridge weight, times the number of samples
+HISTORY = 4  # frames of history of the linear predictor (extra, beyond the brief)
+INNER_SPLIT = 200  # model selection inside 0-299: fit on starts < 200, validate on the rest
+
+
+# --------------------------------------------------------------------------- one-step terms
+
+
+def starts_of(frames: tuple[int, int], first: int = 1) -> np.ndarray:
+    """Start frames t of the one-step terms of window ``frames`` (t-1 and t+1 inside it)."""
+    a, b = frames
+    return np.arange(a + max(first, 1), b - 1)
+
+
+def accel(x: np.ndarray, s: np.ndarray, dt: float) -> np.ndarray:
+    """The accelerations that make the one-step prediction exact: (x_{t+1} - 2x_t + x_{t-1})/dt^2."""
+    return (x[s + 1] - 2.0 * x[s] + x[s - 1]) / dt**2  # [S, P, 3]
+
+
+def rms_mm(err: np.ndarray) -> float:
+    """RMS of the 3D position error [S, P, 3] (m) over particles and frames, in mm."""
+    return float(np.sqrt(np.mean(np.sum(err**2, axis=-1))) * 1000.0)
+
+
+def per_marker_mm(err: np.ndarray) -> list[float]:
+    return (np.sqrt(np.mean(np.sum(err**2, axis=-1), axis=0)) * 1000.0).tolist()
+
+
+# --------------------------------------------------------------------------- floors
+
+
+def exact_floor(x0: np.ndarray, resid: np.ndarray, mass: np.ndarray) -> tuple[float, float]:
+    """The momentum floor (mm) computed scale-invariantly: the constraints (zero net force,
+    zero net torque about the centre of mass) are built from pairwise differences, each row is
+    normalised, and the residual's component in their row space (rank 6 for any positive
+    masses and a non-degenerate frame) is what no internal force can remove. Returns the floor
+    and the smallest singular value of the normalised constraints over frames."""
+    m = np.asarray(mass, np.float64)
+    w = m / m.sum()
+    n_t, n_p, _ = x0.shape
+    rel = x0[:, :, None, :] - x0[:, None, :, :]  # x_p - x_q
+    xc = np.einsum("q,tpqk->tpk", w, rel)  # x_p - c without cancellation
+    c = np.zeros((n_t, 6, n_p, 3))
+    for k in range(3):
+        c[:, k, :, k] = w
+        i, j = (k + 1) % 3, (k + 2) % 3  # (xc x a)_k = xc_i a_j - xc_j a_i
+        c[:, 3 + k, :, j] = w * xc[:, :, i]
+        c[:, 3 + k, :, i] = -w * xc[:, :, j]
+    c = c.reshape(n_t, 6, n_p * 3)
+    c /= np.linalg.norm(c, axis=2, keepdims=True)
+    u, sv, _ = np.linalg.svd(np.transpose(c, (0, 2, 1)), full_matrices=False)  # [T, 3P, 6]
+    proj = np.einsum("tnc,tn->tc", u, resid.reshape(n_t, -1))
+    return float(np.sqrt(np.sum(proj**2) / (n_t * n_p)) * 1000.0), float(sv.min())
+
+
+def limit_floors(x0: np.ndarray, resid: np.ndarray, markers) -> list[dict]:
+    """The exact floor in the hierarchical mass limit m_j >> m_k >> m_l >> the rest: a_j = 0,
+    a_k parallel to x_k - x_j, and a_l without a component along n x (x_l - x_j)
+    (n = unit(x_k - x_j)); every other acceleration is free."""
+    n_t, n_p, _ = x0.shape
+    out = []
+    for j, k, ll in itertools.permutations(range(n_p), 3):
+        n = x0[:, k] - x0[:, j]
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        u = np.cross(n, x0[:, ll] - x0[:, j])
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        rk = resid[:, k]
+        err2 = (
+            np.sum(resid[:, j] ** 2)
+            + np.sum((rk - np.sum(rk * n, axis=1, keepdims=True) * n) ** 2)
+            + np.sum(np.sum(resid[:, ll] * u, axis=1) ** 2)
+        )
+        out.append(
+            {
+                "order": [markers[j], markers[k], markers[ll]],
+                "floor_mm": float(np.sqrt(err2 / (n_t * n_p)) * 1000.0),
+            }
+        )
+    return sorted(out, key=lambda r: r["floor_mm"])
+
+
+def minimise_exact_floor(x0, resid, start_masses, bound: float = 4.0) -> tuple[float, list]:
+    """Nelder-Mead over log10 mass ratios (marker 0 fixed; each log10 ratio in +-bound)."""
+
+    def masses(z):
+        return 10.0 ** np.concatenate([[0.0], bound * np.tanh(z)])
+
+    def f(z):
+        return exact_floor(x0, resid, masses(z))[0]
+
+    best = (np.inf, None)
+    for m0 in start_masses:
+        lm = np.log10(np.asarray(m0, np.float64) / m0[0])[1:]
+        z0 = np.arctanh(np.clip(lm / bound, -0.999, 0.999))
+        res = minimize(f, z0, method="Nelder-Mead", options={"maxfev": 1500, "xatol": 1e-3})
+        if res.fun < best[0]:
+            best = (float(res.fun), masses(res.x))
+    m = best[1]
+    return best[0], (500.0 * m / m.sum()).tolist()
+
+
+def floors(gait: str, held, markers) -> dict:
+    from activebonds.experiments.baselines import _constraints, momentum_floor_rms_mm
+
+    x = held.positions
+    s = starts_of((0, held.n_frames))
+    x0 = x[s]
+    resid = x[s + 1] - 2.0 * x[s] + x[s - 1]
+    n_p = len(markers)
+    out = {"package_equal_masses_mm": momentum_floor_rms_mm(x, held.mask, held.dt, np.ones(n_p))}
+    # the package's floor at the masses behind the tabled value (scripts/horse_ground.py)
+    tabled = None
+    if TABLED.exists():
+        for r in json.loads(TABLED.read_text()):
+            if r.get("gait") == gait and "internal_floor_masses_kg" in r:
+                tabled = {"masses_kg": r["internal_floor_masses_kg"], "tabled_mm": None}
+                tabled["tabled_mm"] = r.get("internal_floor_mm")
+    if tabled is not None:
+        m = np.asarray(tabled["masses_kg"], np.float64)
+        tabled["package_mm"] = momentum_floor_rms_mm(x, held.mask, held.dt, m)
+        tabled["package_linear_only_mm"] = momentum_floor_rms_mm(
+            x, held.mask, held.dt, m, angular=False
+        )
+        ranks = []
+        for t in range(len(s)):
+            sv = np.linalg.svd(_constraints(x0[t], m), compute_uv=False)
+            ranks.append(int(np.sum(sv > 1e-12 * max(sv.max(), 1.0))))
+        tabled["package_constraint_rank"] = sorted(set(ranks))
+        tabled["exact_mm"], tabled["exact_min_singular"] = exact_floor(x0, resid, m)
+    out["tabled"] = tabled
+    # linear momentum only, all mass on one marker: that marker's zero-force error / sqrt(P)
+    zf_each = np.sqrt(np.mean(np.sum(resid**2, axis=-1), axis=0)) * 1000.0
+    j = int(np.argmin(zf_each))
+    out["linear_only_one_heavy_mm"] = float(zf_each[j] / np.sqrt(n_p))
+    out["linear_only_one_heavy_marker"] = markers[j]
+    # the exact floor, scale-invariant: equal masses (check against the package), limits, min
+    eq, eq_sv = exact_floor(x0, resid, np.ones(n_p))
+    out["exact_equal_masses_mm"] = eq
+    out["exact_equal_masses_min_singular"] = eq_sv
+    rng = np.random.default_rng(0)
+    m_rand = 10.0 ** rng.uniform(-2, 2, n_p)
+    out["check_random_masses"] = {
+        "masses": m_rand.tolist(),
+        "package_mm": momentum_floor_rms_mm(x, held.mask, held.dt, m_rand),
+        "exact_mm": exact_floor(x0, resid, m_rand)[0],
+    }
+    limits = limit_floors(x0, resid, markers)
+    out["hierarchical_limits_best5"] = limits[:5]
+    best = limits[0]["order"]
+    idx = [markers.index(n) for n in best]
+    m_lim = np.full(n_p, 1e-12)
+    m_lim[idx] = [1.0, 1e-4, 1e-8]
+    out["check_limit_masses"] = {
+        "masses": m_lim.tolist(),
+        "exact_mm": exact_floor(x0, resid, m_lim)[0],
+        "limit_formula_mm": limits[0]["floor_mm"],
+    }
+    starts = [np.ones(n_p), np.where(np.arange(n_p) == idx[0], 1e3, 1.0)]
+    hier = np.full(n_p, 1e-4)
+    hier[idx] = [1e4, 1e2, 1.0]
+    starts.append(hier)
+    nm, nm_masses = minimise_exact_floor(x0, resid, starts)
+    out["exact_nelder_mead_mm"] = nm
+    out["exact_nelder_mead_masses_kg"] = nm_masses
+    out["exact_mass_minimised_mm"] = min(nm, limits[0]["floor_mm"])
+    return out
+
+
+# --------------------------------------------------------------------------- noise
+
+
+def noise(x: np.ndarray, markers, frames: tuple[int, int], rate: float) -> dict:
+    """sigma per marker (mm, per coordinate) from Savitzky-Golay residuals and the spectrum."""
+    seg = x[frames[0] : frames[1]]
+    out = {"frames": list(frames), "savgol": {}, "spectrum": {}}
+    for w in SG_WINDOWS:
+        h00 = float(savgol_coeffs(w, SG_ORDER)[w // 2])  # hat-matrix diagonal, interior
+        sm = savgol_filter(seg, w, SG_ORDER, axis=0)
+        r = (seg - sm)[w // 2 : -(w // 2)]  # interior points only
+        sig = np.sqrt(np.mean(r**2, axis=(0, 2)) / (1.0 - h00)) * 1000.0
+        out["savgol"][str(w)] = {"h00": h00, "sigma_mm": dict(zip(markers, sig.tolist()))}
+    lo, hi = SPECTRUM["band_hz"]
+    for name in SMOOTH_MARKERS:
+        p = markers.index(name)
+        f, psd = welch(seg[:, p, :], fs=rate, nperseg=SPECTRUM["nperseg"], detrend="linear", axis=0)
+        band = (f >= lo) & (f <= hi)
+        # white noise of variance s^2 has a one-sided PSD of 2 s^2 / rate
+        sig = float(np.sqrt(np.mean(psd[band]) * rate / 2.0) * 1000.0)
+        profile = {
+            f"{fr:.0f}": float(np.sqrt(np.mean(psd[np.argmin(abs(f - fr))]) * rate / 2) * 1000)
+            for fr in (5, 10, 15, 20, 25, 30)
+        }
+        out["spectrum"][name] = {"sigma_mm": sig, "white_equivalent_sigma_mm_at_hz": profile}
+    return out
+
+
+def noise_errors(sigma_mm: dict) -> dict:
+    s2 = np.mean(np.square(list(sigma_mm.values())))
+    return {
+        "state_predictor_mm": float(np.sqrt(18.0 * s2)),  # e_{t+1} - 2e_t + e_{t-1}, 3 coords
+        "any_predictor_mm": float(np.sqrt(3.0 * s2)),  # e_{t+1} alone, 3 coords
+        "per_marker_state_mm": {k: float(np.sqrt(18.0) * v) for k, v in sigma_mm.items()},
+    }
+
+
+# --------------------------------------------------------------------------- predictors
+
+
+def features(x: np.ndarray, s: np.ndarray, dt: float, kind: str, markers) -> np.ndarray:
+    """State at t: positions (relative to the Withers, to the centroid, or absolute) and the
+    backward-difference velocities of all markers."""
+    pos, vel = x[s], (x[s] - x[s - 1]) / dt
+    if kind == "rel_withers":
+        w = markers.index("Withers")
+        pos = np.delete(pos - pos[:, w : w + 1], w, axis=1)
+    elif kind == "rel_centroid":
+        pos = pos - pos.mean(axis=1, keepdims=True)
+    return np.concatenate([pos.reshape(len(s), -1), vel.reshape(len(s), -1)], axis=1)
+
+
+def history_features(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    return np.concatenate([x[s - lag].reshape(len(s), -1) for lag in range(HISTORY)], axis=1)
+
+
+def standardise(train: np.ndarray, *others: np.ndarray):
+    mu, sd = train.mean(axis=0), train.std(axis=0)
+    sd = np.where(sd > 0, sd, 1.0)
+    return [(a - mu) / sd for a in (train, *others)]
+
+
+def poly2(z: np.ndarray) -> np.ndarray:
+    i, j = np.triu_indices(z.shape[1])
+    return np.concatenate([z, z[:, i] * z[:, j]], axis=1)
+
+
+def knn_predict(f_tr, a_tr, f_q, k: int) -> np.ndarray:
+    _, idx = cKDTree(f_tr).query(f_q, k=k)
+    idx = idx.reshape(len(f_q), -1)
+    return a_tr[idx].mean(axis=1)
+
+
+def ridge_path(f_tr, y_tr, f_q, lams):
+    """Predictions at f_q for every ridge weight (lam times the number of samples)."""
+    ym = y_tr.mean(axis=0)
+    u, sv, vt = np.linalg.svd(f_tr, full_matrices=False)
+    uy = u.T @ (y_tr - ym)
+    for lam in lams:
+        coef = vt.T @ ((sv / (sv**2 + lam * len(f_tr)))[:, None] * uy)
+        yield f_q @ coef + ym
+
+
+def one_step_err(a_true, a_pred, dt):
+    return dt**2 * (a_true - a_pred.reshape(a_true.shape))
+
+
+def run_predictors(x: np.ndarray, dt: float, markers) -> dict:
+    s_tr, s_te = starts_of(FIT), starts_of(TEST)
+    a_tr, a_te = accel(x, s_tr, dt), accel(x, s_te, dt)
+    y_tr = a_tr.reshape(len(s_tr), -1)
+    inner = s_tr < INNER_SPLIT
+    res = {"knn": [], "ridge": []}
+
+    def score(pred_te, pred_tr, pred_val):
+        return {
+            "test_mm": rms_mm(one_step_err(a_te, pred_te, dt)),
+            "train_mm": rms_mm(one_step_err(a_tr, pred_tr, dt)),
+            "val_mm": rms_mm(one_step_err(a_tr[~inner], pred_val, dt)),
+            "test_per_marker_mm": per_marker_mm(one_step_err(a_te, pred_te, dt)),
+        }
+
+    for kind in FEATURES:
+        f_tr, f_te = features(x, s_tr, dt, kind, markers), features(x, s_te, dt, kind, markers)
+        z_tr, z_te = standardise(f_tr, f_te)
+        zi_tr, zi_val = standardise(f_tr[inner], f_tr[~inner])
+        for k in KS:
+            r = score(
+                knn_predict(z_tr, y_tr, z_te, k),
+                knn_predict(z_tr, y_tr, z_tr, k),  # in-sample: a point is its own neighbour
+                knn_predict(zi_tr, y_tr[inner], zi_val, k),
+            )
+            res["knn"].append({"features": kind, "k": k, **r})
+        for degree in (1, 2):
+            expand = (lambda z: z) if degree == 1 else poly2
+            p_tr, p_te = standardise(expand(z_tr), expand(z_te))
+            pi_tr, pi_val = standardise(expand(zi_tr), expand(zi_val))
+            res["ridge"].append(ridge_entry(kind, degree, p_tr, p_te, pi_tr, pi_val, y_tr, inner, score))
+    # extra: linear predictor on 4 frames of absolute positions (an AR model)
+    s_tr_h = starts_of(FIT, first=HISTORY - 1)
+    keep = np.isin(s_tr, s_tr_h)
+    h_tr, h_te = history_features(x, s_tr_h), history_features(x, s_te)
+    p_tr, p_te = standardise(h_tr, h_te)
+    inner_h = s_tr_h < INNER_SPLIT
+    pi_tr, pi_val = standardise(h_tr[inner_h], h_tr[~inner_h])
+
+    def score_h(pred_te, pred_tr, pred_val):
+        return {
+            "test_mm": rms_mm(one_step_err(a_te, pred_te, dt)),
+            "train_mm": rms_mm(one_step_err(a_tr[keep], pred_tr, dt)),
+            "val_mm": rms_mm(one_step_err(a_tr[keep][~inner_h], pred_val, dt)),
+            "test_per_marker_mm": per_marker_mm(one_step_err(a_te, pred_te, dt)),
+        }
+
+    res["history_linear"] = ridge_entry(
+        f"abs_positions_{HISTORY}_frames", 1, p_tr, p_te, pi_tr, pi_val, y_tr[keep], inner_h, score_h
+    )
+    for name in ("knn", "ridge"):
+        rows = res[name]
+        res[f"{name}_best_test"] = min(rows, key=lambda r: r["test_mm"])
+        res[f"{name}_selected"] = min(rows, key=lambda r: r["val_mm"])
+    return res
+
+
+def ridge_entry(kind, degree, p_tr, p_te, pi_tr, pi_val, y_tr, inner, score) -> dict:
+    """Ridge weight chosen on the inner split; the best weight on the test frames is kept too
+    (an optimistic number: it is selected on the frames it is scored on)."""
+    val = [p for p in ridge_path(pi_tr, y_tr[inner], pi_val, LAMBDAS)]
+    a_val = y_tr[~inner]
+    val_mm = [float(np.sqrt(np.mean((a_val - v) ** 2) * 3)) for v in val]  # ranking only
+    i = int(np.argmin(val_mm))
+    preds_te = list(ridge_path(p_tr, y_tr, p_te, LAMBDAS))
+    preds_tr = list(ridge_path(p_tr, y_tr, p_tr, LAMBDAS))
+    r = score(preds_te[i], preds_tr[i], val[i])
+    tests = [score(pt, ptr, v)["test_mm"] for pt, ptr, v in zip(preds_te, preds_tr, val)]
+    j = int(np.argmin(tests))
+    return {
+        "features": kind,
+        "degree": degree,
+        "n_features": int(p_tr.shape[1]),
+        "lambda": float(LAMBDAS[i]),
+        **r,
+        "oracle_lambda": float(LAMBDAS[j]),
+        "oracle_test_mm": tests[j],
+    }
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def run_gait(gait: str) -> dict:
+    from activebonds.data import read_trajectory
+    from activebonds.experiments.baselines import zero_force_rms_mm
+
+    traj = read_trajectory(DATA / GAITS[gait])
+    markers = list(traj.markers)
+    x, dt = np.asarray(traj.positions, np.float64), float(traj.dt)
+    if not traj.mask[: TEST[1]].all():
+        raise SystemExit(f"{gait}: gaps in frames 0-{TEST[1] - 1}; this script assumes none")
+    held, fit = traj.window(*TEST), traj.window(*FIT)
+    s_te, s_tr = starts_of(TEST), starts_of(FIT)
+    zf_te = dt**2 * accel(x, s_te, dt)
+    zf_tr = dt**2 * accel(x, s_tr, dt)
+    out = {
+        "gait": gait,
+        "markers": markers,
+        "predicted_frames_test": [int(s_te[0] + 1), int(s_te[-1] + 1)],
+        "predicted_frames_train": [int(s_tr[0] + 1), int(s_tr[-1] + 1)],
+        "zero_force": {
+            "package_test_mm": zero_force_rms_mm(held.positions, held.mask, held.dt),
+            "package_train_mm": zero_force_rms_mm(fit.positions, fit.mask, fit.dt),
+            "own_test_mm": rms_mm(zf_te),
+            "own_train_mm": rms_mm(zf_tr),
+            "test_per_marker_mm": per_marker_mm(zf_te),
+        },
+    }
+    zf = out["zero_force"]
+    assert abs(zf["package_test_mm"] - zf["own_test_mm"]) < 1e-9, zf
+    assert abs(zf["package_train_mm"] - zf["own_train_mm"]) < 1e-9, zf
+    out["floor_test"] = floors(gait, held, markers)
+    out["floor_train_package_equal_masses_mm"] = floors_equal(fit)
+    out["noise_test"] = noise(x, markers, TEST, traj.rate)
+    out["noise_train"] = noise(x, markers, FIT, traj.rate)
+    for part in ("noise_test", "noise_train"):
+        nz = out[part]
+        nz["errors_by_savgol_window"] = {
+            w: noise_errors(v["sigma_mm"]) for w, v in nz["savgol"].items()
+        }
+    out["predictors"] = run_predictors(x, dt, markers)
+    return out
+
+
+def floors_equal(fit) -> float:
+    from activebonds.experiments.baselines import momentum_floor_rms_mm
+
+    return momentum_floor_rms_mm(fit.positions, fit.mask, fit.dt, np.ones(fit.n_markers))
+
+
+def table(r: dict) -> list[tuple[str, str, str]]:
+    """(row, held-out mm, in-sample mm)."""
+    f, p, zf = r["floor_test"], r["predictors"], r["zero_force"]
+    nz = r["noise_test"]["errors_by_savgol_window"][str(SG_MAIN)]
+    nz5 = r["noise_test"]["errors_by_savgol_window"]["5"]
+    spec = noise_errors({k: v["sigma_mm"] for k, v in r["noise_test"]["spectrum"].items()})
+
+    def n(v):
+        return f"{v:.3f}"
+
+    rows = [
+        ("zero force (package = own)", n(zf["package_test_mm"]), n(zf["package_train_mm"])),
+    ]
+    if f["tabled"] is not None:
+        rows.append(("internal-force floor as tabled (package, its best masses)",
+                     n(f["tabled"]["package_mm"]), ""))  # fmt: skip
+        rows.append(("  same masses, exact (all 6 constraints)", n(f["tabled"]["exact_mm"]), ""))
+    rows += [
+        ("internal-force floor, equal masses (package)", n(f["package_equal_masses_mm"]),
+         n(r["floor_train_package_equal_masses_mm"])),
+        ("internal-force floor, exact, minimised over masses", n(f["exact_mass_minimised_mm"]), ""),
+        (f"noise only, x_t & v_t predictor (SG{SG_MAIN} sigma)", n(nz["state_predictor_mm"]), ""),
+        ("noise only, x_t & v_t predictor (SG5 sigma)", n(nz5["state_predictor_mm"]), ""),
+        ("noise only, x_t & v_t, body markers (spectrum sigma)",
+         n(spec["state_predictor_mm"]), ""),
+        (f"noise only, any predictor (SG{SG_MAIN} sigma)", n(nz["any_predictor_mm"]), ""),
+    ]  # fmt: skip
+    for name, label in (("knn", "kNN"), ("ridge", "ridge")):
+        b, s = p[f"{name}_best_test"], p[f"{name}_selected"]
+        opt = f"k={b['k']}" if name == "knn" else f"deg {b['degree']}"
+        opt_s = f"k={s['k']}" if name == "knn" else f"deg {s['degree']}"
+        rows.append((f"{label}, best on held-out ({b['features']}, {opt})", n(b["test_mm"]),
+                     n(b["train_mm"])))  # fmt: skip
+        rows.append((f"{label}, selected in 0-299 ({s['features']}, {opt_s})", n(s["test_mm"]),
+                     n(s["train_mm"])))  # fmt: skip
+    ridge_oracle = min(p["ridge"], key=lambda q: q["oracle_test_mm"])
+    rows.append((f"ridge, weight chosen on held-out ({ridge_oracle['features']}, "
+                 f"deg {ridge_oracle['degree']})", n(ridge_oracle["oracle_test_mm"]), ""))  # fmt: skip
+    h = p["history_linear"]
+    rows.append((f"linear on {HISTORY} frames of history (extra)", n(h["test_mm"]),
+                 n(h["train_mm"])))  # fmt: skip
+    return rows
+
+
+def noise_rows(r: dict) -> list[str]:
+    m = r["markers"]
+    lines = ["| sigma (mm) | " + " | ".join(m) + " |", "|---" * (len(m) + 1) + "|"]
+    for w, v in r["noise_test"]["savgol"].items():
+        lines.append(
+            f"| SG cubic, {w} frames | "
+            + " | ".join(f"{v['sigma_mm'][k]:.3f}" for k in m)
+            + " |"
+        )
+    spec = r["noise_test"]["spectrum"]
+    lo, hi = SPECTRUM["band_hz"]
+    lines.append(
+        f"| spectrum {lo:.0f}-{hi:.0f} Hz | "
+        + " | ".join(f"{spec[k]['sigma_mm']:.4f}" if k in spec else "" for k in m)
+        + " |"
+    )
+    return lines
+
+
+def markdown(results: list[dict], conclusion: list[str]) -> str:
+    out = [
+        "## One-step limits on the bundled horse (held out 300-599)",
+        "",
+        "`python scripts/one_step_limits.py`: everything fitted on frames 0-299, scored on the "
+        "one-step RMS (mm, 3D, all 7 markers) of predicted frames 302-599 (in-sample: 2-299).",
+        "",
+    ]
+    for r in results:
+        out += [f"**{r['gait'].capitalize()}**", "", "| predictor | held out | in-sample |",
+                "|---|---|---|"]  # fmt: skip
+        out += [f"| {a} | {b} | {c} |" for a, b, c in table(r)]
+        out += ["", f"Noise estimates, frames 300-599 ({r['gait']}):", ""] + noise_rows(r) + [""]
+    out += ["Conclusion:", ""] + [f"- {c}" for c in conclusion] + [""]
+    return "\n".join(out)
+
+
+def conclusions(results: list[dict]) -> list[str]:
+    t = {r["gait"]: r for r in results}
+    parts = []
+    best = {
+        g: min(
+            r["predictors"]["knn_best_test"]["test_mm"],
+            r["predictors"]["ridge_best_test"]["test_mm"],
+            min(q["oracle_test_mm"] for q in r["predictors"]["ridge"]),
+            r["predictors"]["history_linear"]["test_mm"],
+        )
+        for g, r in t.items()
+    }
+    tab = {g: (r["floor_test"]["tabled"] or {}).get("package_mm") for g, r in t.items()}
+    exact = {g: r["floor_test"]["exact_mass_minimised_mm"] for g, r in t.items()}
+    eq = {g: r["floor_test"]["package_equal_masses_mm"] for g, r in t.items()}
+    noise7 = {
+        g: r["noise_test"]["errors_by_savgol_window"][str(SG_MAIN)]["state_predictor_mm"]
+        for g, r in t.items()
+    }
+    g_str = ", ".join
+    parts.append(
+        "No predictor tried here gets below the floor on held-out frames: the best held-out "
+        "one-step RMS of any of them, even with its options chosen on the held-out frames "
+        "themselves, is "
+        + g_str(f"{best[g]:.2f} mm ({g})" for g in t)
+        + ", against a tabled floor of "
+        + g_str(f"{tab[g]:.2f} mm" for g in t if tab[g] is not None)
+        + ", and they all sit above the exact equal-mass floor ("
+        + g_str(f"{eq[g]:.2f}" for g in t)
+        + " mm)."
+        if all(best[g] > max(eq[g], exact[g]) for g in t)
+        else "At least one predictor reaches a held-out error below one of the floors: "
+        + g_str(f"{best[g]:.2f} mm ({g})" for g in t)
+        + "; see the table."
+    )
+    parts.append(
+        "The tabled floor (0.82 / 0.39 mm) is not the floor of an internal-force model: "
+        "the package computes it at extreme mass ratios where its SVD rank threshold drops the "
+        "three torque constraints (rank 3 instead of 6), so it equals the linear-momentum-only "
+        "floor with all mass on one body marker (that marker's zero-force error / sqrt(7)). With "
+        "all six constraints and the masses minimised it is "
+        + g_str(f"{exact[g]:.2f} mm ({g})" for g in t)
+        + "."
+    )
+    parts.append(
+        "The markers are nearly noise-free at these rates: the spectrum of Head, Withers and "
+        "Sacrum falls steadily to Nyquist without a white plateau (the data look low-pass "
+        "filtered), and the Savitzky-Golay sigma grows with the window, so it measures motion "
+        "above the filter's band, not noise; even read as noise (an upper estimate), the "
+        f"noise-only error of an x_t, v_t predictor (SG{SG_MAIN}: "
+        + g_str(f"{noise7[g]:.2f} mm ({g})" for g in t)
+        + ") is set mostly by the hooves."
+    )
+    parts.append(
+        "The gap between these predictors and the floor is therefore not measurement noise: "
+        "the floor is an oracle that chooses 15 of 21 acceleration components per frame knowing "
+        "the answer, while the hooves' accelerations (impacts, swing onsets) are not a function "
+        "of the current state that 300 training frames can pin down; the in-sample column shows "
+        "how far the flexible predictors over-fit."
+    )
+    return parts
+
+
+def print_table(results: list[dict]) -> None:
+    for r in results:
+        print(f"\n{r['gait']}: fit frames 0-299, held out 300-599 (one-step RMS, mm)")
+        rows = table(r)
+        w = max(len(a) for a, _, _ in rows)
+        print(f"{'predictor':<{w}}  held-out  in-sample")
+        for a, b, c in rows:
+            print(f"{a:<{w}}  {b:>8}  {c:>9}")
+        print("\n".join(noise_rows(r)))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", type=Path, default=ROOT / "docs" / "results" / "one_step_limits.json")
+    ap.add_argument("--md", type=Path, default=ROOT / "docs" / "results" / "one_step_limits.md")
+    args = ap.parse_args(argv)
+    t0 = time.time()
+    results = [run_gait(g) for g in GAITS]
+    print_table(results)
+    conclusion = conclusions(results)
+    print("\n" + "\n".join(conclusion))
+    options = {
+        "fit_frames": list(FIT),
+        "test_frames": list(TEST),
+        "savgol_windows": list(SG_WINDOWS),
+        "savgol_order": SG_ORDER,
+        "savgol_main_window": SG_MAIN,
+        "spectrum": {**SPECTRUM, "markers": list(SMOOTH_MARKERS)},
+        "knn_k": list(KS),
+        "features": list(FEATURES),
+        "ridge_lambdas_times_n": LAMBDAS.tolist(),
+        "ridge_degrees": [1, 2],
+        "history_frames": HISTORY,
+        "inner_split_start": INNER_SPLIT,
+    }
+    payload = {"options": options, "results": results, "conclusion": conclusion,
+               "seconds": time.time() - t0}  # fmt: skip
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(payload, indent=1) + "\n")
+    args.md.write_text(markdown(results, conclusion))
+    print(f"\n{time.time() - t0:.1f} s; wrote {args.json} and {args.md}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

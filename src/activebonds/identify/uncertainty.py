@@ -1,0 +1,255 @@
+"""Which fitted numbers the data determine: Gauss-Newton standard errors at the optimum.
+
+With residuals r(theta) (metres) at the fit's optimum and J = dr/dtheta (natural units), the
+Gauss-Newton covariance is ``s^2 (J^T J)^-1`` with ``s^2 = |r|^2 / dof`` the residual variance
+(dof: residual coordinates minus variables). It is computed through the SVD of J with its
+columns scaled to unit norm, so units do not matter:
+
+* directions whose singular value is below ``RANK_RTOL`` of the largest are *not determined*
+  (numerically singular J^T J): every parameter with a part in them is marked "not
+  determined" and the direction is named in words ("mass scale", "stiffness and rest_length
+  of type:neck trade off");
+* a determined parameter whose 95 % interval is wider than its search range is also marked
+  "not determined" (the data narrow it no more than the bounds do), with the direction that
+  carries most of its variance named the same way.
+
+Which residuals: those of the fit's last cost (the restart cost at the ES's horizon, or the
+last refinement stage's horizon; for multiple shooting the window start states are extra
+variables, nuisance parameters whose uncertainty widens the others'). The intervals are
+exact for an output-error cost (a free run or shooting) with Gaussian, independent marker
+noise, in the limit of many frames. For the one-step cost with noisy markers they are not:
+the noise is in the regressors too and biases the optimum itself (see EXPERIMENTS.md), which
+no covariance describes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import asdict, dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from ..atomic import write_text_atomic
+from .cost import join_windows, make_residuals, make_windows
+from .problem import Identification
+from .settings import FitSettings
+from .shooting import join_shooting, make_shooting, shooting_windows, start_states
+
+RANK_RTOL = 1e-8  # singular values below this share of the largest: not determined
+Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
+NAMED = 0.3  # a parameter is named in a direction where its component is at least this
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One free parameter: value, standard error and 95 % interval (natural units)."""
+
+    name: str
+    value: float
+    std_error: float | None  # None: not determined
+    low: float | None
+    high: float | None
+    determined: bool
+    note: str  # why not determined, in words ("" when it is)
+
+
+@dataclass
+class Uncertainty:
+    """The Gauss-Newton report of one fit."""
+
+    estimates: list[Estimate]
+    cost: str  # "restart" or "shooting"
+    horizon: int
+    residuals: int  # residual coordinates
+    variables: int  # parameters plus nuisance variables (shooting start states)
+    rank: int
+    condition: float  # of the column-scaled Jacobian (inf when singular)
+    sigma_mm: float  # residual standard deviation per coordinate, mm
+    directions: list[str] = field(default_factory=list)  # not determined, in words
+
+    def record(self) -> dict:
+        out = asdict(self)
+        out["condition"] = None if not math.isfinite(self.condition) else self.condition
+        return out
+
+    def csv_text(self) -> str:
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(
+            ["parameter", "value", "std_error", "ci95_low", "ci95_high", "determined", "note"]
+        )
+        for e in self.estimates:
+            num = [
+                f"{x:.10g}" if x is not None else "not determined"
+                for x in (e.std_error, e.low, e.high)
+            ]
+            w.writerow([e.name, f"{e.value:.10g}", *num, "yes" if e.determined else "no", e.note])
+        return buf.getvalue()
+
+    def write_csv(self, path) -> None:
+        write_text_atomic(path, self.csv_text())
+
+
+def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
+    """A direction of parameter space in words: the parameters that move along it."""
+    big = [i for i in np.argsort(-np.abs(vector)) if abs(vector[i]) >= NAMED * np.abs(vector).max()]
+    if masses and masses <= set(big):
+        return "mass scale (the masses and the forces can grow together)"
+    parts = [names[i] for i in big]
+    groups = {n.rsplit(".", 1)[0] for n in parts if "." in n}
+    if len(parts) >= 2 and len(groups) == 1 and all("." in n for n in parts):
+        fields = [n.rsplit(".", 1)[1] for n in parts]
+        return f"{' and '.join(fields)} of {groups.pop()} trade off"
+    if len(parts) == 1:
+        return f"{parts[0]} does not change the residuals"
+    return f"{', '.join(parts[:-1])} and {parts[-1]} trade off"
+
+
+def from_jacobian(
+    jac: np.ndarray,
+    resid: np.ndarray,
+    names: list[str],
+    values: np.ndarray,
+    spans: np.ndarray,
+    dof: int,
+    masses: set[int] = frozenset(),
+) -> tuple[list[Estimate], int, float, float, list[str]]:
+    """Estimates of the first ``len(names)`` variables (the others are nuisance) from the
+    Jacobian [m, p + q] and residuals [m] at the optimum: (estimates, rank, condition, s^2,
+    directions not determined in words)."""
+    p = len(names)
+    jac = np.asarray(jac, np.float64)
+    norms = np.linalg.norm(jac, axis=0)
+    dead = norms == 0
+    scaled = jac / np.where(dead, 1.0, norms)
+    _, sv, vt = np.linalg.svd(scaled, full_matrices=False)
+    smax = sv[0] if sv.size and sv[0] > 0 else 1.0
+    ok = sv > RANK_RTOL * smax
+    rank = int(ok.sum())
+    condition = float(smax / sv[-1]) if sv.size and sv[-1] > 0 and rank == sv.size else math.inf
+    s2 = float(resid @ resid) / max(dof, 1)
+    v_ok, s_ok = vt[ok].T, sv[ok]  # [p + q, r]
+    contrib = (v_ok / s_ok) ** 2  # variance of each scaled variable, per direction (x s^2)
+    var_scaled = s2 * contrib.sum(axis=1)
+    null = vt[~ok].T  # [p + q, n_null]
+    in_null = np.linalg.norm(null, axis=1) > 1e-6 if null.size else np.zeros(len(norms), bool)
+    in_null |= dead
+    directions = []
+    for j in range(null.shape[1] if null.size else 0):
+        directions.append(describe(names, null[:p, j], set(masses)))
+    if dead[:p].any():
+        directions += [
+            f"{names[i]} does not change the residuals" for i in np.flatnonzero(dead[:p])
+        ]
+    estimates = []
+    for i in range(p):
+        if in_null[i]:
+            hits = [j for j in range(null.shape[1] if null.size else 0) if abs(null[i, j]) > 1e-6]
+            note = directions[hits[0]] if hits else f"{names[i]} does not change the residuals"
+            estimates.append(Estimate(names[i], float(values[i]), None, None, None, False, note))
+            continue
+        se = float(math.sqrt(var_scaled[i]) / norms[i])
+        half = Z95 * se
+        if half > spans[i]:
+            worst = int(np.argmax(contrib[i]))
+            note = "interval wider than the search range: " + describe(
+                names, v_ok[:p, worst], set(masses)
+            )
+            estimates.append(Estimate(names[i], float(values[i]), None, None, None, False, note))
+            continue
+        v = float(values[i])
+        estimates.append(Estimate(names[i], v, se, v - half, v + half, True, ""))
+    return estimates, rank, condition, s2, directions
+
+
+def _residual_function(
+    ident: Identification, settings: FitSettings, horizon: int, cost: str, states
+):
+    """(function of the flat variables -> flat residuals, start variables, nuisance count,
+    observed coordinates) for the fit's cost; the parameters come first, in natural units."""
+    model, data = ident.model, ident.all_data
+    layout = model.layout
+    log = jnp.asarray(layout.log)
+
+    def to_genome(theta):
+        return jnp.where(log, jnp.log(theta), theta)
+
+    if cost == "shooting" and states is not None:
+        windows = join_shooting(
+            [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in data]
+        )
+        residuals, _ = make_shooting(model, windows, settings.substeps, settings.integrator)
+        x0, v0 = start_states(windows, states)
+        observed = int(np.sum(windows.weight)) * model.dimension
+        nuisance = x0.size + v0.size
+        p = layout.n_genes
+
+        def flat(y):
+            theta, xs, vs = y[:p], y[p : p + x0.size], y[p + x0.size :]
+            tree = residuals(to_genome(theta), (xs.reshape(x0.shape), vs.reshape(v0.shape)))
+            return ravel_pytree(tree)[0]
+
+        extra = np.concatenate([np.ravel(x0), np.ravel(v0)])
+        links = int(np.sum(windows.link)) * 2 * model.dimension * len(model.particle_names)
+        return flat, extra, nuisance, observed, links
+    windows = join_windows(
+        [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in data]
+    )
+    residuals = make_residuals(model, windows, settings.substeps, settings.integrator)
+
+    def flat(theta):
+        return ravel_pytree(residuals(to_genome(theta)))[0]
+
+    observed = int(np.sum(windows.weight)) * model.dimension
+    return flat, np.zeros(0), 0, observed, 0
+
+
+def estimate(
+    ident: Identification,
+    settings: FitSettings,
+    genome: np.ndarray,
+    horizon: int | None = None,
+    cost: str = "restart",
+    states=None,
+) -> Uncertainty:
+    """The Gauss-Newton report of the fit ``genome`` (search space) of ``ident`` on the cost
+    ``cost`` at ``horizon`` (default: the ES's); ``states``: for ``shooting``, the per-frame
+    states [(x, v)] of each recording at the optimum (the refinement's)."""
+    layout = ident.model.layout
+    horizon = int(horizon or settings.es_horizon)
+    theta = np.asarray(layout.natural(np.asarray(genome, np.float64)), np.float64)
+    cost = cost if (cost == "shooting" and states is not None) else "restart"
+    fn, extra, nuisance, observed, links = _residual_function(
+        ident, settings, horizon, cost, states
+    )
+    y = np.concatenate([theta, extra])
+    with jax.enable_x64(True):  # scoped, as the least squares
+        yj = jnp.asarray(y, jnp.float64)
+        resid = np.asarray(jax.jit(fn)(yj), np.float64)
+        jac = np.asarray(jax.jit(jax.jacfwd(fn))(yj), np.float64)
+    keep = np.any(jac != 0, axis=1) | (resid != 0)  # rows of masked-out terms are all zero
+    jac, resid = jac[keep], resid[keep]
+    names = [g.name for g in layout.genes]
+    spans = np.array([g.upper - g.lower for g in layout.genes], np.float64)
+    masses = {i for i, g in enumerate(layout.genes) if g.name.startswith("mass:")}
+    # Continuity links are constraints (zero at a converged shooting optimum), not data.
+    dof = observed - (len(theta) + nuisance) + links
+    estimates, rank, condition, s2, directions = from_jacobian(
+        jac, resid, names, theta, spans, dof, masses
+    )
+    return Uncertainty(
+        estimates=estimates,
+        cost=cost,
+        horizon=horizon,
+        residuals=int(observed),
+        variables=int(len(theta) + nuisance),
+        rank=rank,
+        condition=condition,
+        sigma_mm=float(math.sqrt(max(s2, 0.0)) * 1000.0),
+        directions=directions,
+    )
