@@ -40,7 +40,10 @@ SPRING_PROB = np.array([0.5, 0.0, 0.5])
 
 def _clamp(loc: np.ndarray, vel: np.ndarray) -> None:
     """NRI's ``_clamp``, in place: mirror coordinates past a wall back in, velocity inwards."""
-    if np.any(np.abs(loc) >= 3 * BOX):
+    farthest = np.abs(loc).max()
+    if farthest <= BOX:
+        return
+    if farthest >= 3 * BOX:
         raise RuntimeError("springs: a particle left the box by more than two box widths")
     over = loc > BOX
     loc[over] = 2 * BOX - loc[over]
@@ -68,7 +71,8 @@ def simulate(
     coupling = -STRENGTH * laplacian
 
     def force(x: np.ndarray) -> np.ndarray:
-        return np.clip(coupling @ x, -MAX_FORCE, MAX_FORCE)
+        f = coupling @ x
+        return np.clip(f, -MAX_FORCE, MAX_FORCE) if np.abs(f).max() > MAX_FORCE else f
 
     # drawn as NRI's [2, n] arrays, kept as [n, 2]
     loc = (rng.standard_normal((2, n)) * LOC_STD).T.copy()

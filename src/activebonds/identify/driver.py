@@ -22,7 +22,7 @@ from ..data import Trajectory, read_trajectory
 from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model
-from . import rundir, strategies
+from . import rundir, strategies, uncertainty
 from .cost import Display
 from .evolve import Evolution, history_columns, keys
 from .problem import Identification, identification
@@ -287,17 +287,19 @@ def _finish(ident, settings, run, strategy, state, history, integer, status, sta
     display = Display(ident.windows.n_terms)
     if run is not None:
         _checkpoint(run, ident, settings, strategy, state, history, integer, status, started)
-    es_genome, stages = genome, []
+    es_genome, stages, states = genome, [], None
     if status == "completed" and settings.refine != "none" and np.isfinite(cost):
         if run is not None:
             rundir.write_status(run, **{**rundir.read_status(run), "status": "refining"})
-        genome, stages = _refine(ident, settings, run, genome, int(state.generation))
+        genome, stages, states = _refine(ident, settings, run, genome, int(state.generation))
         cost, local = (np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(genome))
         cost = float(cost)
         if run is not None:
             rundir.save_best_model(run, ident.model.with_genome(genome))
             done = {"status": status, "best_rms_mm": float(display(cost))}
             rundir.write_status(run, **{**rundir.read_status(run), **done})
+    if run is not None and status == "completed" and np.isfinite(cost):
+        _uncertainty(ident, settings, run, genome, stages, states)
     per_particle = ident.windows.weight.sum(axis=(0, 1))
     model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
     return FitResult(
@@ -347,7 +349,17 @@ def _refine(ident, settings, run, genome, generation) -> tuple[np.ndarray, list[
                 "stages": [s.record() for s in stages],
             }
             rundir.save_refinement(run, record, refinement.states)
-    return current, stages
+    return current, stages, refinement.states
+
+
+def _uncertainty(ident, settings, run, genome, stages, states) -> None:
+    """RUN/uncertainty.csv and .json: the Gauss-Newton report at the fit's optimum, on the
+    cost of its last accepted stage (the ES's cost without refinement)."""
+    last = next((s for s in reversed(stages) if s.accepted), None)
+    horizon = last.horizon if last else settings.es_horizon
+    cost = last.cost if last else "restart"
+    report = uncertainty.estimate(ident, settings, genome, horizon, cost, states)
+    rundir.write_uncertainty(run, report)
 
 
 __all__ = ["FitResult", "FitSettings", "fit", "resume"]

@@ -211,8 +211,9 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     rows = np.repeat(windows.weight[:, 0] > 0, d, axis=-1).reshape(n_s, n_p, d).ravel()
     scale = dt**2 / np.asarray(base.mass, np.float64)[None, :, None]
     names = tuple(cols)
-    columns = np.stack([(cols[n] * scale).ravel()[rows] for n in names], axis=1)
-    columns = columns.reshape(int(rows.sum()), len(names))
+    columns = np.zeros((int(rows.sum()), len(names)))  # no linear unknown: no column
+    for k, n in enumerate(names):
+        columns[:, k] = (cols[n] * scale).ravel()[rows]
     target = (windows.target[:, 0] - (x + dt * v)).ravel()[rows]
     position = {n: k for k, n in enumerate(names)}
     return LinearProblem(

@@ -13,6 +13,7 @@ Layout of RUN/::
     refine.json         the refinement's stages (``fit --refine lm``), for people
     refine.npz          the same record and the last shooting stage's frame states, for resume
     data-2.npz, ...     further recordings fitted at once (``fit MODEL A B ...``)
+    uncertainty.csv / .json         Gauss-Newton standard errors and 95 % intervals at the optimum
     checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
 This module is the only one that writes or reads these files. A checkpoint stores the loop
@@ -420,6 +421,17 @@ def _read_record(path: Path, what: str) -> dict | None:
     if not isinstance(record, dict):
         raise InputError(path, f"unreadable {what} (not a JSON object)")
     return record
+
+
+def write_uncertainty(run: Path, report) -> None:
+    """RUN/uncertainty.csv (one row per free parameter) and RUN/uncertainty.json (the same
+    with the rank, condition number and undetermined directions), each written atomically."""
+    write_text_atomic(run / "uncertainty.csv", report.csv_text())
+    write_text_atomic(run / "uncertainty.json", json.dumps(report.record(), indent=2) + "\n")
+
+
+def read_uncertainty(run: Path) -> dict | None:
+    return _read_record(run / "uncertainty.json", "uncertainty")
 
 
 def save_refinement(run: Path, record: dict, states=None) -> None:

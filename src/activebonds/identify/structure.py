@@ -10,7 +10,13 @@ every removal raises it. With Gaussian residuals,
     BIC = n ln(RSS / n) + k ln n
 
 (n residual coordinates, RSS the exact least-squares optimum's sum of squares, k the free
-linear unknowns). Why this rather than SINDy's sequential thresholding (Brunton, Proctor &
+linear unknowns), with RSS floored at ``n (RESOLUTION r0)^2``, r0 the RMS residual of the
+zero-force predictor (the signal the forces explain). The floor is the model's resolution: a
+one-step model is a discretisation, and on noiseless data the exact sampled dynamics of
+linear springs between frames is a matrix function of the true stiffness matrix, dense in
+every pair (O(h^2 w^2 / 12) of the true stiffnesses on pairs with no spring), so without a
+floor every candidate would "explain" a residual at machine precision and be kept. Terms
+that improve the fit by less than 0.1 % of the signal are below what the model resolves. Why this rather than SINDy's sequential thresholding (Brunton, Proctor &
 Kutz 2016): the threshold on a coefficient depends on the units and the excitation of each
 bond (a stiff bond that barely stretches and a soft one that stretches a lot carry the same
 evidence at very different coefficients), while the BIC compares fits in one currency, the
@@ -36,7 +42,8 @@ from ..model.schema import ModelSpec
 from .cost import Windows
 from .lsq import least_squares
 
-TINY = 1e-300  # an RSS of exactly 0 (a noiseless, perfectly modelled recording) stays finite
+TINY = 1e-300  # keeps a relative change finite when an RSS is exactly 0
+RESOLUTION = 1e-3  # the one-step model's accuracy, a share of the zero-force residual's RMS
 
 
 @dataclass(frozen=True)
@@ -101,6 +108,9 @@ class _Scorer:
         self.disabled = model.disabled
         self.windows = windows
         self.n = int(np.sum(windows.weight)) * model.dimension  # residual coordinates
+        free = windows.x0 + windows.dt * windows.v0  # the zero-force prediction
+        r0 = windows.weight[:, 0, :, None] * (windows.target[:, 0] - free)
+        self.floor = float(np.sum(r0**2)) * RESOLUTION**2
         self.cache: dict[frozenset, tuple[float, float, Model, np.ndarray]] = {}
 
     def __call__(self, present: frozenset, pool: list[int]):
@@ -110,7 +120,7 @@ class _Scorer:
             model = build(spec, disable=self.disabled)
             fit = least_squares(model, self.windows)
             k = len(fit.values)
-            rss = max(fit.cost, TINY)
+            rss = max(fit.cost, self.floor, TINY)
             bic = self.n * math.log(rss / self.n) + k * math.log(self.n)
             self.cache[present] = (fit.cost, bic, model, fit.genome)
         return self.cache[present]

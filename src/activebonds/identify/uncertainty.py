@@ -74,7 +74,8 @@ class Uncertainty:
 
     def record(self) -> dict:
         out = asdict(self)
-        out["condition"] = None if not math.isfinite(self.condition) else self.condition
+        for key in ("condition", "sigma_mm"):  # JSON has no inf or NaN: null
+            out[key] = out[key] if math.isfinite(out[key]) else None
         return out
 
     def csv_text(self) -> str:
@@ -124,6 +125,13 @@ def from_jacobian(
     directions not determined in words)."""
     p = len(names)
     jac = np.asarray(jac, np.float64)
+    if jac.size == 0 or not (np.all(np.isfinite(jac)) and np.all(np.isfinite(resid))):
+        note = "the residuals or their Jacobian are not finite at the optimum"
+        gone = [
+            Estimate(n, float(v), None, None, None, False, note)
+            for n, v in zip(names, values, strict=True)
+        ]
+        return gone, 0, math.inf, math.nan, [note]
     norms = np.linalg.norm(jac, axis=0)
     dead = norms == 0
     scaled = jac / np.where(dead, 1.0, norms)

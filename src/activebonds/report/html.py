@@ -267,6 +267,36 @@ def _refinement_text(s) -> str:
     return f"Levenberg-Marquardt (optimistix), {s.cost} cost, horizons {horizons}"
 
 
+def uncertainty_section(record: RunRecord) -> Section | None:
+    """RUN/uncertainty.json: each free parameter with its standard error and 95 % interval,
+    or "not determined" and why (never a huge interval)."""
+    rec = record.uncertainty
+    if not rec:
+        return None
+    rows = []
+    for e in rec.get("estimates", []):
+        if e["determined"]:
+            rows.append(
+                (e["name"], e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", "")
+            )
+        else:
+            rows.append((e["name"], e["value"], "not determined", "not determined", e["note"]))
+    condition = rec.get("condition")
+    text = [
+        f"Gauss-Newton covariance at the optimum on the {rec['cost']} cost (horizon "
+        f"{rec['horizon']}): {rec['residuals']} residual coordinates, {rec['variables']} "
+        f"variables, rank {rec['rank']}, condition number "
+        f"{'infinite' if condition is None else f'{condition:.3g}'} (columns scaled), residual "
+        f"standard deviation {rec['sigma_mm'] if rec['sigma_mm'] is None else round(rec['sigma_mm'], 6)} mm per coordinate.",
+        "The intervals assume independent Gaussian marker noise and an output-error cost "
+        "(shooting or a free run); on the one-step cost with noisy markers the optimum itself "
+        "is biased and no interval describes that.",
+    ]
+    text += [f"Not determined: {d}." for d in rec.get("directions", [])]
+    table = Table(("parameter", "value", "standard error", "95 % interval", "note"), rows)
+    return Section("Uncertainty", text=text, tables=[table], anchor="uncertainty")
+
+
 def refinement_table(record: RunRecord) -> Table | None:
     """One row per refinement stage (RUN/refine.json): its cost and horizon, the RMS of its
     own residuals before and after, steps, time, and how it ended."""
@@ -536,6 +566,9 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
             anchor="parameters",
         ),
     ]
+    unc = uncertainty_section(record)
+    if unc is not None:
+        sections.append(unc)
     if pred.neural.any():
         heat = plots.weight_heatmap(model, fig_dir / "weights")
         act = plots.activations(pred, labels, fig_dir / "activations")

@@ -33,6 +33,7 @@ class RunRecord:
     window: Trajectory  # the fitted window (data.npz)
     validation: dict | None = None  # validation.json (fit --validate), if any
     refinement: dict | None = None  # refine.json (fit --refine lm), if any
+    uncertainty: dict | None = None  # uncertainty.json, if any
 
     @property
     def label(self) -> str:
@@ -71,6 +72,7 @@ def load_run(run: str | Path) -> RunRecord:
         window=window,
         validation=rundir.read_validation(run),
         refinement=rundir.read_refinement_record(run),
+        uncertainty=rundir.read_uncertainty(run),
     )
 
 
