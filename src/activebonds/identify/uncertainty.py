@@ -98,7 +98,7 @@ class Uncertainty:
 
 def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
     """A direction of parameter space in words: the parameters that move along it."""
-    big = [i for i in np.argsort(-np.abs(vector)) if abs(vector[i]) >= NAMED * np.abs(vector).max()]
+    big = [i for i in range(len(vector)) if abs(vector[i]) >= NAMED * np.abs(vector).max()]
     if masses and masses <= set(big):
         return "mass scale (the masses and the forces can grow together)"
     parts = [names[i] for i in big]

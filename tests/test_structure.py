@@ -1,0 +1,170 @@
+"""Optional bonds and structure identification (BIC backward elimination on exact least squares)."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from activebonds.data.trajectory import Trajectory
+from activebonds.data.writers import write_trajectory
+from activebonds.errors import InputError
+from activebonds.experiments.springs import candidate_model_toml, dataset
+from activebonds.experiments.springs_structure import recover_edges
+from activebonds.identify.cost import make_windows
+from activebonds.identify.structure import identify_structure
+from activebonds.model import dumps_model, loads_model
+from activebonds.physics import total_force
+from helpers import cli
+
+TRIANGLE = """
+name = "tri"
+dimension = 3
+[[particle]]
+name = "A"
+mass = 1.0
+position = [0.0, 0.0, 0.0]
+[[particle]]
+name = "B"
+mass = 1.5
+position = [0.55, 0.0, 0.05]
+[[particle]]
+name = "C"
+mass = 2.0
+position = [0.2, 0.45, 0.0]
+[[bond]]
+kind = "binary"
+particles = ["A", "B"]
+stiffness = { value = 40.0, min = 1.0, max = 1000.0 }
+rest_length = 0.5
+damping = 0.5
+[[bond]]
+kind = "binary"
+particles = ["B", "C"]
+stiffness = { value = 60.0, min = 1.0, max = 1000.0 }
+rest_length = 0.6
+damping = 1.0
+"""
+
+EXTRA = """
+[[bond]]
+kind = "binary"
+particles = ["A", "C"]
+{flags}
+stiffness = {{ value = 80.0, min = 1.0, max = 1000.0 }}
+rest_length = 0.45
+damping = 0.8
+"""
+
+
+def _with_third(flags: str) -> str:
+    return TRIANGLE + EXTRA.format(flags=flags)
+
+
+def test_an_absent_bond_exerts_no_force_and_has_no_genes():
+    two = loads_model(TRIANGLE)
+    absent = loads_model(_with_third("optional = true\npresent = false"))
+    present = loads_model(_with_third("optional = true\npresent = true"))
+    assert [g.name for g in absent.layout.genes] == [g.name for g in two.layout.genes]
+    assert present.layout.n_genes == two.layout.n_genes + 1
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        x = rng.normal(0.0, 0.4, (3, 3))
+        v = rng.normal(0.0, 1.0, (3, 3))
+        a = total_force(absent.layout.decode(absent.layout.initial()), absent.topology, x, v)
+        b = total_force(two.layout.decode(two.layout.initial()), two.topology, x, v)
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # written back as identified: every candidate kept, with its decision
+    text = dumps_model(absent)
+    bond = tomllib.loads(text)["bond"][2]
+    assert bond["optional"] is True and bond["present"] is False
+    assert dumps_model(loads_model(text)) == text
+
+
+@pytest.mark.parametrize(
+    "flags, message",
+    [
+        ("present = true", "present: only an optional bond has a presence"),
+        ("optional = true\nneural = true\ngain = 1.0", "a neural bond cannot be optional"),
+    ],
+)
+def test_bad_presence_is_one_line(flags, message):
+    with pytest.raises(InputError) as err:
+        loads_model(_with_third(flags), "m.toml")
+    assert message in err.value.line()
+    assert "\n" not in err.value.line()
+
+
+def test_a_contact_cannot_be_optional(tmp_path):
+    text = (
+        TRIANGLE
+        + """
+[[bond]]
+kind = "contact"
+particles = ["A"]
+optional = true
+normal = [0.0, 0.0, 1.0]
+stiffness = 1e4
+"""
+    )
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    r = cli("structure", path, tmp_path / "none.csv", "--out", tmp_path / "o.toml")
+    assert r.returncode == 2
+    assert "optional: a contact bond cannot be optional" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o.toml").exists()
+
+
+def _springs_windows(x):
+    mask = np.ones(x.shape[:2], bool)
+    return make_windows(x, mask, 0.1, 1)
+
+
+def test_noiseless_springs_every_edge_right():
+    """NRI springs, no noise: every pair decided right, stiffness 0.1 within 0.5 %."""
+    for x, edges in dataset(8, seed=11):
+        r = recover_edges(x, edges)
+        assert r.found == r.truth, (r.found, r.truth)
+        assert all(abs(k - 0.1) < 5e-4 for k in r.stiffness), r.stiffness
+
+
+def test_evidence_agrees_with_the_decisions():
+    x, edges = dataset(1, seed=3)[0]
+    model = loads_model(candidate_model_toml())
+    result = identify_structure(model, _springs_windows(x))
+    for d in result.decisions:
+        assert (d.delta_bic > 0) == d.present
+        if d.present:  # a true spring: the fit is far worse without it
+            assert d.cost_change > 1e3
+    assert result.rms_mm >= result.full_rms_mm
+    ident = loads_model(dumps_model(result.spec))
+    assert sum(b.present for b in ident.spec.bond) == sum(d.present for d in result.decisions)
+
+
+def test_no_optional_bond_is_refused():
+    model = loads_model(TRIANGLE)
+    with pytest.raises(InputError, match="no bond is optional"):
+        identify_structure(model, _springs_windows(np.zeros((5, 3, 3))))
+
+
+def test_structure_command(tmp_path):
+    x, edges = dataset(1, seed=3)[0]
+    traj = Trajectory(
+        positions=x,
+        mask=np.ones(x.shape[:2], bool),
+        markers=tuple(f"p{i}" for i in range(5)),
+        rate=10.0,
+    )
+    write_trajectory(traj, tmp_path / "s.npz")
+    (tmp_path / "m.toml").write_text(candidate_model_toml())
+    out = tmp_path / "found.toml"
+    r = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
+    assert r.returncode == 0, r.stderr
+    found = loads_model(out.read_text())
+    for b in found.spec.bond:
+        i, j = (int(p[1:]) for p in b.particles)
+        assert b.present == bool(edges[i, j])
+    again = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
+    assert again.returncode == 2 and "exists" in again.stderr

@@ -1,0 +1,118 @@
+"""The uncertainty report: Gauss-Newton standard errors, undetermined directions, coverage."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from activebonds.experiments.coverage import coverage, trial
+from activebonds.identify.uncertainty import Z95, describe, from_jacobian
+from activebonds.model import load_model
+from helpers import TRIANGLE, cli
+
+
+def test_linear_regression_matches_the_textbook_covariance():
+    """For a linear model the Gauss-Newton covariance is s^2 (X^T X)^-1, exactly."""
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(200, 3)) * np.array([1.0, 1e3, 1e-3])  # units must not matter
+    beta = np.array([2.0, -0.5e-3, 7e2])
+    y = x @ beta + rng.normal(0.0, 0.1, 200)
+    fit, *_ = np.linalg.lstsq(x, y, rcond=None)
+    resid = x @ fit - y
+    est, rank, cond, s2, dirs = from_jacobian(
+        x, resid, ["a", "b", "c"], fit, np.full(3, 1e9), dof=197
+    )
+    s2_ref = resid @ resid / 197
+    se_ref = np.sqrt(np.diag(s2_ref * np.linalg.inv(x.T @ x)))
+    assert rank == 3 and np.isfinite(cond) and dirs == []
+    np.testing.assert_allclose(s2, s2_ref, rtol=1e-12)
+    np.testing.assert_allclose([e.std_error for e in est], se_ref, rtol=1e-9)
+    for e, f, se in zip(est, fit, se_ref, strict=True):
+        assert e.determined
+        np.testing.assert_allclose([e.low, e.high], [f - Z95 * se, f + Z95 * se], rtol=1e-9)
+
+
+def test_linear_intervals_cover_the_truth_95_percent():
+    """Calibration of the formula itself: 400 noisy linear datasets, 3 parameters each."""
+    rng = np.random.default_rng(2)
+    beta = np.array([1.0, -2.0, 0.5])
+    x = rng.normal(size=(60, 3))
+    hits = []
+    for _ in range(400):
+        y = x @ beta + rng.normal(0.0, 0.3, 60)
+        fit, *_ = np.linalg.lstsq(x, y, rcond=None)
+        est, *_ = from_jacobian(x, x @ fit - y, ["a", "b", "c"], fit, np.full(3, 100.0), dof=57)
+        hits += [e.low <= b <= e.high for e, b in zip(est, beta, strict=True)]
+    assert 0.93 <= np.mean(hits) <= 0.97, np.mean(hits)
+
+
+def test_a_singular_jacobian_is_named_not_printed():
+    """Two parameters that only enter as a sum: both 'not determined', the pair named."""
+    rng = np.random.default_rng(3)
+    col = rng.normal(size=50)
+    other = rng.normal(size=50)
+    jac = np.stack([col, 2.0 * col, other], axis=1)  # b moves the residuals as 2 a does
+    names = ["type:neck.stiffness", "type:neck.rest_length", "bond[2].damping"]
+    est, rank, cond, _, dirs = from_jacobian(
+        jac, rng.normal(size=50), names, np.ones(3), np.full(3, 10.0), dof=47
+    )
+    assert rank == 2 and cond == float("inf")
+    assert [e.determined for e in est] == [False, False, True]
+    assert est[0].std_error is None and est[0].low is None
+    assert dirs == ["stiffness and rest_length of type:neck trade off"]
+    assert est[0].note == dirs[0]
+
+
+def test_mass_scale_is_named():
+    names = ["mass:A.mass", "mass:B.mass", "bond[0].stiffness"]
+    assert describe(names, np.array([0.5, 0.5, 0.7]), {0, 1}).startswith("mass scale")
+
+
+def test_an_interval_wider_than_the_search_range_is_not_determined():
+    rng = np.random.default_rng(4)
+    jac = np.stack([rng.normal(size=40), 1e-6 * rng.normal(size=40)], axis=1)
+    est, *_ = from_jacobian(jac, rng.normal(size=40), ["a", "b"], np.ones(2), np.ones(2), 38)
+    assert est[0].determined and not est[1].determined
+    assert est[1].note.startswith("interval wider than the search range")
+
+
+def test_non_finite_jacobian_is_reported_not_raised():
+    jac = np.array([[1.0, np.nan], [0.0, 1.0]])
+    est, rank, *_ = from_jacobian(jac, np.zeros(2), ["a", "b"], np.ones(2), np.ones(2), 1)
+    assert rank == 0 and not any(e.determined for e in est)
+
+
+def test_fit_writes_uncertainty_csv(tmp_path):
+    """A fit of the noiseless triangle: every parameter determined, intervals tiny around it."""
+    data = tmp_path / "tri.csv"
+    assert (
+        cli("simulate", TRIANGLE, "--frames", "120", "--rate", "100", "--out", data).returncode == 0
+    )
+    run = tmp_path / "run"
+    r = cli("fit", TRIANGLE, data, "--population", "30", "--generations", "100", "--out", run)
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader((run / "uncertainty.csv").read_text().splitlines()))
+    model = load_model(TRIANGLE)
+    truth = model.layout.natural(model.layout.initial())
+    assert [row["parameter"] for row in rows] == [g.name for g in model.layout.genes]
+    for row, t in zip(rows, truth, strict=True):
+        assert row["determined"] == "yes"
+        assert float(row["std_error"]) < 1e-6 * abs(t)
+        assert abs(float(row["value"]) - t) < 1e-6 * abs(t)
+    record = json.loads((run / "uncertainty.json").read_text())
+    assert record["rank"] == len(rows) and record["directions"] == []
+    report = tmp_path / "r.html"
+    assert cli("report", run, "--out", report).returncode == 0
+    assert "Uncertainty" in report.read_text()
+
+
+@pytest.mark.slow
+def test_pipeline_coverage_on_50_noisy_datasets():
+    """Simulate, add 0.5 mm noise, fit (least squares, restart horizon 10, one shooting window),
+    and check the 95 % intervals contain the truth 90-98 % of the time (pooled)."""
+    model = load_model(TRIANGLE)
+    trials = [trial(model, 200, 100.0, 5e-4, seed) for seed in range(50)]
+    assert 0.90 <= coverage(trials) <= 0.98, coverage(trials)
