@@ -193,9 +193,23 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--gait", choices=["trot", "walk", "both"], default="both")
     ap.add_argument("--json", type=Path)
+    ap.add_argument(
+        "--floor-only",
+        action="store_true",
+        help="recompute only the internal-force floors of the --json file's results, in place",
+    )
     args = ap.parse_args(argv)
     gaits = ["trot", "walk"] if args.gait == "both" else [args.gait]
-    results = [run_gait(g, args) for g in gaits]
+    if args.floor_only:
+        from activebonds import read_trajectory
+
+        results = json.loads(args.json.read_text())
+        for r in results:
+            held = read_trajectory(DATA / GAITS[r["gait"]]).window(*TEST)
+            r["internal_floor_mm"], r["internal_floor_masses_kg"] = internal_floor(held)
+            r["internal_floor_masses_kg"] = [float(m) for m in r["internal_floor_masses_kg"]]
+    else:
+        results = [run_gait(g, args) for g in gaits]
     for r in results:
         print(
             f"\n{r['gait']} (belt {r['belt_velocity']:.3f} m/s), fit frames 0-299, held out 300-599:"

@@ -168,6 +168,30 @@ def test_momentum_floor_matches_a_general_solver_and_the_audit(horse):
     assert least_squares(model, windows).rms_mm > floor
 
 
+def test_momentum_floor_is_invariant_to_the_mass_scale(horse):
+    """The constraints are homogeneous in the masses: scaling them all changes nothing, and
+    at very unequal masses the torque constraints are kept (a general solver agrees). They
+    were once dropped there (an absolute rank threshold on torques about the origin)."""
+    model, data, windows = horse
+    mass = np.asarray(model.params.mass, float)
+    base = momentum_floor_rms_mm(data.positions, data.mask, data.dt, mass)
+    for scale in (1e-90, 1e-20, 1e20, 1e90):
+        got = momentum_floor_rms_mm(data.positions, data.mask, data.dt, mass * scale)
+        assert got == pytest.approx(base, rel=1e-9)
+    skewed = np.array([1.0, 1e-9, 1e-9])  # one heavy particle
+    floor = momentum_floor_rms_mm(data.positions, data.mask, data.dt, skewed)
+    linear_only = momentum_floor_rms_mm(data.positions, data.mask, data.dt, skewed, angular=False)
+    resid = windows.target[:, 0] - (windows.x0 + windows.dt * windows.v0)
+    # the general solver at the same ratios, in a scale it handles (masses 1, 1e-3, 1e-3):
+    # at small masses the constraints converge to their limit, which both must follow
+    limit = np.array([1.0, 1e-6, 1e-6])
+    total = sum(_floor_by_slsqp(resid[s], windows.x0[s], limit) for s in range(len(resid)))
+    assert momentum_floor_rms_mm(data.positions, data.mask, data.dt, limit) == pytest.approx(
+        np.sqrt(total / windows.n_terms) * 1000, rel=1e-4
+    )
+    assert floor > linear_only * (1 + 1e-3)  # the torque rows still bind
+
+
 def test_floor_is_zero_for_internal_forces_and_the_field_for_a_missing_one(tetra):
     model, data, windows = tetra
     assert model_floor_rms_mm(model, data.positions, data.mask, data.dt) < 1e-9

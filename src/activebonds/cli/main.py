@@ -332,6 +332,18 @@ def _summary(result, held_out=None) -> None:
         label = f"validation frames {frames[0]}:{frames[1]}"
         out.print(_metrics_line(label, found), markup=False, highlight=False)
     if result.run is not None:
+        from ..identify.rundir import read_uncertainty
+
+        unc = read_uncertainty(result.run)
+        if unc is not None:
+            est = unc["estimates"]
+            ok = sum(e["determined"] for e in est)
+            out.print(
+                f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals in "
+                f"{result.run / 'uncertainty.csv'}",
+                markup=False,
+                highlight=False,
+            )
         out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
 
 

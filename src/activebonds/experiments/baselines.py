@@ -39,8 +39,13 @@ def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float) -> flo
 
 
 def _constraints(x: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """Rows of C with C a = 0 for internal accelerations a (flattened [P * D]) at positions x."""
+    """Rows of C with C a = 0 for internal accelerations a (flattened [P * D]) at positions x.
+    Torques are taken about the centre of mass (the same constraints as about any point, given
+    zero net force), so that no torque row is a near-copy of the force rows when one mass
+    dominates: about the origin they differ from them by O(small masses) only, and a rank
+    test then drops them."""
     n_p, dim = x.shape
+    x = x - (mass @ x) / mass.sum()
     rows = []
     for k in range(dim):  # linear momentum
         r = np.zeros((n_p, dim))
@@ -85,9 +90,14 @@ def momentum_floor_rms_mm(
         c = _constraints(w.x0[s], mass)
         if not angular:
             c = c[:dim]
-        # null space of C: the reachable displacements dt^2 a
+        # null space of C: the reachable displacements dt^2 a. Each constraint row is scaled
+        # to unit length first: the rows scale with the masses and the torque rows with the
+        # lever arms, so an absolute threshold would drop real constraints (very unequal or
+        # very small masses once made the torque rows look like rank deficiency).
+        norms = np.linalg.norm(c, axis=1)
+        c = c[norms > 0] / norms[norms > 0, None]
         _, sv, vt = np.linalg.svd(c)
-        rank = int(np.sum(sv > 1e-12 * max(sv.max(), 1.0)))
+        rank = int(np.sum(sv > 1e-10 * sv.max())) if sv.size else 0
         basis = vt[rank:].T  # [P*D, P*D - rank]
         r = resid[s].ravel()[obs]
         b = basis[obs]
