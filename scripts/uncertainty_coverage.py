@@ -56,17 +56,27 @@ def main() -> None:
             "truth": trials[0].truth[i],
             "coverage": float(inside[:, i].mean()),
             "mean_std_error": float(np.nanmean(ses[:, i])),
+            "median_std_error": float(np.nanmedian(ses[:, i])),
+            "median_abs_error": float(np.median(np.abs(values[:, i] - trials[0].truth[i]))),
             "spread_of_estimates": float(np.std(values[:, i], ddof=1)),
             "mean_estimate": float(values[:, i].mean()),
         }
         for i, n in enumerate(names)
     }
     total = coverage(trials)
+    # A fit that ends far above the noise (a local minimum, a rejected stage) is counted
+    # above; the share of fits that reached the noise level, and their coverage, beside it.
+    noise_rms = np.sqrt(3.0) * a.noise_mm  # the RMS 3D distance of the noise alone
+    reached = [t for t in trials if t.rms_mm < 1.2 * noise_rms]
     print(f"pooled coverage of the 95 % intervals: {total:.4f} ({inside.sum()}/{inside.size})")
+    print(
+        f"fits that reached the noise level (RMS < 1.2 x {noise_rms:.3f} mm): {len(reached)} of "
+        f"{len(trials)}, their coverage {coverage(reached):.4f}"
+    )
     for n, r in per.items():
         print(
-            f"  {n:28s} coverage {r['coverage']:.2f}  mean s.e. {r['mean_std_error']:.4g}  "
-            f"spread {r['spread_of_estimates']:.4g}"
+            f"  {n:28s} coverage {r['coverage']:.2f}  median s.e. {r['median_std_error']:.4g}  "
+            f"median |error| {r['median_abs_error']:.4g}"
         )
     if a.json:
         record = {
@@ -79,6 +89,12 @@ def main() -> None:
             "pooled_coverage": total,
             "intervals": int(inside.size),
             "per_parameter": per,
+            "fits_at_noise_level": len(reached),
+            "coverage_of_those": coverage(reached),
+            "trials": [
+                {"seed": t.seed, "rms_mm": t.rms_mm, "message": t.message, "inside": t.inside}
+                for t in trials
+            ],
             "seconds": round(time.time() - started, 1),
         }
         Path(a.json).write_text(json.dumps(record, indent=2) + "\n")

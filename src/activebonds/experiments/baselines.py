@@ -40,12 +40,13 @@ def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float) -> flo
 
 def _constraints(x: np.ndarray, mass: np.ndarray) -> np.ndarray:
     """Rows of C with C a = 0 for internal accelerations a (flattened [P * D]) at positions x.
-    Torques are taken about the centre of mass (the same constraints as about any point, given
-    zero net force), so that no torque row is a near-copy of the force rows when one mass
-    dominates: about the origin they differ from them by O(small masses) only, and a rank
-    test then drops them."""
+    Torques are taken about the heaviest particle (the same constraints as about any point,
+    given zero net force), whose own lever arm is then exactly 0: so no torque row is a
+    near-copy of the force rows when one mass dominates. About the origin (or about a centre
+    of mass rounded next to the heavy particle) they differ from them by O(small masses)
+    only, and a rank test drops them."""
     n_p, dim = x.shape
-    x = x - (mass @ x) / mass.sum()
+    x = x - x[int(np.argmax(mass))]
     rows = []
     for k in range(dim):  # linear momentum
         r = np.zeros((n_p, dim))
