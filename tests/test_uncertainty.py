@@ -116,3 +116,36 @@ def test_pipeline_coverage_on_50_noisy_datasets():
     model = load_model(TRIANGLE)
     trials = [trial(model, 200, 100.0, 5e-4, seed) for seed in range(50)]
     assert 0.90 <= coverage(trials) <= 0.98, coverage(trials)
+
+
+def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
+    """A unary anchor whose spring and damper are fixed at 0 moves nothing: the fit's
+    uncertainty.csv and report say 'not determined' for it, and give the others."""
+    data = tmp_path / "tri.csv"
+    assert (
+        cli("simulate", TRIANGLE, "--frames", "80", "--rate", "100", "--out", data).returncode == 0
+    )
+    model = tmp_path / "m.toml"
+    model.write_text(
+        TRIANGLE.read_text()
+        + '\n[[bond]]\nkind = "unary"\nparticles = ["A"]\nstiffness = 0.0\ndamping = 0.0\n'
+        + "anchor = { value = [0.0, 0.0, 0.0], min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }\n"
+    )
+    run = tmp_path / "run"
+    r = cli("fit", model, data, "--population", "20", "--generations", "30", "--out", run)
+    assert r.returncode == 0, r.stderr
+    rows = {
+        row["parameter"]: row
+        for row in csv.DictReader((run / "uncertainty.csv").read_text().splitlines())
+    }
+    anchors = [name for name in rows if ".anchor[" in name]
+    assert len(anchors) == 3
+    for name in anchors:
+        assert rows[name]["determined"] == "no"
+        assert rows[name]["std_error"] == "not determined"
+        assert "does not change the residuals" in rows[name]["note"]
+    assert all(rows[n]["determined"] == "yes" for n in rows if n not in anchors)
+    assert "uncertainty: 9 of 12 parameters determined" in r.stdout
+    report = tmp_path / "r.html"
+    assert cli("report", run, "--out", report).returncode == 0
+    assert "not determined" in report.read_text()
