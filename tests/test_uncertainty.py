@@ -149,3 +149,32 @@ def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
     report = tmp_path / "r.html"
     assert cli("report", run, "--out", report).returncode == 0
     assert "not determined" in report.read_text()
+
+
+def test_masses_under_a_total_are_reported_in_kg_whatever_the_weights_scale():
+    """Free masses under total_mass are genes w_i with m_i = total w_i / sum(w): the report
+    gives m_i in kg with a standard error (the weights' common scale, which changes nothing,
+    is not 'not determined'), the same at any scale of the weights."""
+    from activebonds.identify.problem import identification
+    from activebonds.identify.settings import FitSettings
+    from activebonds.identify.uncertainty import estimate
+    from activebonds.model import loads_model
+    from activebonds.simulation import simulate
+    from test_gravity_masses import FREE_MASS, MASSES, chain
+
+    data = simulate(loads_model(chain()), 60, 50.0)
+    free_k = "{ value = 50.0, min = 5.0, max = 500.0 }"
+    text = chain(f"total_mass = {sum(MASSES)}", masses=(FREE_MASS,) * 3, stiffness=(free_k,) * 3)
+    model = loads_model(text)
+    ident = identification(model, data, FitSettings())
+    genome = np.log([*MASSES, 90.0, 40.0, 25.0])  # every gene is log-scaled here
+    first = estimate(ident, FitSettings(), genome)
+    scaled = estimate(ident, FitSettings(), genome + np.log(7.0) * np.array([1, 1, 1, 0, 0, 0]))
+    names = [e.name for e in first.estimates]
+    assert names[:3] == ["mass:p0.mass", "mass:p1.mass", "mass:p2.mass"]
+    for a, b, m in zip(first.estimates[:3], scaled.estimates[:3], MASSES, strict=True):
+        assert a.determined and a.value == pytest.approx(m, rel=1e-12)
+        assert a.low < m < a.high
+        assert b.value == pytest.approx(a.value, rel=1e-12)
+        assert b.std_error == pytest.approx(a.std_error, rel=1e-6)
+    assert first.directions == [] and first.rank == 6

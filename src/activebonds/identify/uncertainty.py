@@ -175,6 +175,32 @@ def from_jacobian(
     return estimates, rank, condition, s2, directions
 
 
+def _masses_in_kg(estimates, jac, s2, ratio, theta, rest):
+    """Free masses under ``total_mass`` are genes w_i with m_i = rest w_i / sum(w): report
+    m_i (kg) with its standard error by the delta method (the weights' gauge drops out)."""
+    norms = np.linalg.norm(jac, axis=0)
+    _, sv, vt = np.linalg.svd(jac / np.where(norms > 0, norms, 1.0), full_matrices=False)
+    ok = sv > RANK_RTOL * sv[0]
+    w = theta[ratio]
+    v = vt[ok][:, ratio] / norms[ratio]
+    cov_w = s2 * (v.T / sv[ok] ** 2) @ v
+    total = w.sum()
+    grad = rest * (np.eye(len(w)) / total - np.outer(w, np.ones(len(w))) / total**2)
+    se = np.sqrt(np.maximum(np.diag(grad @ cov_w @ grad.T), 0.0))
+    out = list(estimates)
+    for j, i in enumerate(ratio):
+        e = estimates[i]
+        name = e.name.removesuffix(".weight") + ".mass"
+        m = float(rest * w[j] / total)
+        if not e.determined:
+            out[i] = Estimate(name, m, None, None, None, False, e.note)
+            continue
+        half = Z95 * float(se[j])
+        note = "kg, a share of total_mass"
+        out[i] = Estimate(name, m, float(se[j]), m - half, m + half, True, note)
+    return out
+
+
 def _residual_function(
     ident: Identification, settings: FitSettings, horizon: int, cost: str, states
 ):
@@ -247,9 +273,18 @@ def estimate(
     masses = {i for i, g in enumerate(layout.genes) if g.name.startswith("mass:")}
     # Continuity links are constraints (zero at a converged shooting optimum), not data.
     dof = observed - (len(theta) + nuisance) + links
+    ratio = sorted(masses) if layout.mass_rest is not None else []
+    if ratio:  # the weights' common scale changes nothing: one gauge row fixes it
+        gauge = np.zeros(jac.shape[1])
+        gauge[ratio] = theta[ratio] / np.linalg.norm(theta[ratio])
+        jac = np.vstack([jac, gauge * np.linalg.norm(jac, axis=0).max()])
+        resid = np.append(resid, 0.0)
+        masses = set()
     estimates, rank, condition, s2, directions = from_jacobian(
         jac, resid, names, theta, spans, dof, masses
     )
+    if ratio:
+        estimates = _masses_in_kg(estimates, jac, s2, ratio, theta, layout.mass_rest)
     return Uncertainty(
         estimates=estimates,
         cost=cost,
