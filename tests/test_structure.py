@@ -168,3 +168,16 @@ def test_structure_command(tmp_path):
         assert b.present == bool(edges[i, j])
     again = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
     assert again.returncode == 2 and "exists" in again.stderr
+    # fit takes the identified model (absent bonds carry no genes) and, on the undecided
+    # candidates, says they were fitted as present
+    run = cli("fit", out, tmp_path / "s.npz", "--population", "8", "--generations", "2",
+              "--refine", "none", "--out", tmp_path / "run")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "optional bond" not in run.stdout
+    genes = sum(bool(edges[i, j]) for i in range(5) for j in range(i + 1, 5))
+    rows = (tmp_path / "run" / "uncertainty.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + genes
+    run = cli("fit", tmp_path / "m.toml", tmp_path / "s.npz", "--population", "8",
+              "--generations", "2", "--refine", "none", "--out", tmp_path / "run2")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "note: 10 optional bond(s) without a decision were fitted as present" in run.stdout

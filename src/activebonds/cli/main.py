@@ -301,6 +301,14 @@ def _summary(result, held_out=None) -> None:
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
     from ..report.metrics import read_validation, validation_record, window_metrics
 
+    undecided = sum(1 for b in result.model.spec.bond if b.optional and b.present is None)
+    if undecided:
+        out.print(
+            f"note: {undecided} optional bond(s) without a decision were fitted as present; "
+            "'activebonds structure' decides which the data need",
+            markup=False,
+            highlight=False,
+        )
     data = result.identification.data
     zero = _zero_force_all(result.identification.all_data)
     out.print(
