@@ -87,6 +87,8 @@ def test_an_absent_bond_exerts_no_force_and_has_no_genes():
     [
         ("present = true", "present: only an optional bond has a presence"),
         ("optional = true\nneural = true\ngain = 1.0", "a neural bond cannot be optional"),
+        ('optional = true\npresent = "yes"', "present: Input should be a valid boolean"),
+        ('optional = "yes"', "optional: Input should be a valid boolean"),
     ],
 )
 def test_bad_presence_is_one_line(flags, message):
@@ -141,6 +143,27 @@ def test_evidence_agrees_with_the_decisions():
     assert result.rms_mm >= result.full_rms_mm
     ident = loads_model(dumps_model(result.spec))
     assert sum(b.present for b in ident.spec.bond) == sum(d.present for d in result.decisions)
+
+
+def test_structure_errors_name_the_model_file(tmp_path):
+    x, _ = dataset(1, seed=3)[0]
+    traj = Trajectory(
+        positions=x, mask=np.ones(x.shape[:2], bool), markers=("A", "B", "C", "D", "E"), rate=10.0
+    )
+    write_trajectory(traj.select(["A", "B", "C"]), tmp_path / "s.npz")
+    model = tmp_path / "plain.toml"
+    model.write_text(
+        TRIANGLE.replace("dimension = 3", "dimension = 2")
+        .replace(", 0.0]", "]")
+        .replace(", 0.05]", "]")
+    )
+    r = cli("structure", model, tmp_path / "s.npz", "--out", tmp_path / "o.toml")
+    assert r.returncode == 2
+    assert (
+        r.stderr.strip()
+        == f"error: {model}: no bond is optional (add optional = true to candidates)"
+    )
+    assert not (tmp_path / "o.toml").exists()
 
 
 def test_no_optional_bond_is_refused():

@@ -60,16 +60,19 @@ def structure(
         if smooth:
             positions = smooth_positions(positions, data.mask, smooth)
         windows = make_windows(positions, data.mask, data.dt, 1)
-        result = identify_structure(m, windows)
+        try:
+            result = identify_structure(m, windows)
+        except InputError as e:  # name the model file, not the model's name
+            raise InputError(model, e.message) from None
         save_model(result.spec, out_file)
     except InputError as e:
         fail(e)
-    record = {"model": str(out_file), **result.record()}
+    record = {"written": str(out_file), **result.record()}
     if as_json:
         print(json.dumps(record, indent=2))
         return
     table = Table(title=f"{model} on {traj}: optional bonds (BIC, exact least squares)")
-    for col in ("bond", "decision", "BIC without - with", "cost change if removed/added"):
+    for col in ("bond", "decision", "BIC without - with", "RSS without / with - 1"):
         table.add_column(col, justify="left" if col in ("bond", "decision") else "right")
     for d in result.decisions:
         table.add_row(

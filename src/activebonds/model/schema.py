@@ -27,6 +27,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    StrictBool,
     WrapValidator,
     create_model,
     field_validator,
@@ -199,8 +200,8 @@ class BondBase(_Strict):
     kind: str
     particles: list[str]
     type: str | None = None
-    optional: bool | None = None  # structure identification decides whether it is present
-    present: bool | None = None  # an optional bond's decision; false: no force, no genes
+    optional: StrictBool | None = None  # structure identification decides if it is present
+    present: StrictBool | None = None  # an optional bond's decision; false: no force, no genes
 
     @model_validator(mode="before")
     @classmethod
