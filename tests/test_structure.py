@@ -98,6 +98,18 @@ def test_bad_presence_is_one_line(flags, message):
     assert "\n" not in err.value.line()
 
 
+def test_a_model_with_neural_bonds_cannot_have_optional_bonds():
+    """An absent bond's length would still feed the neurons: refused in one line."""
+    text = _with_third("optional = true").replace(
+        'particles = ["A", "B"]\n', 'particles = ["A", "B"]\nneural = true\ngain = 1.0\n', 1
+    )
+    with pytest.raises(InputError) as err:
+        loads_model(text, "m.toml")
+    assert (
+        "bond[2].optional: a model with neural bonds cannot have optional bonds" in err.value.line()
+    )
+
+
 def test_a_contact_cannot_be_optional(tmp_path):
     text = (
         TRIANGLE

@@ -178,3 +178,41 @@ def test_masses_under_a_total_are_reported_in_kg_whatever_the_weights_scale():
         assert b.value == pytest.approx(a.value, rel=1e-12)
         assert b.std_error == pytest.approx(a.std_error, rel=1e-6)
     assert first.directions == [] and first.rank == 6
+
+
+def test_no_degrees_of_freedom_means_nothing_determined():
+    jac = np.eye(3)
+    est, rank, _, s2, dirs = from_jacobian(
+        jac, np.zeros(3), ["a", "b", "c"], np.ones(3), np.ones(3), 0
+    )
+    assert not any(e.determined for e in est) and np.isnan(s2)
+    assert dirs[0].startswith("no residual degrees of freedom")
+
+
+def test_a_null_direction_in_the_start_states_alone_names_no_parameter():
+    """Two parameters and a nuisance column no residual sees (a start state of masked frames):
+    the parameters stay determined and the direction names no parameter."""
+    rng = np.random.default_rng(5)
+    jac = np.concatenate([rng.normal(size=(30, 2)), np.zeros((30, 1))], axis=1)
+    est, rank, *_, dirs = from_jacobian(
+        jac, rng.normal(size=30), ["a", "b"], np.ones(2), np.full(2, 10.0), 27
+    )
+    assert [e.determined for e in est] == [True, True]
+    assert rank == 2 and dirs == ["a start state that no recorded frame sees (no parameter)"]
+
+
+def test_a_jacobian_too_large_is_skipped_in_one_line(tmp_path, monkeypatch):
+    """The fit completes; uncertainty.json says why there is no report; no CSV."""
+    import activebonds.identify.uncertainty as unc
+    from activebonds.identify import fit
+    from activebonds.simulation import simulate
+
+    monkeypatch.setattr(unc, "MAX_JACOBIAN_BYTES", 1)
+    model = load_model(TRIANGLE)
+    result = fit(
+        model, simulate(model, 40, 100.0), population=8, generations=3, out=tmp_path / "run"
+    )
+    assert result.status == "completed"
+    record = json.loads((tmp_path / "run" / "uncertainty.json").read_text())
+    assert record["not_computed"].startswith("the Jacobian would take")
+    assert not (tmp_path / "run" / "uncertainty.csv").exists()

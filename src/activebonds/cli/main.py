@@ -343,7 +343,9 @@ def _summary(result, held_out=None) -> None:
         from ..identify.rundir import read_uncertainty
 
         unc = read_uncertainty(result.run)
-        if unc is not None:
+        if unc is not None and "not_computed" in unc:
+            out.print(f"uncertainty: not computed ({unc['not_computed']})", markup=False)
+        elif unc is not None:
             est = unc["estimates"]
             ok = sum(e["determined"] for e in est)
             out.print(

@@ -358,7 +358,11 @@ def _uncertainty(ident, settings, run, genome, stages, states) -> None:
     last = next((s for s in reversed(stages) if s.accepted), None)
     horizon = last.horizon if last else settings.es_horizon
     cost = last.cost if last else "restart"
-    report = uncertainty.estimate(ident, settings, genome, horizon, cost, states)
+    try:
+        report = uncertainty.estimate(ident, settings, genome, horizon, cost, states)
+    except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
+        rundir.write_uncertainty_skipped(run, str(err))
+        return
     rundir.write_uncertainty(run, report)
 
 

@@ -430,6 +430,13 @@ def write_uncertainty(run: Path, report) -> None:
     write_text_atomic(run / "uncertainty.json", json.dumps(report.record(), indent=2) + "\n")
 
 
+def write_uncertainty_skipped(run: Path, why: str) -> None:
+    """RUN/uncertainty.json saying why there is no uncertainty report (no CSV)."""
+    (run / "uncertainty.csv").unlink(missing_ok=True)
+    text = json.dumps({"not_computed": why}, indent=2) + "\n"
+    write_text_atomic(run / "uncertainty.json", text)
+
+
 def read_uncertainty(run: Path) -> dict | None:
     return _read_record(run / "uncertainty.json", "uncertainty")
 

@@ -43,6 +43,7 @@ from .shooting import join_shooting, make_shooting, shooting_windows, start_stat
 RANK_RTOL = 1e-8  # singular values below this share of the largest: not determined
 Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
 NAMED = 0.3  # a parameter is named in a direction where its component is at least this
+MAX_JACOBIAN_BYTES = 2**30  # a larger dense Jacobian (long shooting fits) is not formed
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,14 @@ def from_jacobian(
     ok = sv > RANK_RTOL * smax
     rank = int(ok.sum())
     condition = float(smax / sv[-1]) if sv.size and sv[-1] > 0 and rank == sv.size else math.inf
-    s2 = float(resid @ resid) / max(dof, 1)
+    if dof <= 0:
+        note = f"no residual degrees of freedom ({dof}): the residual variance is unknown"
+        gone = [
+            Estimate(n, float(v), None, None, None, False, note)
+            for n, v in zip(names, values, strict=True)
+        ]
+        return gone, 0, math.inf, math.nan, [note]
+    s2 = float(resid @ resid) / dof
     v_ok, s_ok = vt[ok].T, sv[ok]  # [p + q, r]
     contrib = (v_ok / s_ok) ** 2  # variance of each scaled variable, per direction (x s^2)
     var_scaled = s2 * contrib.sum(axis=1)
@@ -149,7 +157,10 @@ def from_jacobian(
     in_null |= dead
     directions = []
     for j in range(null.shape[1] if null.size else 0):
-        directions.append(describe(names, null[:p, j], set(masses)))
+        if np.linalg.norm(null[:p, j]) > 1e-6:
+            directions.append(describe(names, null[:p, j], set(masses)))
+        else:  # only nuisance variables (shooting start states) move along it
+            directions.append("a start state that no recorded frame sees (no parameter)")
     if dead[:p].any():
         directions += [
             f"{names[i]} does not change the residuals" for i in np.flatnonzero(dead[:p])
@@ -165,6 +176,8 @@ def from_jacobian(
         half = Z95 * se
         if half > spans[i]:
             worst = int(np.argmax(contrib[i]))
+            if np.linalg.norm(v_ok[:p, worst]) <= 1e-6:
+                worst = int(np.argmax(contrib[i, :] * (np.linalg.norm(v_ok[:p], axis=0) > 1e-6)))
             note = "interval wider than the search range: " + describe(
                 names, v_ok[:p, worst], set(masses)
             )
@@ -175,7 +188,7 @@ def from_jacobian(
     return estimates, rank, condition, s2, directions
 
 
-def _masses_in_kg(estimates, jac, s2, ratio, theta, rest):
+def _masses_in_kg(estimates, jac, s2, ratio, theta, rest, spans):
     """Free masses under ``total_mass`` are genes w_i with m_i = rest w_i / sum(w): report
     m_i (kg) with its standard error by the delta method (the weights' gauge drops out)."""
     norms = np.linalg.norm(jac, axis=0)
@@ -196,6 +209,10 @@ def _masses_in_kg(estimates, jac, s2, ratio, theta, rest):
             out[i] = Estimate(name, m, None, None, None, False, e.note)
             continue
         half = Z95 * float(se[j])
+        if half > spans[j]:
+            note = "interval wider than the search range (kg)"
+            out[i] = Estimate(name, m, None, None, None, False, note)
+            continue
         note = "kg, a share of total_mass"
         out[i] = Estimate(name, m, float(se[j]), m - half, m + half, True, note)
     return out
@@ -262,6 +279,12 @@ def estimate(
         ident, settings, horizon, cost, states
     )
     y = np.concatenate([theta, extra])
+    size = float(observed) * 1.3 * len(y) * 8  # bytes of the dense Jacobian (with links)
+    if size > MAX_JACOBIAN_BYTES:
+        raise MemoryError(
+            f"the Jacobian would take {size / 2**30:.1f} GiB ({len(y)} variables); "
+            f"the limit is {MAX_JACOBIAN_BYTES / 2**30:.1f} GiB"
+        )
     with jax.enable_x64(True):  # scoped, as the least squares
         yj = jnp.asarray(y, jnp.float64)
         resid = np.asarray(jax.jit(fn)(yj), np.float64)
@@ -274,7 +297,10 @@ def estimate(
     # Continuity links are constraints (zero at a converged shooting optimum), not data.
     dof = observed - (len(theta) + nuisance) + links
     ratio = sorted(masses) if layout.mass_rest is not None else []
+    if not np.all(np.isfinite(jac)):
+        ratio = []  # reported as not finite by from_jacobian, weights as they are
     if ratio:  # the weights' common scale changes nothing: one gauge row fixes it
+        dof += 1
         gauge = np.zeros(jac.shape[1])
         gauge[ratio] = theta[ratio] / np.linalg.norm(theta[ratio])
         jac = np.vstack([jac, gauge * np.linalg.norm(jac, axis=0).max()])
@@ -283,8 +309,9 @@ def estimate(
     estimates, rank, condition, s2, directions = from_jacobian(
         jac, resid, names, theta, spans, dof, masses
     )
-    if ratio:
-        estimates = _masses_in_kg(estimates, jac, s2, ratio, theta, layout.mass_rest)
+    if ratio and np.isfinite(s2):
+        kg_spans = spans[ratio] * layout.mass_rest / theta[ratio].sum()
+        estimates = _masses_in_kg(estimates, jac, s2, ratio, theta, layout.mass_rest, kg_spans)
     return Uncertainty(
         estimates=estimates,
         cost=cost,

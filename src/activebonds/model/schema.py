@@ -344,6 +344,13 @@ class ModelSpec(_Strict):
                     raise ValueError(
                         f"particle[{i}].{field}: expected {d} components, got {len(vec)}"
                     )
+        neural = any(getattr(b, "neural", False) for b in self.bond)
+        optional = next((i for i, b in enumerate(self.bond) if b.optional), None)
+        if neural and optional is not None:
+            raise ValueError(
+                f"bond[{optional}].optional: a model with neural bonds cannot have optional "
+                "bonds (an absent bond would still feed the neurons)"
+            )
         counts: dict[str, int] = {}
         for b in self.bond:
             counts[b.kind] = counts.get(b.kind, 0) + 1

@@ -273,6 +273,9 @@ def uncertainty_section(record: RunRecord) -> Section | None:
     rec = record.uncertainty
     if not rec:
         return None
+    if "not_computed" in rec:
+        text = [f"Not computed: {rec['not_computed']}."]
+        return Section("Uncertainty", text=text, anchor="uncertainty")
     rows = []
     for e in rec.get("estimates", []):
         if e["determined"]:
