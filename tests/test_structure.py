@@ -16,23 +16,13 @@ from activebonds.identify.cost import make_windows
 from activebonds.identify.structure import identify_structure
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force
+from helpers import TRIANGLE as TRIANGLE_FILE
 from helpers import cli
 
-TRIANGLE = """
-name = "tri"
-dimension = 3
-[[particle]]
-name = "A"
-mass = 1.0
-position = [0.0, 0.0, 0.0]
-[[particle]]
-name = "B"
-mass = 1.5
-position = [0.55, 0.0, 0.05]
-[[particle]]
-name = "C"
-mass = 2.0
-position = [0.2, 0.45, 0.0]
+# examples/triangle.toml's name, dimension and particles, with two bonds of this file's own
+TRIANGLE = (
+    TRIANGLE_FILE.read_text().split("[[bond]]")[0]
+    + """
 [[bond]]
 kind = "binary"
 particles = ["A", "B"]
@@ -46,6 +36,7 @@ stiffness = { value = 60.0, min = 1.0, max = 1000.0 }
 rest_length = 0.6
 damping = 1.0
 """
+)
 
 EXTRA = """
 [[bond]]
@@ -157,18 +148,18 @@ def test_evidence_agrees_with_the_decisions():
     assert sum(b.present for b in ident.spec.bond) == sum(d.present for d in result.decisions)
 
 
+def _springs_file(path, seed: int = 3):
+    """One NRI springs trajectory (markers p0..p4, 10 Hz) written to ``path``; its edges."""
+    x, edges = dataset(1, seed=seed)[0]
+    markers = tuple(f"p{i}" for i in range(5))
+    write_trajectory(Trajectory(x, np.ones(x.shape[:2], bool), markers, 10.0), path)
+    return edges
+
+
 def test_structure_errors_name_the_model_file(tmp_path):
-    x, _ = dataset(1, seed=3)[0]
-    traj = Trajectory(
-        positions=x, mask=np.ones(x.shape[:2], bool), markers=("A", "B", "C", "D", "E"), rate=10.0
-    )
-    write_trajectory(traj.select(["A", "B", "C"]), tmp_path / "s.npz")
+    _springs_file(tmp_path / "s.npz")
     model = tmp_path / "plain.toml"
-    model.write_text(
-        TRIANGLE.replace("dimension = 3", "dimension = 2")
-        .replace(", 0.0]", "]")
-        .replace(", 0.05]", "]")
-    )
+    model.write_text(candidate_model_toml().replace("optional = true\n", ""))
     r = cli("structure", model, tmp_path / "s.npz", "--out", tmp_path / "o.toml")
     assert r.returncode == 2
     assert (
@@ -185,14 +176,7 @@ def test_no_optional_bond_is_refused():
 
 
 def test_structure_command(tmp_path):
-    x, edges = dataset(1, seed=3)[0]
-    traj = Trajectory(
-        positions=x,
-        mask=np.ones(x.shape[:2], bool),
-        markers=tuple(f"p{i}" for i in range(5)),
-        rate=10.0,
-    )
-    write_trajectory(traj, tmp_path / "s.npz")
+    edges = _springs_file(tmp_path / "s.npz")
     (tmp_path / "m.toml").write_text(candidate_model_toml())
     out = tmp_path / "found.toml"
     r = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.smoothing import smooth_positions
-from ..data.trajectory import Trajectory
 from ..identify.cost import make_windows
 from ..identify.structure import identify_structure
 from ..model import loads_model
@@ -41,14 +40,7 @@ def recover_edges(positions: np.ndarray, edges: np.ndarray, smooth: int = 0) -> 
     mask = ~near_wall(positions)
     if smooth:
         positions = smooth_positions(positions, np.ones(positions.shape[:2], bool), smooth)
-    names = tuple(f"p{i}" for i in range(n))
-    traj = Trajectory(
-        positions=np.where(mask[..., None], positions, np.nan),
-        mask=mask,
-        markers=names,
-        rate=1.0 / FRAME_DT,
-    )
-    windows = make_windows(traj.positions, traj.mask, traj.dt, 1)
+    windows = make_windows(positions, mask, FRAME_DT, 1)  # masked positions are not read
     result = identify_structure(model, windows)
     truth, found, stiffness = [], [], []
     for d, bond in zip(result.decisions, result.spec.bond, strict=True):

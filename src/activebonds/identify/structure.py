@@ -16,8 +16,10 @@ one-step model is a discretisation, and on noiseless data the exact sampled dyna
 linear springs between frames is a matrix function of the true stiffness matrix, dense in
 every pair (O(h^2 w^2 / 12) of the true stiffnesses on pairs with no spring), so without a
 floor every candidate would "explain" a residual at machine precision and be kept. Terms
-that improve the fit by less than 0.1 % of the signal are below what the model resolves. Why this rather than SINDy's sequential thresholding (Brunton, Proctor &
-Kutz 2016): the threshold on a coefficient depends on the units and the excitation of each
+that improve the fit by less than 0.1 % of the signal are below what the model resolves.
+
+Why this rather than SINDy's sequential thresholding (Brunton, Proctor & Kutz 2016): the
+threshold on a coefficient depends on the units and the excitation of each
 bond (a stiff bond that barely stretches and a soft one that stretches a lot carry the same
 evidence at very different coefficients), while the BIC compares fits in one currency, the
 likelihood, and each step's solve is exact, so the path is the sparse regression's own path
@@ -126,11 +128,10 @@ class _Scorer:
         return self.cache[present]
 
 
-def identify_structure(model: Model, windows: Windows, progress=None) -> Structure:
+def identify_structure(model: Model, windows: Windows) -> Structure:
     """Backward elimination of the optional bonds of ``model`` under the BIC, each structure
-    solved by exact least squares on ``windows`` (horizon 1). ``progress(step, n)``: called
-    once per elimination step. InputError when the model has no optional bond or is outside
-    the families the exact least squares solves."""
+    solved by exact least squares on ``windows`` (horizon 1). InputError when the model has
+    no optional bond or is outside the families the exact least squares solves."""
     pool = candidates(model.spec)
     if not pool:
         raise InputError(model.name, "no bond is optional (add optional = true to candidates)")
@@ -145,8 +146,6 @@ def identify_structure(model: Model, windows: Windows, progress=None) -> Structu
     rss_full, bic, _, _ = score(present, pool)
     removed: list[int] = []
     while present:
-        if progress:
-            progress(len(removed), len(pool))
         trials = {i: score(present - {i}, pool)[1] for i in sorted(present)}
         best = min(trials, key=trials.get)
         if not trials[best] < bic:

@@ -34,7 +34,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ..atomic import write_text_atomic
 from .cost import join_windows, make_residuals, make_windows
 from .problem import Identification
 from .settings import FitSettings
@@ -93,9 +92,6 @@ class Uncertainty:
             w.writerow([e.name, f"{e.value:.10g}", *num, "yes" if e.determined else "no", e.note])
         return buf.getvalue()
 
-    def write_csv(self, path) -> None:
-        write_text_atomic(path, self.csv_text())
-
 
 def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
     """A direction of parameter space in words: the parameters that move along it."""
@@ -110,6 +106,25 @@ def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
     if len(parts) == 1:
         return f"{parts[0]} does not change the residuals"
     return f"{', '.join(parts[:-1])} and {parts[-1]} trade off"
+
+
+def _undetermined(names, values, note: str):
+    """Every parameter "not determined" for one reason: (estimates, rank, condition, s^2,
+    directions) as :func:`from_jacobian` returns them."""
+    gone = [
+        Estimate(n, float(v), None, None, None, False, note)
+        for n, v in zip(names, values, strict=True)
+    ]
+    return gone, 0, math.inf, math.nan, [note]
+
+
+def _decompose(jac: np.ndarray):
+    """The SVD of the Jacobian with unit-norm columns: (column norms, singular values, V^T,
+    the directions above RANK_RTOL)."""
+    norms = np.linalg.norm(jac, axis=0)
+    _, sv, vt = np.linalg.svd(jac / np.where(norms == 0, 1.0, norms), full_matrices=False)
+    ok = sv > RANK_RTOL * (sv[0] if sv.size and sv[0] > 0 else 1.0)
+    return norms, sv, vt, ok
 
 
 def from_jacobian(
@@ -127,27 +142,16 @@ def from_jacobian(
     p = len(names)
     jac = np.asarray(jac, np.float64)
     if jac.size == 0 or not (np.all(np.isfinite(jac)) and np.all(np.isfinite(resid))):
-        note = "the residuals or their Jacobian are not finite at the optimum"
-        gone = [
-            Estimate(n, float(v), None, None, None, False, note)
-            for n, v in zip(names, values, strict=True)
-        ]
-        return gone, 0, math.inf, math.nan, [note]
-    norms = np.linalg.norm(jac, axis=0)
-    dead = norms == 0
-    scaled = jac / np.where(dead, 1.0, norms)
-    _, sv, vt = np.linalg.svd(scaled, full_matrices=False)
-    smax = sv[0] if sv.size and sv[0] > 0 else 1.0
-    ok = sv > RANK_RTOL * smax
-    rank = int(ok.sum())
-    condition = float(smax / sv[-1]) if sv.size and sv[-1] > 0 and rank == sv.size else math.inf
+        return _undetermined(
+            names, values, "the residuals or their Jacobian are not finite at the optimum"
+        )
     if dof <= 0:
         note = f"no residual degrees of freedom ({dof}): the residual variance is unknown"
-        gone = [
-            Estimate(n, float(v), None, None, None, False, note)
-            for n, v in zip(names, values, strict=True)
-        ]
-        return gone, 0, math.inf, math.nan, [note]
+        return _undetermined(names, values, note)
+    norms, sv, vt, ok = _decompose(jac)
+    dead = norms == 0
+    rank = int(ok.sum())
+    condition = float(sv[0] / sv[-1]) if sv[-1] > 0 and rank == sv.size else math.inf
     s2 = float(resid @ resid) / dof
     v_ok, s_ok = vt[ok].T, sv[ok]  # [p + q, r]
     contrib = (v_ok / s_ok) ** 2  # variance of each scaled variable, per direction (x s^2)
@@ -188,12 +192,11 @@ def from_jacobian(
     return estimates, rank, condition, s2, directions
 
 
-def _masses_in_kg(estimates, jac, s2, ratio, theta, rest, spans):
+def _masses_in_kg(estimates, decomposition, s2, ratio, theta, rest, spans):
     """Free masses under ``total_mass`` are genes w_i with m_i = rest w_i / sum(w): report
-    m_i (kg) with its standard error by the delta method (the weights' gauge drops out)."""
-    norms = np.linalg.norm(jac, axis=0)
-    _, sv, vt = np.linalg.svd(jac / np.where(norms > 0, norms, 1.0), full_matrices=False)
-    ok = sv > RANK_RTOL * sv[0]
+    m_i (kg) with its standard error by the delta method (the weights' gauge drops out);
+    ``decomposition``: :func:`_decompose` of the Jacobian with its gauge row."""
+    norms, sv, vt, ok = decomposition
     w = theta[ratio]
     v = vt[ok][:, ratio] / norms[ratio]
     cov_w = s2 * (v.T / sv[ok] ** 2) @ v
@@ -311,7 +314,9 @@ def estimate(
     )
     if ratio and np.isfinite(s2):
         kg_spans = spans[ratio] * layout.mass_rest / theta[ratio].sum()
-        estimates = _masses_in_kg(estimates, jac, s2, ratio, theta, layout.mass_rest, kg_spans)
+        estimates = _masses_in_kg(
+            estimates, _decompose(jac), s2, ratio, theta, layout.mass_rest, kg_spans
+        )
     return Uncertainty(
         estimates=estimates,
         cost=cost,
