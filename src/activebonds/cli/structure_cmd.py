@@ -83,7 +83,8 @@ def structure(
         )
     out.print(table)
     out.print(
-        f"one-step RMS {result.rms_mm:.6g} mm (every candidate: {result.full_rms_mm:.6g} mm); "
+        f"one-step RMS {result.rms_mm:.6g} mm (every candidate: {result.full_rms_mm:.6g} mm, "
+        f"zero force: {result.zero_force_rms_mm:.6g} mm); "
         f"{sum(d.present for d in result.decisions)} of {len(result.decisions)} present; "
         f"written to {out_file}"
     )

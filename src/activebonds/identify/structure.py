@@ -68,6 +68,7 @@ class Structure:
     decisions: list[Decision]
     rms_mm: float  # one-step RMS of the identified model on the fitted frames
     full_rms_mm: float  # ... with every candidate present
+    zero_force_rms_mm: float  # ... of the zero-force (constant-velocity) predictor
     bic: float
     removed: list[int] = field(default_factory=list)  # bond indices, in the order removed
 
@@ -76,6 +77,7 @@ class Structure:
             "criterion": "BIC, backward elimination on the exact least squares",
             "rms_mm": self.rms_mm,
             "full_rms_mm": self.full_rms_mm,
+            "zero_force_rms_mm": self.zero_force_rms_mm,
             "bic": self.bic,
             "removed": self.removed,
             "decisions": [asdict(d) for d in self.decisions],
@@ -112,7 +114,8 @@ class _Scorer:
         self.n = int(np.sum(windows.weight)) * model.dimension  # residual coordinates
         free = windows.x0 + windows.dt * windows.v0  # the zero-force prediction
         r0 = windows.weight[:, 0, :, None] * (windows.target[:, 0] - free)
-        self.floor = float(np.sum(r0**2)) * RESOLUTION**2
+        self.zero_force = float(np.sum(r0**2))  # RSS of the zero-force predictor
+        self.floor = self.zero_force * RESOLUTION**2
         self.cache: dict[frozenset, tuple[float, float, Model, np.ndarray]] = {}
 
     def __call__(self, present: frozenset, pool: list[int]):
@@ -175,6 +178,7 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
         decisions=decisions,
         rms_mm=float(np.sqrt(rss / n_terms) * 1000.0),
         full_rms_mm=float(np.sqrt(rss_full / n_terms) * 1000.0),
+        zero_force_rms_mm=float(np.sqrt(score.zero_force / n_terms) * 1000.0),
         bic=float(bic),
         removed=removed,
     )
