@@ -39,9 +39,8 @@ def activation(params, n: int, elongation, rate, t=0.0):
     """Neuron b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b
     + w_b sin(2 pi f t + phi_b)) (the drive term only where ``params`` has drive weights)."""
     off = 1.0 - np.eye(n)
-    drive = jnp.sum(params["length_weights"] * off * elongation[None, :], axis=-1) + jnp.sum(
-        params["rate_weights"] * off * rate[None, :], axis=-1
-    )
+    # one matrix-vector product (a batched product once vmapped over states and individuals)
+    drive = (params["length_weights"] * off) @ elongation + (params["rate_weights"] * off) @ rate
     net = drive - params["threshold"]
     if "drive_weight" in params:  # absent from hand-made parameter dicts (older tests)
         phase = 2.0 * jnp.pi * params["drive_frequency"] * t + params["drive_phase"]

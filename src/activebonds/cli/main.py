@@ -131,7 +131,13 @@ def fit(
     substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = 1,
     integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 5000,
-    precision: Annotated[str, typer.Option(help="float64 or float32.")] = "float64",
+    precision: Annotated[
+        str,
+        typer.Option(
+            help="float64, float32, or mixed (the ES's one-step cost in float32, the rest in "
+            "float64: faster, see benchmarks/README.md)."
+        ),
+    ] = "float64",
     adapt_variants: Annotated[
         bool, typer.Option(help="Adapt the mutation-variant rates to their success.")
     ] = False,
@@ -406,4 +412,4 @@ from .report_cmd import report  # noqa: E402
 
 app.command(name="report")(report)
 
-from . import baselines_cmd, structure_cmd  # noqa: E402,F401
+from . import baselines_cmd, structure_cmd, sweep_cmd  # noqa: E402,F401

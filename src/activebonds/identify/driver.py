@@ -52,11 +52,11 @@ class FitResult:
 
 def _precision(settings: FitSettings):
     """JAX's 64-bit mode for the run's precision, scoped to the call."""
-    return jax.enable_x64(settings.precision == "float64")
+    return jax.enable_x64(settings.precision != "float32")
 
 
 def _dtype(settings: FitSettings):
-    return jnp.float64 if settings.precision == "float64" else jnp.float32
+    return jnp.float32 if settings.precision == "float32" else jnp.float64
 
 
 def fit(

@@ -35,8 +35,10 @@ class Run(NamedTuple):
 def population_evaluate(problem: Problem, dtype) -> Callable:
     """genes [N, G] -> (cost [N], local [N, P]) in ``dtype``, non-finite -> +inf."""
 
+    each = problem.evaluate_population or jax.vmap(problem.evaluate)
+
     def evaluate(genes):
-        cost, local = jax.vmap(problem.evaluate)(genes)
+        cost, local = each(genes)
         out = dtype or jnp.result_type(float)
         return finite_or_inf(cost.astype(out), local.astype(out))
 

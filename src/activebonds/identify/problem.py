@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..data.trajectory import Trajectory
@@ -13,6 +14,7 @@ from ..model import Model, as_neural, as_standard
 from .cost import Windows, join_windows, make_cost, make_windows
 from .es import Problem
 from .lsq import least_squares
+from .population_cost import make_population_cost
 from .settings import FitSettings
 
 
@@ -107,6 +109,13 @@ def identification(
             raise InputError("--init lsq", err.message) from None
     problem = Problem(
         evaluate=cost,
+        evaluate_population=make_population_cost(
+            model,
+            windows,
+            settings.substeps,
+            settings.integrator,
+            jnp.float32 if settings.precision == "mixed" else None,
+        ),
         lower=layout.lower,
         upper=layout.upper,
         gene_group=layout.gene_group,

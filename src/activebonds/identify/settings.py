@@ -36,7 +36,9 @@ class FitSettings(BaseModel):
     optimizer: str = "es"  # a name of identify.strategies: "es" (the paper's), "random", "cmaes"
     chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call, at most
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints
-    precision: Literal["float32", "float64"] = "float64"
+    # float64; float32 throughout; or mixed: the ES's one-step cost evaluated in float32, the
+    # ES state, history and refinement in float64 (benchmarks/README.md: speed and quality)
+    precision: Literal["float32", "float64", "mixed"] = "float64"
 
     @field_validator("smooth")
     @classmethod

@@ -37,6 +37,9 @@ class Problem(NamedTuple):
     gene_group: np.ndarray  # [G] bond-type group of each gene
     group_slots: np.ndarray  # [T, S] extremity particles of each group, -1 padded
     start: np.ndarray | None = None  # [K, G] genomes placed first in the initial population
+    # genes [N, G] -> (cost [N], local [N, P]) for a whole population at once, where a faster
+    # form than vmapping ``evaluate`` exists (the one-step cost: identify/population_cost.py)
+    evaluate_population: object = None
 
 
 class Column(NamedTuple):
