@@ -581,7 +581,11 @@ def test_crossover_children_refer_to_their_own_parents():
     from activebonds.identify import es, evolve
 
     n, g = 4, 2
-    settings = es.ESSettings(population=n, crossover_rate=1.0, elite_fraction=0.25)
+    # adapt_variants: each child draws its variant from the noise below (with fixed rates the
+    # variants are planned, i mod 4, and each child draws only the numbers its variant uses)
+    settings = es.ESSettings(
+        population=n, crossover_rate=1.0, elite_fraction=0.25, adapt_variants=True
+    )
     slots = np.array([[0, 1]], dtype=np.int32)
     problem = es.Problem(
         evaluate=lambda x: (jnp.sum(x), jnp.stack([x[0], x[1]])),
@@ -621,3 +625,43 @@ def test_crossover_children_refer_to_their_own_parents():
     per_slot = ops.crossover_slot_costs(state.local, parents, jnp.asarray(slots))
     np.testing.assert_array_equal(np.asarray(per_slot), [[[1.0, 1.0]]])
     assert float(ops.crossover_reference(state.cost, parents, jnp.asarray(slots))[0]) == 10.0
+
+
+# --------------------------------------------------------------------------------------------
+# Planned variants: counts proportional to the rates, and only the numbers each child uses
+# --------------------------------------------------------------------------------------------
+
+
+def test_planned_variants_have_proportional_interleaved_counts():
+    assert list(ops.plan(8, (0.25, 0.25, 0.25, 0.25))) == [0, 1, 2, 3, 0, 1, 2, 3]
+    variant = ops.plan(500, (0.4, 0.3, 0.2, 0.1))
+    assert list(np.bincount(variant, minlength=4)) == [200, 150, 100, 50]
+    # every variant gets its share of the first half (the crossover children) too
+    assert list(np.bincount(variant[:250], minlength=4)) == [100, 75, 50, 25]
+    odd = ops.plan(7, (0.5, 0.0, 0.25, 0.25))
+    assert np.bincount(odd, minlength=4)[1] == 0 and len(odd) == 7
+
+
+def test_planned_numbers_expand_to_each_childs_variant_and_needs():
+    n, g = 12, 5
+    variant = ops.plan(n, (0.25, 0.25, 0.25, 0.25))
+    key = jax.random.PRNGKey(4)
+    nz = ops.draw_planned(key, variant, 6, g, (2, 2))
+    # the frozen variant (2) adapts nothing, the jump (3) takes no normal step
+    assert nz.zi.shape == (9, g) and nz.step.shape == (9, g) and nz.cauchy.shape == (3,)
+    assert ops.planned_bytes(variant, 6, g, (2, 2)) == sum(a.size * 4 for a in nz)
+    full = ops.expand(nz, variant, (0.25, 0.25, 0.25, 0.25))
+    chosen = ops.choose(full.variant, jnp.full((n, 4), 0.25))
+    np.testing.assert_array_equal(np.asarray(chosen), variant)
+    zi, step, cauchy = (np.asarray(a) for a in (full.zi, full.step, full.cauchy))
+    assert np.all(zi[variant == 2] == 0) and np.all(zi[variant != 2] != 0)
+    assert np.all(step[variant == 3] == 0) and np.all(step[variant != 3] != 0)
+    assert np.all(cauchy[variant != 3] == 0) and np.all(cauchy[variant == 3] != 0)
+    # the drawn rows land on the children that need them, in order
+    np.testing.assert_array_equal(zi[variant != 2], np.asarray(nz.zi))
+    # and unequal rates still choose the planned variants
+    probs = (0.4, 0.3, 0.2, 0.1)
+    uneven = ops.plan(n, probs)
+    full = ops.expand(ops.draw_planned(key, uneven, 6, g, (2, 2)), uneven, probs)
+    chosen = ops.choose(full.variant, jnp.broadcast_to(jnp.asarray(probs), (n, 4)))
+    np.testing.assert_array_equal(np.asarray(chosen), uneven)

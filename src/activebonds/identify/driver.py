@@ -232,7 +232,8 @@ def _evolve(
     if progress is not None and gen > 0 and len(history["best_rms_mm"]):
         progress(gen, total, float(history["best_rms_mm"][-1]))  # a resumed run starts here
     try:
-        for latest, rows in loop.run(gen_key, state, total):
+        every = settings.checkpoint_every if run is not None else None
+        for latest, rows in loop.run(gen_key, state, total, every):
             state = latest
             history = {k: np.concatenate([history[k], rows[k]]) for k in history}
             gen = int(state.generation)

@@ -4,8 +4,11 @@ Recipe (one generation, §3.2 of Stanciulescu & Louchet 2000, completed by DESIG
 
 1. each of N children starts from a parent drawn by global tournament; with probability
    ``crossover_rate`` its genes are replaced by the multi-parent crossover per bond type;
-2. one mutation variant (``operators.VARIANTS``) is drawn per child and applied (mutabilities
-   first);
+2. one mutation variant (``operators.VARIANTS``) per child is applied (mutabilities first):
+   with fixed variant rates (the default) child i's variant is fixed, the counts proportional
+   to the rates and interleaved (i mod 4 for equal rates: ``operators.plan``), and each child
+   draws only the random numbers its variant uses; with ``adapt_variants`` each child draws
+   its variant from the adapted rates;
 3. children are evaluated (global and local costs; non-finite -> +inf, counted);
 4. survivors are selected from parents + children: 10 % elite, the rest random biased to low
    cost, population size constant.
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import jax
@@ -104,17 +108,37 @@ class PaperES:
         probs = jnp.asarray(settings.variant_probs, dtype)
         return ESState(genes=genes, sigma=sigma, cost=cost, local=local, variant_probs=probs)
 
+    @cached_property
+    def plan(self) -> np.ndarray | None:
+        """The children's fixed mutation variants (:func:`operators.plan`), or None where the
+        variant rates adapt (each child then draws its variant)."""
+        if self.settings.adapt_variants:
+            return None
+        return ops.plan(self.settings.population, self.settings.variant_probs)
+
     def draw(self, key) -> ops.Noise:
-        """The random numbers of one generation (float32)."""
+        """The random numbers of one generation (float32): with fixed variant rates, only
+        those each child's variant uses."""
         shape = np.asarray(self.problem.group_slots).shape
         n, c, g = self.settings.population, self.settings.n_cross, len(self.problem.lower)
-        return ops.draw(key, n, c, g, shape, jnp.float32)
+        plan = self.plan
+        if plan is None:
+            return ops.draw(key, n, c, g, shape, jnp.float32)
+        return ops.draw_planned(key, plan, c, g, shape, jnp.float32)
+
+    def expand(self, nz: ops.Noise) -> ops.Noise:
+        """A generation's numbers in the shapes of :func:`operators.draw`."""
+        plan = self.plan
+        return nz if plan is None else ops.expand(nz, plan, self.settings.variant_probs)
 
     @property
     def noise_bytes(self) -> int:
         """Memory of one generation's random numbers (float32), to size the chunks."""
         n, g = self.settings.population, len(self.problem.lower)
         t, s = np.asarray(self.problem.group_slots).shape
+        plan = self.plan
+        if plan is not None:
+            return ops.planned_bytes(plan, self.settings.n_cross, g, (t, s))
         return 4 * (n * (2 + 4 + 2 * g + 1) + 2 * self.settings.n_cross * t * s + 2 * n)
 
     def ask(self, nz: ops.Noise, state: ESState):
@@ -122,6 +146,7 @@ class PaperES:
         problem, settings = self.problem, self.settings
         n = settings.population
         dtype = state.genes.dtype
+        nz = self.expand(nz)
         bounds = ops.Bounds(jnp.asarray(problem.lower, dtype), jnp.asarray(problem.upper, dtype))
         gene_group = jnp.asarray(problem.gene_group)
         slots = jnp.asarray(problem.group_slots)

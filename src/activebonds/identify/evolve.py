@@ -4,12 +4,19 @@ A generation is fused: ``ask``, the vmapped evaluation (non-finite -> +inf, coun
 ``tell``. Many generations run in one compiled ``lax.scan`` (a chunk) whose random numbers
 are drawn first, in bulk; generation g's numbers depend only on the seed key and g, so
 results do not depend on how a run is chunked, interrupted or resumed. Generations at or
-beyond ``stop`` leave the state unchanged, so one compiled chunk serves a whole run. Used by
-``fit``/``resume`` (driver.py), the multi-seed experiments and the benchmarks.
+beyond ``stop`` leave the state unchanged, so a compiled chunk may run past the end.
+
+Chunks are sized by time (:class:`Chunking`): about :data:`CHUNK_SECONDS` each, from the
+measured time of a generation (first estimated from the start's population evaluation), never
+more generations than remain, and at most ``requested``; a short final chunk is compiled only
+where that is cheaper than running a compiled one past the end. So short fits are short, and
+progress and interrupts stay responsive on big models. Used by ``fit``/``resume``
+(driver.py), the multi-seed experiments and the benchmarks.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterator
 from functools import partial
 from typing import Any, NamedTuple
@@ -22,6 +29,7 @@ from .strategy import Column, Problem, Strategy, finite_or_inf
 
 NOISE_BUDGET = 64 * 2**20  # bytes of random numbers drawn per compiled chunk
 DEFAULT_CHUNK = 250  # generations per compiled chunk, at most
+CHUNK_SECONDS = 1.0  # wall time aimed at per chunk
 
 
 class Run(NamedTuple):
@@ -100,10 +108,49 @@ def keys(seed: int):
     return jax.random.split(jax.random.PRNGKey(seed))
 
 
+class Chunking:
+    """Chooses each chunk's length from measured times: about :data:`CHUNK_SECONDS` a chunk,
+    at most ``limit`` generations; compiled lengths are reused where that costs less than
+    compiling another (a compilation is timed as it happens)."""
+
+    def __init__(self, limit: int, seconds: float = CHUNK_SECONDS):
+        self.limit, self.seconds = limit, seconds
+        self.generation: float | None = None  # seconds per generation, measured
+        self.estimate: float | None = None  # seconds per generation, before any chunk ran
+        self.compile = 0.0  # seconds of the slowest compilation seen
+
+    def target(self) -> int:
+        per = self.generation or self.estimate
+        if per is None:
+            return min(self.limit, 16)
+        return int(max(1, min(self.limit, self.seconds // max(per, 1e-9))))
+
+    def next(self, remaining: int, compiled) -> int:
+        """The length of the next chunk, ``remaining`` generations to go."""
+        target = min(self.target(), remaining)
+        if not compiled:
+            return target
+        near = [c for c in compiled if target / 4 <= c <= 2 * target]
+        if remaining > self.target():  # the body of the run: a length near the target
+            return max(near) if near else target
+        per = self.generation or self.estimate or 0.0
+
+        def cost(c):  # time to finish with length c (compiling it if new)
+            calls = -(-remaining // c)
+            return calls * c * per + (0.0 if c in compiled else self.compile)
+
+        options = [c for c in compiled if c * per <= 2 * self.seconds] + [remaining]
+        return min(options, key=cost)
+
+    def observed(self, n: int, seconds: float) -> None:
+        self.generation = seconds / n
+
+
 class Evolution:
     """Compiled start and chunks of one strategy on one problem; ``seeds`` runs them side by
     side (vmapped: they share the compiled code and the vector width). ``display`` turns
-    costs into what people read (the cost's :class:`~activebonds.identify.cost.Display`)."""
+    costs into what people read (the cost's :class:`~activebonds.identify.cost.Display`).
+    ``requested`` caps the generations of a chunk; within it, chunks are sized by time."""
 
     def __init__(
         self,
@@ -120,27 +167,65 @@ class Evolution:
         self.display, self.seeds = display, seeds
         self.columns = history_columns(strategy, display)
         self.length = chunk_length(strategy, requested, total, seeds or 1)
+        self.chunking = Chunking(self.length)
         one_start = partial(start, strategy, problem, dtype)
-        one_chunk = partial(chunk, strategy, problem, dtype, self.length)
         if seeds is None:
             self.start_fn = jax.jit(one_start)
-            self.chunk_fn = jax.jit(one_chunk)
         else:
             self.start_fn = jax.jit(jax.vmap(one_start))
-            self.chunk_fn = jax.jit(jax.vmap(one_chunk, in_axes=(0, 0, None)))
+        self._jitted: dict[int, Any] = {}
+        self._compiled: dict[int, Any] = {}
+
+    def chunk_function(self, n: int):
+        """The jitted chunk of ``n`` generations: ``(gen_key, state, stop) -> (state, rows)``."""
+        if n not in self._jitted:
+            one_chunk = partial(chunk, self.strategy, self.problem, self.dtype, n)
+            if self.seeds is None:
+                self._jitted[n] = jax.jit(one_chunk)
+            else:
+                self._jitted[n] = jax.jit(jax.vmap(one_chunk, in_axes=(0, 0, None)))
+        return self._jitted[n]
+
+    @property
+    def chunk_fn(self):
+        """The jitted chunk of the longest length (:attr:`length`), for the benchmarks."""
+        return self.chunk_function(self.length)
 
     def start(self, init_key) -> Run:
-        return self.start_fn(init_key)
+        """The first state; its time (after compiling) estimates a generation's for the
+        first chunk's length."""
+        began = time.perf_counter()
+        compiled = self.start_fn.lower(init_key).compile()
+        self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
+        began = time.perf_counter()
+        state = jax.block_until_ready(compiled(init_key))
+        self.chunking.estimate = 2.0 * (time.perf_counter() - began)
+        return state
 
     def template(self, init_key) -> Run:
         """Shapes and dtypes of the loop state, without computing it (for checkpoints)."""
         return jax.eval_shape(self.start_fn, init_key)
 
-    def run(self, gen_key, state: Run, stop: int) -> Iterator[tuple[Run, dict[str, np.ndarray]]]:
+    def _call(self, n: int, gen_key, state: Run, stop: int):
+        if n not in self._compiled:
+            began = time.perf_counter()
+            self._compiled[n] = self.chunk_function(n).lower(gen_key, state, stop).compile()
+            self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
+        began = time.perf_counter()
+        out = jax.block_until_ready(self._compiled[n](gen_key, state, stop))
+        self.chunking.observed(n, time.perf_counter() - began)
+        return out
+
+    def run(
+        self, gen_key, state: Run, stop: int, every: int | None = None
+    ) -> Iterator[tuple[Run, dict[str, np.ndarray]]]:
         """Chunks until ``stop`` generations are done: yields (state, history rows of the
-        chunk, as NumPy columns by name; [seeds, k] when vmapped)."""
-        while _generation(state) < stop:
-            state, (rows, active) = self.chunk_fn(gen_key, state, stop)
+        chunk, as NumPy columns by name; [seeds, k] when vmapped). With ``every``, no chunk
+        crosses a multiple of ``every`` (the checkpoints' generations)."""
+        while (done := _generation(state)) < stop:
+            end = stop if every is None else min(stop, (done // every + 1) * every)
+            n = self.chunking.next(end - done, tuple(self._compiled))
+            state, (rows, active) = self._call(n, gen_key, state, end)
             yield state, self.rows(rows, active, state)
 
     def rows(self, rows: dict, active, state: Run) -> dict[str, np.ndarray]:

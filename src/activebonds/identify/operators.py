@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import rng
 
@@ -78,6 +79,99 @@ def draw(
         step=rng.normal(k[8], (n, n_genes), dtype),
         cauchy=rng.cauchy(k[9], (n,), dtype),
         gumbel=rng.gumbel(k[10], (2 * n,), dtype),
+    )
+
+
+def plan(n: int, probs) -> np.ndarray:
+    """Fixed mutation variants of ``n`` children: counts proportional to the variant rates
+    (largest remainder), interleaved so that every variant gets its share of the crossover
+    children (the first ones) and of the copies (i mod 4 for equal rates). [n] indices."""
+    p = np.asarray(probs, np.float64) / np.sum(probs)
+    counts = np.floor(p * n).astype(np.int64)
+    order = np.argsort(-(p * n - counts), kind="stable")
+    counts[order[: n - counts.sum()]] += 1
+    variant = np.empty(n, np.int64)
+    given = np.zeros(len(p))
+    for i in range(n):
+        v = int(np.argmax((i + 1) * counts / n - given))
+        variant[i] = v
+        given[v] += 1
+    return variant
+
+
+def _needs(variant: np.ndarray) -> dict[str, np.ndarray]:
+    """The children (indices) that need each random field, given their planned variants."""
+    adapts = np.asarray([v.adapts for v in VARIANTS])[variant]
+    genes = np.asarray([v.genes for v in VARIANTS])[variant]
+    cauchy = np.asarray([v.step == "cauchy" for v in VARIANTS])[variant]
+    return {
+        "adapt": np.flatnonzero(adapts),  # z0, zi
+        "normal": np.flatnonzero(~cauchy),  # step
+        "cauchy": np.flatnonzero(cauchy),  # cauchy
+        "one": np.flatnonzero(genes == "one"),  # gene
+        "group": np.flatnonzero(genes == "group"),  # group
+    }
+
+
+def draw_planned(
+    key, variant: np.ndarray, n_cross: int, n_genes: int, slots_shape, dtype=jnp.float32
+) -> Noise:
+    """The random numbers of one generation whose children's variants are fixed
+    (:func:`plan`): each child draws only what its variant uses (:func:`expand` gives them
+    the shapes of :func:`draw`)."""
+    k = rng.streams(key, 11)
+    t, s = slots_shape
+    n = len(variant)
+    need = {name: len(rows) for name, rows in _needs(variant).items()}
+    return Noise(
+        parent=rng.uniform(k[0], (2, n)),
+        cross=rng.uniform(k[1], (2, n_cross, t, s)),
+        variant=jnp.zeros((0, 1), jnp.float32),
+        group=rng.uniform(k[4], (need["group"], 1)),
+        gene=rng.uniform(k[5], (need["one"],)),
+        z0=rng.normal(k[6], (need["adapt"], 1), dtype),
+        zi=rng.normal(k[7], (need["adapt"], n_genes), dtype),
+        step=rng.normal(k[8], (need["normal"], n_genes), dtype),
+        cauchy=rng.cauchy(k[9], (need["cauchy"],), dtype),
+        gumbel=rng.gumbel(k[10], (2 * n,), dtype),
+    )
+
+
+def planned_bytes(variant: np.ndarray, n_cross: int, n_genes: int, slots_shape) -> int:
+    """Memory of :func:`draw_planned`'s numbers (float32)."""
+    need = {name: len(rows) for name, rows in _needs(variant).items()}
+    t, s = slots_shape
+    n = len(variant)
+    rows = need["adapt"] * (1 + n_genes) + need["normal"] * n_genes + need["cauchy"]
+    return 4 * (2 * n + 2 * n_cross * t * s + need["group"] + need["one"] + rows + 2 * n)
+
+
+def expand(nz: Noise, variant: np.ndarray, probs) -> Noise:
+    """Planned numbers (:func:`draw_planned`) in the shapes of :func:`draw`: zeros where a
+    child's variant uses none, and variant uniforms that :func:`choose` maps, under the
+    rates ``probs``, to each child's planned variant."""
+    n = len(variant)
+    rows = {}
+    for name, idx in _needs(variant).items():
+        table = np.full(n, len(idx))  # the zero row past the drawn ones
+        table[idx] = np.arange(len(idx))
+        rows[name] = table
+
+    def spread(a, name):
+        pad = jnp.zeros((1, *a.shape[1:]), a.dtype)
+        return jnp.concatenate([a, pad])[rows[name]]
+
+    p = np.asarray(probs, np.float64)
+    cdf = np.cumsum(p)
+    middle = (cdf - 0.5 * p) / cdf[-1]
+    return nz._replace(
+        variant=jnp.asarray(middle[variant][:, None], jnp.float32),
+        group=spread(nz.group, "group"),
+        gene=spread(nz.gene, "one"),
+        z0=spread(nz.z0, "adapt"),
+        zi=spread(nz.zi, "adapt"),
+        step=spread(nz.step, "normal"),
+        cauchy=spread(nz.cauchy, "cauchy"),
     )
 
 
