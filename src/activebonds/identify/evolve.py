@@ -123,7 +123,7 @@ class Chunking:
         per = self.generation or self.estimate
         if per is None:
             return min(self.limit, 16)
-        return int(max(1, min(self.limit, self.seconds // max(per, 1e-9))))
+        return int(max(1, min(self.limit, self.seconds / max(per, 1e-9))))
 
     def next(self, remaining: int, compiled) -> int:
         """The length of the next chunk, ``remaining`` generations to go."""
