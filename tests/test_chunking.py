@@ -34,7 +34,8 @@ def test_compiled_lengths_are_reused_unless_far_from_the_target():
     c = Chunking(limit=250, seconds=1.0)
     c.generation, c.compile = 0.025, 3.0  # target 40
     assert c.next(1000, (16,)) == 16  # within 4x of the target: no second compilation
-    assert c.next(1000, (5,)) == 40  # too short a chunk: compile the target length
+    assert c.next(10_000, (5,)) == 40  # too short a chunk for a long run: compile the target
+    assert c.next(1000, (5,)) == 5  # 25 s left, under 10 compilations: not worth one
     # the tail: 6 generations left, 16 compiled. Running 16 (10 masked) costs 0.4 s, compiling
     # 6 costs 3 s: reuse
     assert c.next(6, (16,)) == 16

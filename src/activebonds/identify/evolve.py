@@ -130,10 +130,17 @@ class Chunking:
         target = min(self.target(), remaining)
         if not compiled:
             return target
-        near = [c for c in compiled if target / 4 <= c <= 2 * target]
-        if remaining > self.target():  # the body of the run: a length near the target
-            return max(near) if near else target
         per = self.generation or self.estimate or 0.0
+        if remaining > self.target():  # the body of the run: a length near the target
+            near = [c for c in compiled if target / 4 <= c <= 2 * target]
+            if near:
+                return max(near)
+            # shorter chunks only cost their calls' overhead: compile the target length only
+            # where the rest of the run is long beside a compilation
+            short = [c for c in compiled if c < target]
+            if short and remaining * per < 10 * self.compile:
+                return max(short)
+            return target
 
         def cost(c):  # time to finish with length c (compiling it if new)
             calls = -(-remaining // c)
@@ -192,13 +199,14 @@ class Evolution:
         return self.chunk_function(self.length)
 
     def start(self, init_key) -> Run:
-        """The first state; its time (after compiling) estimates a generation's for the
-        first chunk's length."""
+        """The first state; the time of a second call (one population evaluation, without
+        the first call's allocations) estimates a generation's for the first chunk's length."""
         began = time.perf_counter()
         compiled = self.start_fn.lower(init_key).compile()
         self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
+        state = jax.block_until_ready(compiled(init_key))  # the first call allocates
         began = time.perf_counter()
-        state = jax.block_until_ready(compiled(init_key))
+        jax.block_until_ready(compiled(init_key))
         self.chunking.estimate = 2.0 * (time.perf_counter() - began)
         return state
 
