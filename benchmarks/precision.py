@@ -61,7 +61,11 @@ def _one(model, options, generations, seed, precision):
     )
     # steady speed: the median over chunks after the first (a chunk that compiled a new
     # length is an outlier the median ignores)
-    rates = [(g1 - g0) / (t1 - t0) for (t0, g0), (t1, g1) in zip(marks, marks[1:]) if t1 > t0]
+    rates = [
+        (g1 - g0) / (t1 - t0)
+        for (t0, g0), (t1, g1) in zip(marks, marks[1:], strict=False)
+        if t1 > t0
+    ]
     rate = statistics.median(rates) if rates else float("nan")
     return {"gen_per_s": rate, "rms_mm": float(result.rms_mm)}
 
