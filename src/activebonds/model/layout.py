@@ -87,7 +87,16 @@ class Layout:
 
     def decode(self, genome):
         """Genome (search space, [G]) -> Params. Pure JAX; vmap it over a population."""
-        values = jnp.where(jnp.asarray(self.log), jnp.exp(genome), genome)
+        # exp of the log-scaled genes only (few of a neural model's), put back by one gather
+        log = np.flatnonzero(np.asarray(self.log, bool))
+        if len(log) == len(self.genes):
+            values = jnp.exp(genome)
+        elif len(log):
+            where = np.arange(len(self.genes))
+            where[log] = len(self.genes) + np.arange(len(log))
+            values = jnp.concatenate([genome, jnp.exp(genome[log])])[where]
+        else:
+            values = genome
         padded = jnp.concatenate([values, jnp.zeros((1,), values.dtype)])
 
         def leaf(base, index):
