@@ -36,3 +36,23 @@ def float64(fn):
             return fn(*args, **kwargs)
 
     return scoped
+
+
+def compilation_cache() -> None:
+    """Keep compiled programs between runs (a repeated fit of the same shapes starts at
+    once): JAX's persistent cache in ``~/.cache/activebonds/jax``. ``ACTIVEBONDS_CACHE=off``
+    disables it; ``ACTIVEBONDS_CACHE=DIR`` moves it. (The command line's choice, for the
+    processes that run its work elsewhere, e.g. a sweep's Ray workers.)"""
+    from pathlib import Path
+
+    where = os.environ.get("ACTIVEBONDS_CACHE", "")
+    if where.lower() in ("off", "0", "no"):
+        return
+    folder = Path(where or Path.home() / ".cache" / "activebonds" / "jax")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))

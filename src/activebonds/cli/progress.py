@@ -53,3 +53,34 @@ def fit_progress(total: int, console: Console):
     finally:
         if state["task"] is not None:
             bar.stop()
+
+
+@contextmanager
+def sweep_progress(total: int, console: Console):
+    """A progress bar over a sweep's fits: fits done of all, how many were skipped (finished
+    before) and how many failed, elapsed time, ETA. Yields ``update(outcome)``."""
+    columns = (
+        TextColumn("[bold]fits"),
+        MofNCompleteColumn(),
+        BarColumn(),
+        TextColumn("{task.fields[skipped]} skipped, {task.fields[failed]} failed"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+    )
+    bar = Progress(*columns, console=console, transient=False)
+    task = bar.add_task("sweep", total=total, skipped=0, failed=0)
+    counts = {"skipped": 0, "failed": 0}
+
+    def update(outcome) -> None:
+        if outcome.action == "skipped":
+            counts["skipped"] += 1
+        if not outcome.ok:
+            counts["failed"] += 1
+        bar.update(task, advance=1, **counts)
+
+    bar.start()
+    try:
+        yield update
+    finally:
+        bar.stop()

@@ -38,6 +38,17 @@ def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float) -> flo
     return float(np.sqrt(np.sum(weight[..., None] * resid**2) / n) * 1000.0)
 
 
+def zero_force_rms_mm_of(recordings) -> float:
+    """The zero-force baseline's RMS (mm) over every one-step term of several recordings
+    (trajectories; a fit on several at once adds their costs)."""
+    sq = n = 0.0
+    for d in recordings:
+        terms = make_windows(d.positions, d.mask, d.dt, 1).n_terms
+        sq += zero_force_rms_mm(d.positions, d.mask, d.dt) ** 2 * terms
+        n += terms
+    return float(np.sqrt(sq / max(n, 1)))
+
+
 def _constraints(x: np.ndarray, mass: np.ndarray) -> np.ndarray:
     """Rows of C with C a = 0 for internal accelerations a (flattened [P * D]) at positions x.
     Torques are taken about the heaviest particle (the same constraints as about any point,
