@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import TRIANGLE
 
 from activebonds.identify import evolve, strategies
 from activebonds.identify.cost import Display
@@ -16,6 +15,7 @@ from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model
 from activebonds.simulation import simulate
+from helpers import TRIANGLE
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -61,7 +61,8 @@ def _evolve(problem, settings, seconds: float, stop: int, every=None):
         init_key, gen_key = evolve.keys(settings.seed)
         state = loop.start(init_key)
         lengths, rows = [], []
-        for state, row in loop.run(gen_key, state, stop, every):
+        for latest, row in loop.run(gen_key, state, stop, every):
+            state = latest
             lengths.append(len(row["generation"]))
             rows.append(row)
         history = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}

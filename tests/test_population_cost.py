@@ -8,7 +8,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, TRIANGLE
 
 from activebonds.bonds.accumulate import accumulate
 from activebonds.data import Trajectory, read_trajectory
@@ -19,6 +18,7 @@ from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings
 from activebonds.model import as_neural, load_model
 from activebonds.simulation import simulate
+from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, TRIANGLE
 
 
 def _genes(problem, n: int, seed: int = 0) -> jnp.ndarray:
