@@ -117,28 +117,23 @@ class PaperES:
         return ops.plan(self.settings.population, self.settings.variant_probs)
 
     def draw(self, key) -> ops.Noise:
-        """The random numbers of one generation (float32): with fixed variant rates, only
-        those each child's variant uses."""
+        """The random numbers of one generation (float32): with fixed variant rates, each
+        child draws only those its variant uses, spread to the shapes of
+        :func:`operators.draw` here, in bulk before the generations run (a gather inside a
+        generation would be fused into its every consumer)."""
         shape = np.asarray(self.problem.group_slots).shape
         n, c, g = self.settings.population, self.settings.n_cross, len(self.problem.lower)
         plan = self.plan
         if plan is None:
             return ops.draw(key, n, c, g, shape, jnp.float32)
-        return ops.draw_planned(key, plan, c, g, shape, jnp.float32)
-
-    def expand(self, nz: ops.Noise) -> ops.Noise:
-        """A generation's numbers in the shapes of :func:`operators.draw`."""
-        plan = self.plan
-        return nz if plan is None else ops.expand(nz, plan, self.settings.variant_probs)
+        planned = ops.draw_planned(key, plan, c, g, shape, jnp.float32)
+        return ops.expand(planned, plan, self.settings.variant_probs)
 
     @property
     def noise_bytes(self) -> int:
         """Memory of one generation's random numbers (float32), to size the chunks."""
         n, g = self.settings.population, len(self.problem.lower)
         t, s = np.asarray(self.problem.group_slots).shape
-        plan = self.plan
-        if plan is not None:
-            return ops.planned_bytes(plan, self.settings.n_cross, g, (t, s))
         return 4 * (n * (2 + 4 + 2 * g + 1) + 2 * self.settings.n_cross * t * s + 2 * n)
 
     def ask(self, nz: ops.Noise, state: ESState):
@@ -146,7 +141,6 @@ class PaperES:
         problem, settings = self.problem, self.settings
         n = settings.population
         dtype = state.genes.dtype
-        nz = self.expand(nz)
         bounds = ops.Bounds(jnp.asarray(problem.lower, dtype), jnp.asarray(problem.upper, dtype))
         gene_group = jnp.asarray(problem.gene_group)
         slots = jnp.asarray(problem.group_slots)

@@ -82,18 +82,18 @@ def make_population_cost(
     def evaluate(genes):
         params = jax.vmap(layout.decode)(genes)
         params = jax.tree.map(lambda a: a.astype(work), params)
-        n = genes.shape[0]
-        inv_m = 1.0 / params.mass  # [N, P]
-        acc = jnp.broadcast_to(params.gravity[:, None, None, :], (n, 1, n_p, dim))  # F = m g
-        force = jnp.zeros((fixed.shape[0], n, n_p * dim), work)  # [S, N, P D]
+        n, n_s = genes.shape[0], fixed.shape[0]
+        # the population is the last axis throughout (contiguous: vectorised along it)
+        force = jnp.zeros((n_s, n_p, dim, n), work)  # [S, P, D, N]
         if binary:
-            force = force + _binary_forces(params.bonds[_BINARY], geometry, neural, t0_j)
-        force = force.reshape(fixed.shape[0], n, n_p, dim).transpose(1, 0, 2, 3)
+            bond_params = params.bonds[_BINARY]
+            force = force + _binary_forces(bond_params, geometry, neural, t0_j, n_p, dim)
         if others:
-            force = force + jax.vmap(other_forces)(params)
-        acc = acc + force * inv_m[:, None, :, None]  # [N, S, P, D]
-        err2 = jnp.sum((fixed_j[None] + dt2 * acc) ** 2, axis=-1)  # [N, S, P]
-        local = jnp.sum(jnp.where(weight_j[None] > 0, err2, 0.0), axis=1)
+            force = force + jax.vmap(other_forces)(params).transpose(1, 2, 3, 0)
+        inv_m = (1.0 / params.mass).T  # [P, N]
+        acc = params.gravity.T[None, None] + force * inv_m[None, :, None]  # F = m g + bonds
+        err2 = jnp.sum((fixed_j[..., None] + dt2 * acc) ** 2, axis=2)  # [S, P, N]
+        local = jnp.sum(jnp.where(weight_j[..., None] > 0, err2, 0.0), axis=0).T  # [N, P]
         local = jnp.where(jnp.isfinite(local), local, jnp.inf)
         return jnp.sum(local, axis=-1), local
 
@@ -101,8 +101,9 @@ def make_population_cost(
 
 
 def _binary_geometry(topology, x0, v0, n_particles: int) -> dict[str, np.ndarray]:
-    """Per restart: lengths L [S, B], rates Ldot [S, B], and the map from tensions to particle
-    forces [S, B, P D] (``+u`` at the first particle, ``-u`` at the second)."""
+    """Per restart: lengths L [S, B, 1], rates Ldot [S, B, 1], the neuron inputs [S, 2B], and
+    the map from tensions to particle forces: dense [S, P D, B] (``+u`` at a bond's first
+    particle, ``-u`` at its second) or, for large models, gathered by particle."""
     pairs = np.asarray(topology["particles"])
     i, j = pairs[:, 0], pairs[:, 1]
     d = x0[:, j] - x0[:, i]
@@ -111,12 +112,16 @@ def _binary_geometry(topology, x0, v0, n_particles: int) -> dict[str, np.ndarray
         u = d / length[..., None]
     rate = np.sum((v0[:, j] - v0[:, i]) * u, axis=-1)
     s, b, dim = u.shape
-    out = {"length": length, "inputs": np.concatenate([length, rate], axis=1), "rate": rate}
+    out = {
+        "length": length[..., None],
+        "rate": rate[..., None],
+        "inputs": np.concatenate([length, rate], axis=1),
+    }
     if spread_form(b, n_particles) == "dense":
-        spread = np.zeros((s, b, n_particles, dim))
-        spread[:, np.arange(b), i] += u
-        spread[:, np.arange(b), j] -= u
-        out["spread"] = spread.reshape(s, b, n_particles * dim)
+        spread = np.zeros((s, n_particles, dim, b))
+        spread[:, i, :, np.arange(b)] += u.transpose(1, 0, 2)
+        spread[:, j, :, np.arange(b)] -= u.transpose(1, 0, 2)
+        out["spread"] = spread.reshape(s, n_particles * dim, b)
     else:  # particle p sums the tensions of bonds table[p] along ends[:, p] (0 past its ends)
         table, total = gather_table(n_particles, [i, j])
         bond = np.where(table < total, table % b, 0)
@@ -128,36 +133,36 @@ def _binary_geometry(topology, x0, v0, n_particles: int) -> dict[str, np.ndarray
 
 def spread_form(n_bonds: int, n_particles: int) -> str:
     """How tensions become particle forces: "dense" (a product with the signed incidence of
-    every restart, [B, P D]: fastest while small) or "gathered" (each particle's bonds by
+    every restart, [P D, B]: fastest while small) or "gathered" (each particle's bonds by
     index: work grows with the bond ends, not with bonds x particles)."""
     return "dense" if n_bonds * n_particles <= DENSE_LIMIT else "gathered"
 
 
-def _binary_forces(params, geometry, neural: np.ndarray, t0):
-    """Forces of the binary bonds of every individual at every restart: [S, N, P D]."""
-    length, rate = geometry["length"], geometry["rate"]  # [S, B]
-    rest = params["rest_length"]  # [N, B]
-    elongation = length[:, None, :] - rest[None]  # [S, N, B]
-    tension = params["stiffness"][None] * elongation + params["damping"][None] * rate[:, None]
+def _binary_forces(params, geometry, neural: np.ndarray, t0, n_p: int, dim: int):
+    """Forces of the binary bonds of every individual at every restart: [S, P, D, N]."""
+    length, rate = geometry["length"], geometry["rate"]  # [S, B, 1]
+    rest = params["rest_length"].T  # [B, N]
+    elongation = length - rest[None]  # [S, B, N]
+    tension = params["stiffness"].T[None] * elongation + params["damping"].T[None] * rate
     if neural.any():
         b = len(neural)
         off = jnp.asarray(1.0 - np.eye(b), length.dtype)
         w_len = params["length_weights"] * off  # [N, B, B]
         w_rate = params["rate_weights"] * off
-        # neuron inputs: [S, 2B] @ [2B, N B] -> [S, N, B]
-        weights = jnp.concatenate([w_len, w_rate], axis=2)  # [N, B, 2B]
-        n = weights.shape[0]
-        net = (geometry["inputs"] @ weights.reshape(n * b, 2 * b).T).reshape(-1, n, b)
-        bias = -jnp.einsum("nbj,nj->nb", w_len, rest) - params["threshold"]  # [N, B]
+        # neuron inputs: [S, 2B] @ [2B, B N] -> [S, B, N]
+        n = w_len.shape[0]
+        weights = jnp.concatenate([w_len, w_rate], axis=2).transpose(2, 1, 0)  # [2B, B, N]
+        net = (geometry["inputs"] @ weights.reshape(2 * b, b * n)).reshape(-1, b, n)
+        bias = -jnp.einsum("nbj,nj->bn", w_len, params["rest_length"]) - params["threshold"].T
         net = net + bias[None]
         if "drive_weight" in params:
-            freq = jnp.broadcast_to(params["drive_frequency"], rest.shape)  # [N, B]
-            phase = 2.0 * jnp.pi * freq[None] * t0[:, None, None] + params["drive_phase"][None]
-            net = net + params["drive_weight"][None] * jnp.sin(phase)
-        gain = jnp.where(jnp.asarray(neural), params["gain"], 0.0)  # [N, B]
+            freq = jnp.broadcast_to(params["drive_frequency"], params["rest_length"].shape).T
+            phase = 2.0 * jnp.pi * freq[None] * t0[:, None, None] + params["drive_phase"].T[None]
+            net = net + params["drive_weight"].T[None] * jnp.sin(phase)
+        gain = jnp.where(jnp.asarray(neural)[:, None], params["gain"].T, 0.0)  # [B, N]
         tension = tension + gain[None] * jnp.tanh(net)
-    if "spread" in geometry:  # tensions to particle forces: [S, N, B] @ [S, B, P D]
-        return jnp.einsum("snb,sbq->snq", tension, geometry["spread"])
+    n_s, n = tension.shape[0], tension.shape[-1]
+    if "spread" in geometry:  # [S, P D, B] @ [S, B, N]
+        return jnp.matmul(geometry["spread"], tension).reshape(n_s, n_p, dim, n)
     bond, ends = geometry["bond"], geometry["ends"]  # [P, K], [S, P, K, D]
-    force = jnp.einsum("snpk,spkd->snpd", tension[:, :, bond], ends)
-    return force.reshape(*force.shape[:2], -1)
+    return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])
