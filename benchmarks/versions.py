@@ -177,6 +177,8 @@ METRIC = {
 def run_child(case: str, spec: dict, side: dict, workdir: Path, timeout: float) -> dict:
     workdir.mkdir(parents=True, exist_ok=True)
     full = {**spec, "case": case, "expect_root": side["src"], "workdir": str(workdir)}
+    if side.get("precision"):  # --new-precision: a setting the old side may not know
+        full["precision"] = side["precision"]
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
     env.update(
         PYTHONPATH=side["src"],
@@ -432,6 +434,10 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per child")
     ap.add_argument("--json", type=Path, help="write every number to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the temporary trees")
+    ap.add_argument(
+        "--new-precision",
+        help="the new side's --precision (e.g. mixed); the old side keeps its default float64",
+    )
     args = ap.parse_args(argv)
     only = args.only.split(",") if args.only else list(CASES)
     unknown = set(only) - set(CASES)
@@ -448,6 +454,8 @@ def main(argv=None) -> int:
             else snapshot_working_tree(tmp / "new"),
             "old": extract(args.base, tmp / "old"),
         }
+        if args.new_precision:
+            sides["new"]["precision"] = args.new_precision
         for name, side in sides.items():
             log(f"{name}: {side['short']} {side['subject']}  (PYTHONPATH={side['src']})")
         report = {

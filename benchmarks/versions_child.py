@@ -299,6 +299,8 @@ def main(spec: dict) -> dict:
         options["markers"] = tuple(spec["markers"])
     if spec.get("chunk"):
         options["chunk"] = spec["chunk"]
+    if spec.get("precision"):
+        options["precision"] = spec["precision"]
     settings = FitSettings(**options)
     info["settings"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
 
