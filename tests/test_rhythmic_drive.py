@@ -405,7 +405,9 @@ def test_fit_recovers_the_drive_with_a_spring_gain_and_threshold():
     data = simulate(truth, n_frames=180, rate=60.0)
     start = start_model(triangle(**SPRING))
     assert start.layout.n_genes == 9
-    result = fit(start, data, population=60, generations=1500, seed=0)
+    # 3000 generations: with the planned mutation variants (issue 14) seed 0 needs more than
+    # 1500 to leave a near-optimum (seeds 1-3 recover in 1500)
+    result = fit(start, data, population=60, generations=3000, seed=0)
     assert_drive_recovered(result.model)
     binary = result.model.params.bonds["binary"]
     found = [binary[f][0] for f in ("stiffness", "gain", "damping", "threshold")]

@@ -199,15 +199,14 @@ class Evolution:
         return self.chunk_function(self.length)
 
     def start(self, init_key) -> Run:
-        """The first state; the time of a second call (one population evaluation, without
-        the first call's allocations) estimates a generation's for the first chunk's length."""
+        """The first state; its time (one population evaluation, compiled apart) estimates a
+        generation's for the first chunk's length."""
         began = time.perf_counter()
         compiled = self.start_fn.lower(init_key).compile()
         self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
-        state = jax.block_until_ready(compiled(init_key))  # the first call allocates
         began = time.perf_counter()
-        jax.block_until_ready(compiled(init_key))
-        self.chunking.estimate = 2.0 * (time.perf_counter() - began)
+        state = jax.block_until_ready(compiled(init_key))
+        self.chunking.estimate = time.perf_counter() - began
         return state
 
     def template(self, init_key) -> Run:
