@@ -71,14 +71,14 @@ def _evolve(problem, settings, seconds: float, stop: int, every=None):
 
 def test_results_do_not_depend_on_the_chunk_lengths():
     model, traj = _triangle()
-    settings = FitSettings(population=24, generations=60, seed=3)
+    settings = FitSettings(population=16, generations=40, seed=3)
     with jax.enable_x64(True):
         problem = identification(model, traj, settings).problem
-    tiny = _evolve(problem, settings, 1e-9, 60)  # chunks of one generation
-    whole = _evolve(problem, settings, 1e9, 60)  # one chunk
-    aligned = _evolve(problem, settings, 1e9, 60, every=25)  # no chunk crosses 25 or 50
-    assert set(tiny[2]) == {1} and whole[2] == [60]
-    assert np.cumsum(aligned[2]).tolist() == [25, 50, 60]
+    tiny = _evolve(problem, settings, 1e-9, 40)  # chunks of one generation
+    whole = _evolve(problem, settings, 1e9, 40)  # one chunk
+    aligned = _evolve(problem, settings, 1e9, 40, every=15)  # no chunk crosses 15 or 30
+    assert set(tiny[2]) == {1} and whole[2] == [40]
+    assert np.cumsum(aligned[2]).tolist() == [15, 30, 40]
     for other in (whole, aligned):
         np.testing.assert_array_equal(tiny[0], other[0])
         for k in tiny[1]:
