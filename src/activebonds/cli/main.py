@@ -287,21 +287,6 @@ def _metrics_line(label: str, found: dict) -> str:
     )
 
 
-def _zero_force_all(recordings) -> float:
-    """The zero-force baseline's RMS (mm) over every fitted recording's one-step terms."""
-    import numpy as np
-
-    from ..experiments.baselines import zero_force_rms_mm
-    from ..identify.cost import make_windows
-
-    sq = n = 0.0
-    for d in recordings:
-        terms = make_windows(d.positions, d.mask, d.dt, 1).n_terms
-        sq += zero_force_rms_mm(d.positions, d.mask, d.dt) ** 2 * terms
-        n += terms
-    return float(np.sqrt(sq / max(n, 1)))
-
-
 def _summary(result, held_out=None) -> None:
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
@@ -316,7 +301,9 @@ def _summary(result, held_out=None) -> None:
             highlight=False,
         )
     data = result.identification.data
-    zero = _zero_force_all(result.identification.all_data)
+    from ..experiments.baselines import zero_force_rms_mm_of
+
+    zero = zero_force_rms_mm_of(result.identification.all_data)
     out.print(
         f"[bold]{result.status}[/]: best RMS error {result.rms_mm:.4g} mm "
         f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
@@ -363,30 +350,12 @@ def _summary(result, held_out=None) -> None:
         out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
 
 
-def _compilation_cache() -> None:
-    """Keep compiled programs between runs (a repeated fit of the same shapes starts at
-    once). ACTIVEBONDS_CACHE=off disables it; ACTIVEBONDS_CACHE=DIR moves it."""
-    import os
-
-    where = os.environ.get("ACTIVEBONDS_CACHE", "")
-    if where.lower() in ("off", "0", "no"):
-        return
-    folder = Path(where or Path.home() / ".cache" / "activebonds" / "jax")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return
-    import jax
-
-    jax.config.update("jax_compilation_cache_dir", str(folder))
-
-
 def main() -> None:
     """Entry point: usage errors become one line and exit code 2."""
-    from ..runtime import fast_cpu_flags
+    from ..runtime import compilation_cache, fast_cpu_flags
 
     fast_cpu_flags()
-    _compilation_cache()
+    compilation_cache()
     try:
         code = app(standalone_mode=False)
     except typer.Exit as e:
