@@ -23,16 +23,35 @@ def simulate(
     substeps: int = 1,
     integrator: str = "euler",
 ) -> Trajectory:
-    """Positions of ``n_frames`` frames at ``rate`` Hz, from the model's initial state or from
-    the first two frames of ``start`` (position of frame 1, and the velocity the integrator
-    carries there given frames 0 and 1: see :func:`~activebonds.physics.start_velocity`).
-    Time (for forces that depend on it) is 0 at the first frame written."""
+    """Free-run a model: positions of ``n_frames`` frames at ``rate`` Hz.
+
+    Args:
+        model: the model (e.g. ``load_model(path)`` or a fit's ``result.model``).
+        n_frames: frames to return, including the first.
+        rate: frame rate in Hz (the step is ``1 / rate``, divided by ``substeps``).
+        start: where to start. ``None`` (default): the model file's initial state, the
+            ``position`` (required for every particle) and ``velocity`` (default zero) of
+            each ``[[particle]]``. A :class:`Trajectory` holding every model marker in its
+            first two frames: those two frames are the first two written, and the run goes
+            on from frame 1 with the velocity the integrator carries there given frames 0
+            and 1 (see :func:`~activebonds.physics.start_velocity`).
+        substeps: integration steps per frame.
+        integrator: ``"euler"`` (semi-implicit) or ``"verlet"``.
+
+    Time (for forces that depend on it) is 0 at the first frame written.
+
+    Raises:
+        InputError: a bad rate or integrator, a particle without ``position`` when ``start``
+            is None, or a ``start`` without the model's markers in its first two frames.
+        DivergenceError: the run became non-finite (names the frame, particle and bonds).
+    """
     if not (np.isfinite(rate) and rate > 0):
         raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
     if integrator not in ("euler", "verlet"):
         raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
     dt = 1.0 / rate
     if start is None:
+        require_initial_state(model)  # before any computation
         x0, v0 = model.initial_state()
         first = None
         t0 = 0.0
@@ -79,6 +98,22 @@ def simulate(
     )
 
 
+def require_initial_state(model: Model, where="model") -> None:
+    """Refuse (InputError) a free run from the model file when some particle has no
+    ``position``: its start would be made up (the origin), not the model's."""
+    missing = [p.name for p in model.spec.particle if p.position is None]
+    if not missing:
+        return
+    shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
+    raise InputError(
+        where,
+        f"the model has no initial state: {len(missing)} of {len(model.spec.particle)} "
+        f"particles have no position ({shown}); give each [[particle]] a position = [...] "
+        f"(and optionally velocity = [...]), or start from a recording's first two frames "
+        f"with --from TRAJ (Python: simulate(..., start=trajectory))",
+    )
+
+
 def check_finite(model: Model, xs: np.ndarray, rate: float) -> None:
     """Report divergence with the first bad frame, the particle and its bonds; never clamp."""
     bad = ~np.isfinite(xs).all(axis=-1)
@@ -105,6 +140,8 @@ def simulate_to_file(
         raise InputError(out, "an output path may not contain '..'")
     model = load_model(model_path)
     start = read_trajectory(start_path) if start_path is not None else None
+    if start is None:
+        require_initial_state(model, model_path)
     traj = simulate(model, n_frames, rate, start, substeps, integrator)
     write_trajectory(traj, Path(out))
     return traj.n_frames
