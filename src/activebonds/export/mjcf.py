@@ -1,0 +1,264 @@
+"""A model as MuJoCo MJCF: point masses on slide joints, tendons, joint springs and gravity.
+
+What maps, exactly (the MuJoCo model's forces are the model's, term for term):
+
+* **particle** -> a body at the particle's initial ``position`` with one slide joint per axis
+  (x, y, z; a 2D model lives in the plane z = 0 with slide joints x and y), no rotation, an
+  ``inertial`` of the particle's mass and a site at its centre. Each joint's ``ref`` is the
+  initial coordinate, so ``qpos`` *is* the world position (particle by particle, axis by
+  axis) and ``qpos0`` the initial state; the initial velocities are the keyframe
+  ``initial`` (``mj_resetDataKeyframe(model, data, 0)``: MuJoCo starts at rest otherwise).
+* **binary bond** (not neural) -> a spatial tendon between the two particles' sites with
+  ``stiffness`` = k, ``damping`` = c, ``springlength`` = l0: MuJoCo's tendon force
+  ``-k (L - l0) - c Ldot`` along the tendon, ``Ldot`` the relative velocity projected on it,
+  is the bond's tension ``k (L - l0) + c Ldot`` pulling the two together.
+* **unary bond** (a spring + damper to a fixed anchor ``a``: ``-k (x - a) - c v``) -> the
+  particle's slide joints: per axis ``stiffness`` = the sum of its unary bonds' k,
+  ``springref`` = their k-weighted mean anchor, ``damping`` = the sum of their c. Not a
+  tendon to a world site: a tendon's damper acts along the line only, the unary damper in
+  every direction. A site on the world body marks each anchor (no force).
+* **gravity** -> ``<option gravity>`` (m g on every body).
+* **integrator**: MuJoCo's ``Euler`` with ``eulerdamp`` disabled is the semi-implicit Euler
+  of ``simulate`` (``v += h F / m``, then ``x += h v``, every force explicit); the timestep is
+  ``1 / (rate * substeps)``, MuJoCo's default (2 ms) without a rate. No geoms, contacts
+  disabled: nothing else acts.
+
+Refused (:class:`~activebonds.errors.InputError`, one line naming them; nothing written):
+neural bonds (a neuron's tension depends on every other bond's state: no MJCF element),
+ternary (flexion) bonds (an energy in the cosine of an angle at three particles), contacts
+(MuJoCo's contacts are soft constraints solved by its constraint solver, with solref/solimp
+and a friction cone, not the penalty spring-damper ``max(0, k d - c n.v)`` with smoothed
+Coulomb friction: it cannot reproduce them faithfully), unary bonds with a moving anchor
+(``anchor_velocity`` != 0) and any other kind. Optional bonds identified as absent and bonds
+of disabled kinds exert no force and are left out.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import write_text_atomic
+from ..errors import InputError
+
+AXES = "xyz"
+INERTIA = 1e-6  # kg m^2: the bodies' rotational inertia (no rotational joint: it never acts)
+SITE_SIZE = "0.01"  # m, the sites' drawn radius (no physics)
+EXPRESSIBLE = "point masses, gravity, binary spring-dampers and fixed unary anchors"
+
+
+def _num(x) -> str:
+    return repr(float(x))  # shortest round-trip form
+
+
+def _vec(xs) -> str:
+    return " ".join(_num(x) for x in xs)
+
+
+def _pad3(xs) -> list[float]:
+    """A 2D vector (x, y) -> (x, y, 0); 3D unchanged."""
+    return [float(x) for x in xs] + [0.0] * (3 - len(xs))
+
+
+_WHY = {"contact bonds": "MuJoCo's contacts are solver constraints, not this penalty law"}
+
+
+def _refusals(model) -> list[str]:
+    """What MuJoCo cannot express, in words with the bonds' indices (empty: all of it can)."""
+    found: dict[str, list[int]] = {}
+    for i, b in enumerate(model.spec.bond):
+        if b.absent or b.kind in model.disabled:
+            continue
+        if b.kind == "binary" and getattr(b, "neural", False):
+            what = "neural bonds"
+        elif b.kind == "binary":
+            continue
+        elif b.kind == "unary":
+            velocity = b.anchor_velocity
+            if velocity is None:
+                continue
+            values = velocity if isinstance(velocity, list) else velocity.value
+            if not any(float(v) != 0.0 for v in values):
+                continue
+            what = "unary bonds with a moving anchor (anchor_velocity)"
+        else:  # ternary, contact, any other kind
+            what = f"{b.kind} bonds"
+        found.setdefault(what, []).append(i)
+    out = []
+    for what, ids in found.items():
+        listed = ", ".join(f"bond[{i}]" for i in ids[:4]) + (", ..." if len(ids) > 4 else "")
+        why = f"; {_WHY[what]}" if what in _WHY else ""
+        what = what.replace("bonds", "bond", 1) if len(ids) == 1 else what
+        out.append(f"{len(ids)} {what} ({listed}{why})")
+    return out
+
+
+def check_exportable(model, source: str = "model") -> None:
+    """Raise InputError (one line) naming every bond kind MuJoCo cannot express, or a model
+    without an initial state."""
+    refused = _refusals(model)
+    if refused:
+        raise InputError(
+            source,
+            f"cannot export to MJCF: MuJoCo cannot express {', '.join(refused)}; "
+            f"only {EXPRESSIBLE} map",
+        )
+    missing = [p.name for p in model.spec.particle if p.position is None]
+    if missing:
+        shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
+        raise InputError(
+            source,
+            f"cannot export to MJCF: {len(missing)} particles have no initial position "
+            f"({shown}); give each [[particle]] a position = [...] (and optionally "
+            f"velocity = [...])",
+        )
+
+
+def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "model") -> str:
+    """The model as an MJCF document (a string; pure).
+
+    Args:
+        model: a :class:`~activebonds.model.Model` of point masses, gravity, binary (not
+            neural) bonds and unary bonds with fixed anchors, every particle with a position.
+        rate: frame rate in Hz; the MuJoCo timestep is ``1 / (rate * substeps)``, so that
+            MuJoCo's semi-implicit Euler steps as ``simulate(model, n, rate,
+            substeps=substeps)`` does. ``None``: MuJoCo's default timestep.
+        substeps: integration steps per frame.
+        source: the model's name in error messages (its file).
+
+    Raises:
+        InputError: a bond MuJoCo cannot express (every such kind named in one line), a
+            particle without ``position``, a bad rate or substeps.
+    """
+    if rate is not None and not (np.isfinite(rate) and rate > 0):
+        raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
+    if not (isinstance(substeps, int | np.integer) and substeps >= 1):
+        raise InputError("--substeps", f"must be a whole number >= 1, got {substeps}")
+    check_exportable(model, source)
+    d = model.dimension
+    params = model.params
+    x0, v0 = model.initial_state()
+    masses = np.asarray(params.mass, np.float64)
+    gravity = _pad3(np.asarray(params.gravity, np.float64))
+
+    # Per particle: the unary bonds' summed stiffness, k-weighted anchor and damping.
+    n = len(model.spec.particle)
+    k_sum = np.zeros(n)
+    ka_sum = np.zeros((n, d))
+    c_sum = np.zeros(n)
+    anchors: list[tuple[int, list[float]]] = []  # (bond index, anchor) for the world sites
+    tendons: list[tuple[int, str, str, float, float, float]] = []
+    names = {p.name: i for i, p in enumerate(model.spec.particle)}
+    counters: dict[str, int] = {}
+    for i, b in enumerate(model.spec.bond):
+        pos = counters.get(b.kind, 0)
+        counters[b.kind] = pos + 1
+        if b.absent or b.kind in model.disabled:
+            continue
+        values = params.bonds[b.kind]
+        if b.kind == "unary":
+            p = names[b.particles[0]]
+            k = float(values["stiffness"][pos])
+            anchor = np.asarray(values["anchor"][pos], np.float64)
+            k_sum[p] += k
+            ka_sum[p] += k * anchor
+            c_sum[p] += float(values["damping"][pos])
+            anchors.append((i, _pad3(anchor)))
+        elif b.kind == "binary":
+            tendons.append(
+                (
+                    i,
+                    *b.particles,
+                    float(values["stiffness"][pos]),
+                    float(values["damping"][pos]),
+                    float(values["rest_length"][pos]),
+                )
+            )
+
+    root = ET.Element("mujoco", model=model.name)
+    root.append(
+        ET.Comment(
+            f" exported by activebonds from the model '{model.name}': qpos = world positions "
+            f"(particle by particle, axes {AXES[:d]}); initial velocities in keyframe "
+            f"'initial' (mj_resetDataKeyframe(model, data, 0)) "
+        )
+    )
+    ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false")
+    option = ET.SubElement(root, "option", integrator="Euler", gravity=_vec(gravity))
+    if rate is not None:
+        option.set("timestep", _num(1.0 / (float(rate) * int(substeps))))
+    # eulerdamp off: dampers explicit, as in simulate; no geoms and no contacts.
+    ET.SubElement(option, "flag", eulerdamp="disable", contact="disable")
+
+    world = ET.SubElement(root, "worldbody")
+    for i, anchor in anchors:
+        site = ET.SubElement(world, "site", pos=_vec(anchor), size=SITE_SIZE, rgba="1 0 0 1")
+        if f"bond{i}_anchor" not in names:  # site names must not clash with the particles'
+            site.set("name", f"bond{i}_anchor")
+    for p, particle in enumerate(model.spec.particle):
+        start = _pad3(x0[p])
+        body = ET.SubElement(world, "body", name=particle.name, pos=_vec(start))
+        for ax in range(d):
+            axis = ["0", "0", "0"]
+            axis[ax] = "1"
+            joint = ET.SubElement(
+                body,
+                "joint",
+                name=f"{particle.name}_{AXES[ax]}",
+                type="slide",
+                axis=" ".join(axis),
+                ref=_num(start[ax]),
+            )
+            if k_sum[p] > 0:
+                joint.set("stiffness", _num(k_sum[p]))
+                joint.set("springref", _num(ka_sum[p, ax] / k_sum[p]))
+            if c_sum[p] > 0:
+                joint.set("damping", _num(c_sum[p]))
+        ET.SubElement(
+            body, "inertial", pos="0 0 0", mass=_num(masses[p]), diaginertia=_vec([INERTIA] * 3)
+        )
+        ET.SubElement(body, "site", name=particle.name, pos="0 0 0", size=SITE_SIZE)
+
+    if tendons:
+        tendon = ET.SubElement(root, "tendon")
+        for i, a, b, k, c, l0 in tendons:
+            spatial = ET.SubElement(
+                tendon,
+                "spatial",
+                name=f"bond{i}",
+                stiffness=_num(k),
+                damping=_num(c),
+                springlength=_num(l0),
+                width="0.005",
+            )
+            ET.SubElement(spatial, "site", site=a)
+            ET.SubElement(spatial, "site", site=b)
+
+    keyframe = ET.SubElement(root, "keyframe")
+    ET.SubElement(
+        keyframe,
+        "key",
+        name="initial",
+        time="0",
+        qpos=_vec(x0.reshape(-1)),
+        qvel=_vec(v0.reshape(-1)),
+    )
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_mjcf(
+    model, path: str | Path, rate: float | None = None, substeps: int = 1, source: str = "model"
+) -> Path:
+    """Write :func:`to_mjcf` atomically (a temporary sibling, then rename); nothing is written
+    when the model is refused."""
+    path = Path(path)
+    if ".." in path.parts:
+        raise InputError(path, "an output path may not contain '..'")
+    if not path.parent.exists():
+        raise InputError(path, "the folder does not exist")
+    text = to_mjcf(model, rate=rate, substeps=substeps, source=source)
+    write_text_atomic(path, text)
+    return path
