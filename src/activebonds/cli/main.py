@@ -382,4 +382,5 @@ from .report_cmd import report  # noqa: E402
 app.command(name="report")(report)
 
 from . import baselines_cmd, structure_cmd, sweep_cmd  # noqa: E402,F401
+from . import datasets_cmd  # noqa: E402,F401
 from . import export_cmd  # noqa: E402,F401

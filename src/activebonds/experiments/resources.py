@@ -15,7 +15,9 @@ def bundled(relative: str) -> Path:
 
 
 def horse_trot() -> Path:
-    return bundled("datasets/horse_vhdc/Horse1_M1_trot1_kinematics.csv")
+    from ..data.bundled import dataset
+
+    return dataset("horse-trot").path
 
 
 def example(name: str) -> Path:
