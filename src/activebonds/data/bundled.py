@@ -53,6 +53,7 @@ DATASETS: dict[str, Bundled] = {
 EXAMPLES = (
     "triangle.toml",
     "triangle.csv",
+    "triangle_candidates.toml",
     "chain2d.toml",
     "horse_limb.toml",
     "horse_trot_drive.toml",
