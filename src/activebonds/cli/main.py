@@ -23,12 +23,21 @@ from .app import app, fail, out, parse_option_frames
 def info(
     traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .npz).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    markers: Annotated[
+        str | None,
+        typer.Option(
+            help="A,B,C: the frame windows where all of these markers are present (for "
+            "fit --frames)."
+        ),
+    ] = None,
 ):
-    """Markers, frames, rate, units and gaps of a trajectory file."""
+    """Markers, frames, rate, units, gaps and coverage of a trajectory file, and its vertical
+    axis guessed twice (lowest markers; acceleration in flight)."""
     from ..data import describe, read_trajectory
 
+    chosen = [m.strip() for m in markers.split(",")] if markers else None
     try:
-        d = describe(read_trajectory(traj))
+        d = describe(read_trajectory(traj), chosen)
     except InputError as e:
         fail(e)
     if as_json:
@@ -50,7 +59,38 @@ def info(
         table.add_row("gaps", ", ".join(f"{k} {v}" for k, v in gaps.items()))
     if d["ground"] is not None:
         table.add_row("vertical, ground (guessed)", d["ground"]["text"])
+    else:
+        table.add_row("vertical, ground (guessed)", "none (fewer than two markers or frames)")
+    table.add_row("vertical from gravity (guessed)", d["gravity"]["text"])
+    agree = {True: "agree", False: "disagree", None: "not comparable (one guess only)"}
+    table.add_row("the two vertical guesses", agree[d["vertical_agree"]])
+    cov = d["coverage"]
+    table.add_row("all markers present", _windows_text(cov["all"]))
+    if cov["chosen"] is not None:
+        table.add_row(f"{','.join(cov['chosen']['markers'])} present", _windows_text(cov["chosen"]))
     out.print(table)
+    per_marker = Table(title="coverage", show_header=True)
+    for column in ("marker", "present", "missing frames", "gaps", "longest gap-free window"):
+        per_marker.add_column(column)
+    for name, c in cov["markers"].items():
+        window = c["longest"]
+        per_marker.add_row(
+            name,
+            f"{100 * c['present']:.1f} %",
+            str(c["missing_frames"]),
+            str(c["gaps"]),
+            "none" if window is None else f"{window['frames']} ({window['length']} frames)",
+        )
+    out.print(per_marker)
+
+
+def _windows_text(record: dict) -> str:
+    """'in 93.2 % of the frames; longest: 120:480 (360 frames), 0:100 (100 frames)'."""
+    windows = record["windows"]
+    if not windows:
+        return "in no frame"
+    listed = ", ".join(f"{w['frames']} ({w['length']} frames)" for w in windows)
+    return f"in {100 * record['present']:.1f} % of the frames; longest: {listed}"
 
 
 @app.command()
@@ -190,7 +230,9 @@ def fit(
             optimizer=optimizer,
         )
         first = traj[0]
+        predictions = _check_predictions(model, traj, settings)
         held_out = _validation_window(model, first, settings, validate) if validate else None
+        out.print(predictions, markup=False, highlight=False)
         data = traj if len(traj) > 1 else first
         with _progress(generations) as progress:
             result = run_fit(
@@ -275,6 +317,60 @@ def _validation_window(model, traj, settings, text: str):
     data = validation_data(variant(load_model(model), settings.bonds), recording, settings, frames)
     stop = recording.n_frames if frames[1] is None else frames[1]
     return (frames[0], stop), data
+
+
+def _check_predictions(model, trajs, settings) -> str:
+    """'gaps removed 17 of 144 predictions (12 %) in frames 0:50', counted like the ES's cost
+    (:func:`~activebonds.identify.cost.count_predictions`) before anything is compiled.
+
+    Too few left is an InputError naming the gap-free windows that would do: none, or fewer
+    predicted coordinates (predictions x dimension, the cost's residuals) than the model has
+    free parameters (genes), which the data could then not determine."""
+    from ..data import read_trajectory
+    from ..data.coverage import longest, present_windows, window_text
+    from ..identify.cost import count_predictions
+    from ..identify.problem import select_recordings, variant
+    from ..model import load_model
+
+    spec = variant(load_model(model), settings.bonds)
+    recordings = [read_trajectory(p) for p in trajs]
+    data = select_recordings(spec, recordings, settings)
+    counts = [count_predictions(d.mask, settings.es_horizon) for d in data]
+    kept, possible = sum(k for k, _ in counts), sum(p for _, p in counts)
+    removed = possible - kept
+    frames = range(recordings[0].n_frames)[slice(*settings.frames)]
+    where = f"frames {frames.start}:{frames.stop}"
+    if len(data) > 1:
+        where += f" of {len(data)} recordings"
+    pct = 100 * removed / possible if possible else 0.0
+    share = f"{pct:.0f}" if pct >= 1 or pct == 0 else f"{pct:.1g}"
+    line = f"gaps removed {removed} of {possible} predictions ({share} %) in {where}"
+    genes, dim = spec.layout.n_genes, spec.dimension
+    if kept > 0 and kept * dim >= genes:
+        return line
+    # a window of L frames with every marker present holds (L - 2) x P predictions at any
+    # horizon (each frame from the third on is predicted once)
+    names = data[0].markers
+    need = 2 + max(1, -(-genes // (len(names) * dim)))
+    full = recordings[0].select(list(names))
+    windows = present_windows(full.mask)
+    good = longest([w for w in windows if w[1] - w[0] >= need], 3)
+    listed = ", ".join(window_text(w) for w in good)
+    source = f" of {full.source}" if len(data) > 1 and full.source else ""
+    if good:
+        hint = f"windows{source} where {', '.join(names)} are all present that would do: {listed}"
+    elif windows:
+        hint = (
+            f"no window{source} where {', '.join(names)} are all present holds {need} frames; "
+            f"the longest: {window_text(longest(windows, 1)[0])}"
+        )
+    else:
+        hint = f"{', '.join(names)} are never all present in one frame{source}"
+    raise InputError(
+        "--frames",
+        f"{line}: the {kept} left give {kept * dim} coordinates for the model's {genes} free "
+        f"parameters, too few (gap-free windows need {need} frames); {hint}",
+    )
 
 
 def _metrics_line(label: str, found: dict) -> str:

@@ -9,24 +9,39 @@ from __future__ import annotations
 
 import numpy as np
 
-from activebonds.data.orientation import guess_ground
+from activebonds.data.coverage import coverage
+from activebonds.data.orientation import agree, guess_gravity, guess_ground
 from activebonds.data.readers import read_trajectory
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
+from activebonds.errors import InputError
 
 __all__ = ["Trajectory", "describe", "read_trajectory", "write_trajectory"]
 
 
-def describe(traj: Trajectory) -> dict:
+def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
     """JSON-ready summary: markers, frames, rate, dt, duration, units, dimension, gaps.
 
     ``duration`` is the time from the first to the last frame, ``(frames - 1) / rate``;
     ``units`` the length unit of the source file (positions are always in metres);
     ``gaps`` maps each marker to its number of missing frames; ``ground`` the vertical axis
-    and ground level guessed from the markers (:mod:`activebonds.data.orientation`), or None.
+    and ground level guessed from the markers (:mod:`activebonds.data.orientation`), or None;
+    ``gravity`` the vertical guessed from the markers' acceleration in flight (``up`` None and
+    ``text`` saying why when there is no flight phase), ``vertical_agree`` whether the two
+    guesses name the same up (None unless both found one); ``coverage`` where the data is
+    (:func:`activebonds.data.coverage.coverage`; ``chosen`` for the names in ``markers``).
     """
+    if markers is not None:
+        unknown = [m for m in markers if m not in traj.markers]
+        if unknown:
+            raise InputError(
+                "--markers",
+                f"marker {unknown[0]!r} not found in {traj.source or 'the trajectory'}; "
+                f"available: {', '.join(traj.markers)}",
+            )
     missing = np.count_nonzero(~traj.mask, axis=0)
     ground = guess_ground(traj)
+    gravity = guess_gravity(traj)
     return {
         "source": traj.source,
         "markers": list(traj.markers),
@@ -49,4 +64,17 @@ def describe(traj: Trajectory) -> dict:
             "lowest_marker": ground.lowest,
             "text": ground.describe(),
         },
+        "gravity": {
+            "up": None
+            if not gravity.found
+            else ("+" if gravity.up > 0 else "-") + "XYZ"[gravity.axis],
+            "normal": gravity.normal,
+            "acceleration": None if not gravity.found else list(gravity.acceleration),
+            "along_up": gravity.along_up,
+            "flight_frames": gravity.flight_frames,
+            "phases": gravity.phases,
+            "text": gravity.describe(),
+        },
+        "vertical_agree": agree(ground, gravity),
+        "coverage": coverage(traj, markers),
     }

@@ -12,6 +12,18 @@ mean positions), picks the flattest, signs it so that the markers' mean lies abo
 minimum, and takes the ground height as the 5th percentile of the per-frame minimum. The
 guess says how sure it is (its score beside the next axis's): a recording of a body in the
 air, or of markers at one height, has no clear answer and is reported as such.
+
+:func:`guess_gravity` is a second, independent guess, from the acceleration: only in flight
+(a ballistic phase, no marker on the ground) do the markers fall freely, their mean
+accelerating at about g downwards (over a whole stride on the ground it averages to about 0,
+so the acceleration says nothing there). For each axis and sign taken as up, the flight
+frames are those whose lowest marker is more than :data:`FLIGHT_MARGIN` above the ground (the
+5th percentile of the lowest marker); over each run of at least :data:`MIN_PHASE` such frames,
+the mean position of the markers present throughout is fitted by one parabola in time per run
+(a shared acceleration, each run its own position and velocity). The direction whose flight
+acceleration is within :data:`GRAVITY_TOLERANCE` of ``-g * up`` (as a vector: sideways
+acceleration counts too) is the guess; when none is, there is no guess ("no flight phase
+found"), never a forced one.
 """
 
 from __future__ import annotations
@@ -24,6 +36,10 @@ from .trajectory import Trajectory
 
 AXES = "XYZ"
 CLEAR = 0.5  # the flattest axis must score at most this fraction of the next one
+G = 9.81  # m/s^2
+FLIGHT_MARGIN = 0.03  # m: in flight, the lowest marker is at least this far above the ground
+MIN_PHASE = 5  # frames: the shortest flight phase used (a parabola needs a few frames)
+GRAVITY_TOLERANCE = 0.25  # the flight acceleration is within this fraction of g of -g * up
 
 
 @dataclass(frozen=True)
@@ -97,3 +113,117 @@ def guess_ground(traj: Trajectory) -> Ground | None:
         clear=bool(scores[axis] <= CLEAR * second),
         lowest=traj.markers[int(np.argmax(counts))],
     )
+
+
+@dataclass(frozen=True)
+class Gravity:
+    """The vertical as the acceleration in flight says, or none (``axis`` None) and why."""
+
+    axis: int | None  # index of the vertical axis, None if no flight phase was found
+    up: float | None  # +1.0 or -1.0
+    acceleration: tuple[float, ...] | None  # the markers' mean acceleration in flight, m/s^2
+    flight_frames: int  # frames of the flight phases used
+    phases: int  # flight phases (runs of at least MIN_PHASE flight frames) used
+    reason: str = ""  # why there is no guess
+
+    @property
+    def found(self) -> bool:
+        return self.axis is not None
+
+    @property
+    def normal(self) -> list[float] | None:
+        if self.axis is None:
+            return None
+        n = [0.0] * len(self.acceleration)
+        n[self.axis] = self.up
+        return n
+
+    @property
+    def along_up(self) -> float | None:
+        """The flight acceleration along up (about -9.81 m/s^2)."""
+        return None if self.axis is None else self.up * self.acceleration[self.axis]
+
+    def describe(self) -> str:
+        if self.axis is None:
+            return f"none ({self.reason})"
+        sign = "+" if self.up > 0 else "-"
+        return (
+            f"up = {sign}{AXES[self.axis]}: the markers accelerate at {self.along_up:.2f} m/s^2 "
+            f"along it in {self.flight_frames} flight frames ({self.phases} phase"
+            f"{'s' if self.phases != 1 else ''})"
+        )
+
+
+def _flight_acceleration(x: np.ndarray, mask: np.ndarray, height: np.ndarray, dt: float):
+    """(acceleration [D] or None, frames, phases) over the flight frames of one candidate
+    up direction (``height`` [F, P], NaN where missing)."""
+    from .coverage import present_windows
+
+    some = mask.any(axis=1)
+    lowest = np.full(height.shape[0], np.nan)
+    lowest[some] = np.nanmin(height[some], axis=1)
+    if not some.any():
+        return None, 0, 0
+    ground = float(np.percentile(lowest[some], 5))
+    flight = some & (np.where(some, lowest, -np.inf) > ground + FLIGHT_MARGIN)
+    rows, ys, segments = [], [], 0
+    for start, stop in present_windows(flight, MIN_PHASE):
+        cols = mask[start:stop].all(axis=0)
+        if not cols.any():
+            continue
+        mean = x[start:stop, cols].mean(axis=1)  # [L, D]
+        t = (np.arange(stop - start) - (stop - start - 1) / 2) * dt
+        rows.append((segments, t))
+        ys.append(mean)
+        segments += 1
+    if not segments:
+        return None, 0, 0
+    n = sum(len(t) for _, t in rows)
+    design = np.zeros((n, 1 + 2 * segments))
+    i = 0
+    for k, t in rows:
+        design[i : i + len(t), 0] = 0.5 * t**2
+        design[i : i + len(t), 1 + 2 * k] = 1.0
+        design[i : i + len(t), 2 + 2 * k] = t
+        i += len(t)
+    coef = np.linalg.lstsq(design, np.concatenate(ys), rcond=None)[0]
+    return coef[0], n, segments
+
+
+def guess_gravity(traj: Trajectory) -> Gravity:
+    """The vertical axis from the acceleration of the markers in flight (see the module's
+    docstring), or a :class:`Gravity` without axis saying why there is none."""
+    x = np.asarray(traj.positions, np.float64)  # [F, P, D], NaN where missing
+    mask = np.asarray(traj.mask, bool)
+    d = x.shape[2]
+    if x.shape[0] < MIN_PHASE:
+        return Gravity(None, None, None, 0, 0, f"fewer than {MIN_PHASE} frames")
+    best, any_flight = None, 0
+    for axis in range(d):
+        for up in (1.0, -1.0):
+            acc, frames, phases = _flight_acceleration(x, mask, up * x[:, :, axis], traj.dt)
+            if acc is None:
+                continue
+            any_flight = max(any_flight, frames)
+            expected = np.zeros(d)
+            expected[axis] = -up * G
+            miss = float(np.linalg.norm(acc - expected))
+            if miss <= GRAVITY_TOLERANCE * G and (best is None or miss < best[0]):
+                best = (miss, axis, up, acc, frames, phases)
+    if best is None:
+        reason = (
+            "no flight phase found: the lowest marker never leaves the ground"
+            if not any_flight
+            else f"no flight phase found: the markers never fall at about {G} m/s^2 while "
+            "the lowest is off the ground"
+        )
+        return Gravity(None, None, None, 0, 0, reason)
+    _, axis, up, acc, frames, phases = best
+    return Gravity(axis, up, tuple(float(a) for a in acc), frames, phases)
+
+
+def agree(ground: Ground | None, gravity: Gravity) -> bool | None:
+    """Whether the two guesses name the same up (None unless both found one)."""
+    if ground is None or not gravity.found:
+        return None
+    return ground.axis == gravity.axis and ground.up == gravity.up

@@ -69,15 +69,10 @@ def make_windows(
     inputs = x
     if smooth:
         inputs = np.where(mask[..., None], smooth_positions(positions, mask, smooth), 0.0)
-    starts = np.arange(1, n_frames - 1, horizon)
+    starts, frames_c, weight, _ = _terms(mask, horizon)
     x0 = inputs[starts]
     v0 = (inputs[starts] - inputs[starts - 1]) / dt
-    ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
-    frames = starts[:, None] + np.arange(1, horizon + 1)[None, :]  # [S, H]
-    inside = frames < n_frames
-    frames_c = np.minimum(frames, n_frames - 1)
     target = x[frames_c]
-    weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
     return Windows(
         x0=x0,
         x_prev=inputs[starts - 1],
@@ -87,6 +82,35 @@ def make_windows(
         dt=float(dt),
         t0=starts * float(dt),
     )
+
+
+def _terms(mask: np.ndarray, horizon: int):
+    """(starts [S], target frames [S, H] clipped to the window, weight [S, H, P] float, the
+    terms inside the window [S, H] bool) of :func:`make_windows`: the prediction of particle p
+    at frame s + k (1 <= k <= H) from start s counts when every particle is present at s and
+    s - 1 (the start state) and p at s + k (the target)."""
+    n_frames = mask.shape[0]
+    starts = np.arange(1, n_frames - 1, horizon)
+    ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
+    frames = starts[:, None] + np.arange(1, horizon + 1)[None, :]  # [S, H]
+    inside = frames < n_frames
+    frames_c = np.minimum(frames, n_frames - 1)
+    weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
+    return starts, frames_c, weight, inside
+
+
+def count_predictions(mask: np.ndarray, horizon: int = 1) -> tuple[int, int]:
+    """(kept, possible): the cost's terms (one predicted particle position each) in a window
+    with presence ``mask`` [F, P], and as many as it would hold without gaps; exactly
+    :func:`make_windows`'s ``n_terms`` and its count with every marker present. NumPy only,
+    nothing compiled: the ``fit`` command checks a window with it before it starts."""
+    mask = np.asarray(mask, bool)
+    n_frames = mask.shape[0]
+    if n_frames < 3:
+        return 0, 0
+    horizon = max(1, min(int(horizon), n_frames - 2))
+    _, _, weight, inside = _terms(mask, horizon)
+    return int(weight.sum()), int(inside.sum()) * mask.shape[1]
 
 
 def join_windows(parts: list[Windows]) -> Windows:
