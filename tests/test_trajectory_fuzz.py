@@ -33,12 +33,14 @@ import struct
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
+from activebonds.data.readers import TruncatedRowWarning
 from activebonds.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -218,8 +220,9 @@ def mutate_text(data: bytes, rng, sep: bytes, header_lines: int) -> tuple[bytes,
     return data, op
 
 
-def text_row_problems(t: Trajectory, data: bytes, fmt: str) -> list[str]:
-    """For a loaded text file: frames == data rows in the file, and no marker dropped."""
+def text_row_problems(t: Trajectory, data: bytes, fmt: str, dropped: int = 0) -> list[str]:
+    """For a loaded text file: frames == data rows in the file (less a ``dropped``
+    incomplete last row), and no marker dropped."""
     text = data.decode("utf-8-sig")
     lines = [ln[:-1] if ln.endswith("\r") else ln for ln in text.split("\n")]
     if fmt == "trc":
@@ -239,8 +242,8 @@ def text_row_problems(t: Trajectory, data: bytes, fmt: str) -> list[str]:
         markers_ok = markers_ok and all(name in header for name in t.markers)
     rows = sum(1 for line in body if line.strip())
     problems = []
-    if rows != t.n_frames:
-        problems.append(f"{t.n_frames} frames loaded from {rows} data rows")
+    if rows - dropped != t.n_frames:
+        problems.append(f"{t.n_frames} frames loaded from {rows} data rows, {dropped} dropped")
     if not markers_ok:
         problems.append(f"markers {t.markers} do not match header {header[:80]!r}")
     return problems
@@ -249,14 +252,21 @@ def text_row_problems(t: Trajectory, data: bytes, fmt: str) -> list[str]:
 def run_case(path: Path, fmt: str, kwargs: dict) -> tuple[str, list[str]]:
     """Read one file in-process; return (outcome, problems)."""
     try:
-        t = read_trajectory(path, **kwargs)
+        with warnings.catch_warnings(record=True) as caught:  # other warnings stay errors
+            warnings.simplefilter("always", TruncatedRowWarning)
+            t = read_trajectory(path, **kwargs)
     except InputError as exc:
         return "error", error_problems(str(exc), path)
     except Exception as exc:  # noqa: BLE001 - any other exception is the failure we look for
         return "crash", [f"{type(exc).__name__}: {exc}"]
     problems = invariant_problems(t)
+    dropped = [w for w in caught if issubclass(w.category, TruncatedRowWarning)]
+    if len(dropped) > 1:
+        problems.append(f"{len(dropped)} truncation warnings for one file")
+    for w in dropped:  # an incomplete last row dropped: one line naming the file
+        problems += error_problems(str(w.message), path)
     if fmt in ("csv", "trc") and not problems:
-        problems += text_row_problems(t, path.read_bytes(), fmt)
+        problems += text_row_problems(t, path.read_bytes(), fmt, len(dropped))
     return "ok", problems
 
 

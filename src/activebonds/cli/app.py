@@ -4,6 +4,7 @@ command module (the modules register their commands on it; :mod:`.main` imports 
 from __future__ import annotations
 
 import sys
+import warnings
 
 import typer
 from rich.console import Console
@@ -33,3 +34,27 @@ def parse_option_frames(text, parse):
         return parse(text)
     except ValueError as e:
         raise InputError("--frames", str(e)) from None
+
+
+_python_showwarning = warnings.showwarning
+_warned: set[str] = set()
+
+
+def show_warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` of the command line: a reader's warning about the user's
+    file (a truncated last row) prints as one line on stderr, ``warning: FILE: line N:
+    ...``, once per message; any other warning prints as Python prints it."""
+    from ..data.readers import TruncatedRowWarning
+
+    if not issubclass(category, TruncatedRowWarning):
+        _python_showwarning(message, category, filename, lineno, file, line)
+        return
+    text = " ".join(str(message).split())
+    if text not in _warned:
+        _warned.add(text)
+        err.print(f"warning: {text}", markup=False, highlight=False, soft_wrap=True)
+
+
+def one_line_warnings() -> None:
+    """Install :func:`show_warning_line` (called by ``main()``)."""
+    warnings.showwarning = show_warning_line

@@ -23,6 +23,14 @@ from .app import app, fail, out, parse_option_frames
 def info(
     traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .npz).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    strict: Annotated[
+        bool,
+        typer.Option(
+            "--strict",
+            help="Refuse a CSV or TRC file whose last row is incomplete (an interrupted "
+            "export) instead of dropping that row with a warning.",
+        ),
+    ] = False,
     markers: Annotated[
         str | None,
         typer.Option(
@@ -37,7 +45,7 @@ def info(
 
     chosen = [m.strip() for m in markers.split(",")] if markers else None
     try:
-        d = describe(read_trajectory(traj), chosen)
+        d = describe(read_trajectory(traj, strict=strict), chosen)
     except InputError as e:
         fail(e)
     if as_json:
@@ -203,6 +211,14 @@ def fit(
             "one-step RMS, free-run RMS and frames within 50 mm there (RUN/validation.json)."
         ),
     ] = None,
+    strict: Annotated[
+        bool,
+        typer.Option(
+            "--strict",
+            help="Refuse a CSV or TRC recording whose last row is incomplete (an "
+            "interrupted export) instead of dropping that row with a warning.",
+        ),
+    ] = False,
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
     from ..identify import fit as run_fit
@@ -229,6 +245,11 @@ def fit(
             init=init,
             optimizer=optimizer,
         )
+        if strict:  # checked before anything is written; the fit then reads them as usual
+            from ..data import read_trajectory
+
+            for path in traj:
+                read_trajectory(path, strict=True)
         first = traj[0]
         predictions = _check_predictions(model, traj, settings)
         held_out = _validation_window(model, first, settings, validate) if validate else None
@@ -449,7 +470,9 @@ def _summary(result, held_out=None) -> None:
 def main() -> None:
     """Entry point: usage errors become one line and exit code 2."""
     from ..runtime import compilation_cache, fast_cpu_flags
+    from .app import one_line_warnings
 
+    one_line_warnings()  # a reader's warning about a file: "warning: FILE: line N: ..."
     fast_cpu_flags()
     compilation_cache()
     try:

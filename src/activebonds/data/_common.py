@@ -6,6 +6,8 @@ Everything here raises :class:`activebonds.errors.InputError` naming the file at
 from __future__ import annotations
 
 import math
+import re
+import warnings
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
@@ -216,6 +218,159 @@ def data_lines(text: str) -> list[str]:
 def ends_with_line_break(text: str) -> bool:
     """True if the text after the last non-blank character contains a line break."""
     return "\n" in text[len(text.rstrip()) :]
+
+
+class TruncatedRowWarning(UserWarning):
+    """The last data row of a text trajectory file was incomplete and has been dropped.
+
+    The message is one line, ``FILE: line N: what was wrong``, like an
+    :class:`~activebonds.errors.InputError`; ``source`` and ``line`` hold the file and the
+    line number.  ``strict=True`` turns the same finding into an InputError.
+    """
+
+    def __init__(self, source: str | Path, line: int, message: str):
+        self.source = str(source)
+        self.line = line
+        super().__init__(InputError(source, message, where=f"line {line}").line())
+
+
+#: A field that may be the beginning of a number cut short ("12.", "1e", "-", "na").
+_NUMBER_PREFIX = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d*)?(?:[eE][+-]?\d*)?|[+-]?[nN][aA]?")
+#: How a number is written: digits after the point and exponent digits (None: absent).
+_NUMBER_SHAPE = re.compile(r"[+-]?\d*(?:\.(\d*))?(?:[eE][+-]?(\d*))?")
+#: Values of the same column, besides the last row's, needed to trust a fixed format,
+#: and how many rows before the last are looked at.
+_SHAPE_EVIDENCE = 3
+_SHAPE_ROWS = 1000
+
+
+def _shape(text: str) -> tuple[int | None, int | None] | None:
+    match = _NUMBER_SHAPE.fullmatch(text.strip())
+    if match is None or not any(c.isdigit() for c in text):
+        return None
+    point, exponent = match.group(1), match.group(2)
+    return (
+        None if point is None else len(point),
+        None if exponent is None else len(exponent),
+    )
+
+
+def _shorter(got: tuple[int | None, int | None], written: tuple[int | None, int | None]) -> bool:
+    """Whether a number shaped ``got`` can be a cut copy of one shaped ``written``."""
+    (decimals, exponent), (full_decimals, full_exponent) = got, written
+    if full_exponent is None:  # 617.24762 -> 617.2 or 617
+        return exponent is None and full_decimals is not None and (decimals or 0) < full_decimals
+    if exponent is None:  # 6.1724762e+02 -> 6.17
+        return True
+    return decimals == full_decimals and exponent < full_exponent  # -> 6.1724762e+0
+
+
+def _cut_number(rows: list[tuple[int, list[str]]], column: int) -> str | None:
+    """Why the last field of the last row looks like a number cut short, or None.
+
+    Only called for a file without a final line break.  The field is cut if it is the
+    beginning of a number but not a number ("12.3e", "-"), or if it is written with
+    fewer digits than the other values of its column when that column has a fixed format
+    (at least three values in the 1,000 rows before, all with the same number of decimals
+    and exponent digits): "617.2" where the column is written "617.24762".
+    """
+    text = rows[-1][1][column].strip()
+    try:
+        float(text)
+    except ValueError:
+        if _NUMBER_PREFIX.fullmatch(text):
+            return f"ends in {text!r}, only the beginning of a number"
+        return None  # not a number at all: parse_rows reports it
+    shape = _shape(text)
+    if shape is None:
+        return None  # "nan"
+    shapes = set()
+    example = ""
+    count = 0
+    for _, fields in reversed(rows[-1 - _SHAPE_ROWS : -1]):
+        if len(fields) > column and fields[column].strip():
+            other = _shape(fields[column])
+            if other is None:
+                continue
+            shapes.add(other)
+            example = example or fields[column].strip()
+            count += 1
+            if len(shapes) > 1:
+                return None
+    if count < _SHAPE_EVIDENCE or not _shorter(shape, next(iter(shapes))):
+        return None
+    return f"ends in {text!r} where the rows before write its column like {example!r}"
+
+
+def incomplete_last_row(
+    rows: list[tuple[int, list[str]]], n_fields: int, final_newline: bool
+) -> str | None:
+    """What is incomplete about the last data row (an interrupted export), or None.
+
+    ``rows`` holds (line number, fields) of the non-blank data rows; ``n_fields`` is the
+    number of header columns.  The last row is incomplete when
+
+    * it has fewer fields than the header (the file was cut inside the row), or
+    * the file does not end with a line break (the writer never finished the row) and the
+      row's last field is empty, is only the beginning of a number ("1e-", "-", "."),
+      or has fewer digits than the other values of a fixed-format column (the column is
+      written "617.24762" in the rows before, and here "617.2").
+
+    A full-width last row without a final line break is otherwise complete: many writers
+    omit the last line break, and a number cut in a column of varying format cannot be
+    told from a short one.
+    """
+    if not rows:
+        return None
+    fields = rows[-1][1]
+    if len(fields) < n_fields:
+        what = f"has only {len(fields)} of the header's {n_fields} fields"
+    elif final_newline or len(fields) > n_fields:
+        return None
+    elif not fields[n_fields - 1].strip():
+        what = "ends in an empty field"
+    else:
+        what = _cut_number(rows, n_fields - 1)
+        if what is None:
+            return None
+    return what if final_newline else f"{what}, with no line break at the end of the file"
+
+
+def drop_incomplete_row(
+    source: str | Path,
+    rows: list[tuple[int, list[str]]],
+    what: str | None,
+    strict: bool = False,
+) -> list[tuple[int, list[str]]]:
+    """The rows without the last one if :func:`incomplete_last_row` found it incomplete.
+
+    ``what`` is that function's finding (None: nothing to drop).  With ``strict`` an
+    incomplete row is an :class:`InputError` naming its line, and so is an incomplete row
+    that is the only data row.  The reader calls :func:`warn_incomplete_row` once the
+    rest of the file has been read.  (A short row anywhere else is reported by
+    :func:`parse_rows`.)
+    """
+    if what is None:
+        return rows
+    if strict or len(rows) == 1:
+        row = "the only data row" if len(rows) == 1 else "last row"
+        raise InputError(
+            source, f"{row} {what}: truncated or incomplete row", where=f"line {rows[-1][0]}"
+        )
+    return rows[:-1]
+
+
+def warn_incomplete_row(source: str | Path, line: int, what: str, kept: int) -> None:
+    """The one :class:`TruncatedRowWarning` of a file whose incomplete last row was dropped."""
+    warnings.warn(
+        TruncatedRowWarning(
+            source,
+            line,
+            f"last row {what}: truncated file (an interrupted export?); dropped that row "
+            f"and read the {kept} row{'s' if kept != 1 else ''} before it",
+        ),
+        stacklevel=4,
+    )
 
 
 def check_output_path(path: Path) -> None:

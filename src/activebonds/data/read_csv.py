@@ -20,7 +20,12 @@ Layout (comma separated, LF or CRLF, optional UTF-8 BOM, fields may be quoted)::
   gives exactly 60).  Declared rates that disagree with the time column by more than 1 %
   are an error; so is a time column that is not uniformly sampled.
 * Blank fields and ``nan`` are missing samples; a row with fewer fields than the header
-  (a truncated file) or a non-number is an error naming the line and column.
+  or a non-number is an error naming the line and column.
+* An incomplete **last** row (an interrupted export: fewer fields than the header, or no
+  final line break after an empty field or a number cut short; see
+  :func:`~activebonds.data._common.incomplete_last_row`) is dropped with a
+  :class:`~activebonds.data._common.TruncatedRowWarning` naming the line; with
+  ``strict=True`` it is an error naming the line.
 """
 
 from __future__ import annotations
@@ -32,11 +37,14 @@ from pathlib import Path
 from activebonds.data._common import (
     canonical_units,
     data_lines,
+    drop_incomplete_row,
+    incomplete_last_row,
     masked_positions,
     parse_rows,
     positive_rate,
     read_text,
     resolve_rate,
+    warn_incomplete_row,
 )
 from activebonds.data._common import (
     ends_with_line_break as _ends_line,
@@ -106,7 +114,9 @@ def _header_layout(
     return frame_col, time_col, names, len(axes)
 
 
-def read_csv(path: Path, rate: float | None = None, units: str | None = None) -> Trajectory:
+def read_csv(
+    path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
+) -> Trajectory:
     """Read a wide CSV marker file (see the module docstring for the conventions)."""
     text = read_text(path)
     lines = data_lines(text)
@@ -137,6 +147,10 @@ def read_csv(path: Path, rate: float | None = None, units: str | None = None) ->
         raise InputError(path, f"malformed CSV ({exc})") from None
     if not rows:
         raise InputError(path, "no data rows after the header", where=f"line {i + 1}")
+    final_newline = _ends_line(text)
+    what = incomplete_last_row(rows, len(columns), final_newline)
+    last_line = rows[-1][0]
+    rows = drop_incomplete_row(path, rows, what, strict)
 
     if units is not None:
         unit = canonical_units(path, units, where="units option")
@@ -158,13 +172,12 @@ def read_csv(path: Path, rate: float | None = None, units: str | None = None) ->
 
     start_col = len(columns) - len(names) * dim
     coord_cols = list(range(start_col, len(columns)))
-    values, time_strings = parse_rows(
-        path, rows, columns, coord_cols, time_col, frame_col, _ends_line(text)
-    )
+    ended = final_newline or what is not None  # the rows before a dropped one all ended
+    values, time_strings = parse_rows(path, rows, columns, coord_cols, time_col, frame_col, ended)
     line_numbers = [line_no for line_no, _ in rows]
     sample_rate, start_time = resolve_rate(path, declared, time_strings, line_numbers)
     positions, mask = masked_positions(values, len(names), dim, unit)
-    return Trajectory(
+    trajectory = Trajectory(
         positions=positions,
         mask=mask,
         markers=tuple(names),
@@ -173,3 +186,6 @@ def read_csv(path: Path, rate: float | None = None, units: str | None = None) ->
         source_units=unit,
         source=str(path),
     )
+    if what is not None:
+        warn_incomplete_row(path, last_line, what, len(rows))
+    return trajectory
