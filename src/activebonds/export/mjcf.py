@@ -110,7 +110,8 @@ def check_exportable(model, source: str = "model") -> None:
         shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
         raise InputError(
             source,
-            f"cannot export to MJCF: {len(missing)} particles have no initial position "
+            f"cannot export to MJCF: {len(missing)} of {len(model.spec.particle)} particles "
+            f"have no initial position "
             f"({shown}); give each [[particle]] a position = [...] (and optionally "
             f"velocity = [...])",
         )
