@@ -79,5 +79,7 @@ def baselines(
         result.get("least_squares_why_not", "") if lsq_rms is None else f"{lsq_rms:.6g}",
     )
     out.print(table)
-    for name, value in result.get("least_squares", {}).items():
-        out.print(f"  {name} = {value:.6g}")
+    from ..model.names import parameter_label
+
+    for name, value in result.get("least_squares", {}).items():  # keys in JSON, words here
+        out.print(f"  {parameter_label(m.spec, name)} = {value:.6g}", markup=False)

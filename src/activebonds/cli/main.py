@@ -439,6 +439,12 @@ def _summary(result, held_out=None) -> None:
     s = result.settings
     fitted = window_metrics(result.model, data, s.substeps, s.integrator)
     out.print(_metrics_line("fitted frames", fitted), markup=False, highlight=False)
+    from ..model.names import bounds_line, parameter_rows
+
+    searched = result.identification.model  # its bounds were searched; the genome is its
+    rows = parameter_rows(searched, searched.layout.natural(result.genome))
+    if (line := bounds_line(rows)) is not None:
+        out.print(line, markup=False, highlight=False)
     if held_out is not None:
         frames, held = held_out
         record = validation_record(result.model, held, s, frames)
@@ -501,5 +507,6 @@ from .report_cmd import report  # noqa: E402
 app.command(name="report")(report)
 
 from . import baselines_cmd, structure_cmd, sweep_cmd  # noqa: E402,F401
+from . import evaluate_cmd  # noqa: E402,F401
 from . import datasets_cmd  # noqa: E402,F401
 from . import export_cmd  # noqa: E402,F401

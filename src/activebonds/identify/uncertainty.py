@@ -27,13 +27,14 @@ from __future__ import annotations
 import csv
 import io
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from ..model.names import parameter_label
 from .cost import join_windows, make_residuals, make_windows
 from .problem import Identification
 from .settings import FitSettings
@@ -56,6 +57,7 @@ class Estimate:
     high: float | None
     determined: bool
     note: str  # why not determined, in words ("" when it is)
+    label: str = ""  # the name as people read it ("spring A-B stiffness"); ``name`` is the key
 
 
 @dataclass
@@ -82,19 +84,31 @@ class Uncertainty:
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(
-            ["parameter", "value", "std_error", "ci95_low", "ci95_high", "determined", "note"]
+            [
+                "parameter",
+                "value",
+                "std_error",
+                "ci95_low",
+                "ci95_high",
+                "determined",
+                "note",
+                "label",
+            ]
         )
         for e in self.estimates:
             num = [
                 f"{x:.10g}" if x is not None else "not determined"
                 for x in (e.std_error, e.low, e.high)
             ]
-            w.writerow([e.name, f"{e.value:.10g}", *num, "yes" if e.determined else "no", e.note])
+            determined = "yes" if e.determined else "no"
+            w.writerow([e.name, f"{e.value:.10g}", *num, determined, e.note, e.label or e.name])
         return buf.getvalue()
 
 
-def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
-    """A direction of parameter space in words: the parameters that move along it."""
+def describe(names: list[str], vector: np.ndarray, masses: set[int], label=None) -> str:
+    """A direction of parameter space in words: the parameters that move along it
+    (``label``: a parameter's or group's name -> the words shown; default: the name)."""
+    show = label or (lambda n: n)
     big = [i for i in range(len(vector)) if abs(vector[i]) >= NAMED * np.abs(vector).max()]
     if masses and masses <= set(big):
         return "mass scale (the masses and the forces can grow together)"
@@ -102,7 +116,8 @@ def describe(names: list[str], vector: np.ndarray, masses: set[int]) -> str:
     groups = {n.rsplit(".", 1)[0] for n in parts if "." in n}
     if len(parts) >= 2 and len(groups) == 1 and all("." in n for n in parts):
         fields = [n.rsplit(".", 1)[1] for n in parts]
-        return f"{' and '.join(fields)} of {groups.pop()} trade off"
+        return f"{' and '.join(fields)} of {show(groups.pop())} trade off"
+    parts = [show(n) for n in parts]
     if len(parts) == 1:
         return f"{parts[0]} does not change the residuals"
     return f"{', '.join(parts[:-1])} and {parts[-1]} trade off"
@@ -135,10 +150,12 @@ def from_jacobian(
     spans: np.ndarray,
     dof: int,
     masses: set[int] = frozenset(),
+    label=None,
 ) -> tuple[list[Estimate], int, float, float, list[str]]:
     """Estimates of the first ``len(names)`` variables (the others are nuisance) from the
     Jacobian [m, p + q] and residuals [m] at the optimum: (estimates, rank, condition, s^2,
-    directions not determined in words)."""
+    directions not determined in words; ``label``: as in :func:`describe`)."""
+    show = label or (lambda n: n)
     p = len(names)
     jac = np.asarray(jac, np.float64)
     if jac.size == 0 or not (np.all(np.isfinite(jac)) and np.all(np.isfinite(resid))):
@@ -162,18 +179,19 @@ def from_jacobian(
     directions = []
     for j in range(null.shape[1] if null.size else 0):
         if np.linalg.norm(null[:p, j]) > 1e-6:
-            directions.append(describe(names, null[:p, j], set(masses)))
+            directions.append(describe(names, null[:p, j], set(masses), label))
         else:  # only nuisance variables (shooting start states) move along it
             directions.append("a start state that no recorded frame sees (no parameter)")
     if dead[:p].any():
         directions += [
-            f"{names[i]} does not change the residuals" for i in np.flatnonzero(dead[:p])
+            f"{show(names[i])} does not change the residuals" for i in np.flatnonzero(dead[:p])
         ]
     estimates = []
     for i in range(p):
         if in_null[i]:
             hits = [j for j in range(null.shape[1] if null.size else 0) if abs(null[i, j]) > 1e-6]
-            note = directions[hits[0]] if hits else f"{names[i]} does not change the residuals"
+            unseen = f"{show(names[i])} does not change the residuals"
+            note = directions[hits[0]] if hits else unseen
             estimates.append(Estimate(names[i], float(values[i]), None, None, None, False, note))
             continue
         se = float(math.sqrt(var_scaled[i]) / norms[i])
@@ -183,7 +201,7 @@ def from_jacobian(
             if np.linalg.norm(v_ok[:p, worst]) <= 1e-6:
                 worst = int(np.argmax(contrib[i, :] * (np.linalg.norm(v_ok[:p], axis=0) > 1e-6)))
             note = "interval wider than the search range: " + describe(
-                names, v_ok[:p, worst], set(masses)
+                names, v_ok[:p, worst], set(masses), label
             )
             estimates.append(Estimate(names[i], float(values[i]), None, None, None, False, note))
             continue
@@ -309,14 +327,16 @@ def estimate(
         jac = np.vstack([jac, gauge * np.linalg.norm(jac, axis=0).max()])
         resid = np.append(resid, 0.0)
         masses = set()
+    spec = ident.model.spec
     estimates, rank, condition, s2, directions = from_jacobian(
-        jac, resid, names, theta, spans, dof, masses
+        jac, resid, names, theta, spans, dof, masses, lambda n: parameter_label(spec, n)
     )
     if ratio and np.isfinite(s2):
         kg_spans = spans[ratio] * layout.mass_rest / theta[ratio].sum()
         estimates = _masses_in_kg(
             estimates, _decompose(jac), s2, ratio, theta, layout.mass_rest, kg_spans
         )
+    estimates = [replace(e, label=parameter_label(spec, e.name)) for e in estimates]
     return Uncertainty(
         estimates=estimates,
         cost=cost,

@@ -22,6 +22,7 @@ from ..errors import InputError
 from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.lsq import least_squares, nonlinear_genes
+from ..model.names import NEAR_BOUND, parameter_label, parameter_rows
 from . import animation, metrics, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
@@ -278,12 +279,11 @@ def uncertainty_section(record: RunRecord) -> Section | None:
         return Section("Uncertainty", text=text, anchor="uncertainty")
     rows = []
     for e in rec.get("estimates", []):
+        name = e.get("label") or parameter_label(record.model.spec, e["name"])
         if e["determined"]:
-            rows.append(
-                (e["name"], e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", "")
-            )
+            rows.append((name, e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", ""))
         else:
-            rows.append((e["name"], e["value"], "not determined", "not determined", e["note"]))
+            rows.append((name, e["value"], "not determined", "not determined", e["note"]))
     condition = rec.get("condition")
     text = [
         f"Gauss-Newton covariance at the optimum on the {rec['cost']} cost (horizon "
@@ -450,12 +450,27 @@ def free_run_table(record: RunRecord) -> Table:
     )
 
 
-def parameters_table(record: RunRecord) -> Table:
+def searched_model(record: RunRecord):
+    """The model whose bounds the fit searched: the run's input model (a best model written
+    without min/max derives new bounds around its values); the best model if it is gone."""
+    from ..identify import rundir
+    from ..identify.problem import variant
+
+    try:
+        return variant(rundir.read_input_model(record.path), record.settings.bonds)
+    except (InputError, ValueError):
+        return None
+
+
+def parameters_table(record: RunRecord, searched=None) -> Table:
+    """Each free parameter by its readable name, its value, search bounds, and "near min" or
+    "near max" within 1 % of a bound (names.NEAR_BOUND); the machine key last."""
     rows = [
-        (g.name, float(g.value), float(g.lower), float(g.upper), g.log)
-        for g in record.model.layout.genes
+        (r.name, r.value, r.lower, r.upper, r.log, r.bound_text(), r.key)
+        for r in parameter_rows(record.model, bounds=searched)
     ]
-    return Table(("parameter", "value", "min", "max", "log search"), rows, "Identified parameters")
+    columns = ("parameter", "value", "min", "max", "log search", "at a bound", "key")
+    return Table(columns, rows, "Identified parameters")
 
 
 def neural_table(pred: Prediction, labels: Sequence[str]) -> Table:
@@ -512,7 +527,8 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         [plots.Series(record.label, [record.history])], fig_dir / "convergence", references=refs
     )
     traj = plots.trajectories(pred, fig_dir / "trajectories")
-    params = plots.parameters(model, fig_dir / "parameters")
+    searched = searched_model(record)
+    params = plots.parameters(model, fig_dir / "parameters", bounds=searched)
     variants = plots.variant_success(record.history, fig_dir / "variants")
     gif = animation.write_gif([(record.label, pred)], fig_dir / "animation.gif")
     extra = []
@@ -562,10 +578,19 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         ),
         Section(
             "Parameters",
+            text=[
+                "Each parameter is named by its bond's kind and particles (or its type); the "
+                "key column is its name in uncertainty.csv and the run's files. 'near min' or "
+                f"'near max': the value is within {NEAR_BOUND * 100:g} % of the search range from "
+                "that bound (of the log range for a log-searched parameter), where the "
+                "search stopped rather than where the data put it: widen the bound and fit "
+                "again. Free masses under total_mass are never flagged (their weights' "
+                "common scale changes nothing)."
+            ],
             figures=[
                 Figure(params[0], "Identified parameters within their bounds (search space).")
             ],
-            tables=[parameters_table(record)],
+            tables=[parameters_table(record, searched)],
             anchor="parameters",
         ),
     ]

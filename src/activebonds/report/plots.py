@@ -7,7 +7,6 @@ comparison take the default colour cycle in order.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from matplotlib.figure import Figure
 
 from ..identify.operators import VARIANTS
 from ..model import Model
+from ..model.names import bound_position, parameter_label, parameter_rows
 from .predict import Prediction, neural_bonds, neural_weights, to_mm
 from .runs import history_rms_mm
 
@@ -149,28 +149,34 @@ def convergence(
 
 
 def parameters(
-    model: Model, stem: str | Path, *, title: str = "Identified parameters"
+    model: Model,
+    stem: str | Path,
+    *,
+    title: str = "Identified parameters",
+    bounds: Model | None = None,
 ) -> list[Path]:
-    """One horizontal bar per gene: its bounds in search space mapped to [0, 1], a marker at
-    the identified value, the value written beside it; log-searched genes are marked."""
-    genes = model.layout.genes
-    n = len(genes)
+    """One horizontal bar per gene (named as people read it): its bounds in search space
+    mapped to [0, 1], a marker at the identified value (red within 1 % of a bound:
+    :func:`activebonds.model.names.at_bound`), the value written beside it; log-searched genes
+    are marked. ``bounds``: the model whose bounds were searched (default ``model``)."""
+    rows = parameter_rows(model, bounds=bounds)
+    n = len(rows)
     fig, ax = _subplots(figsize=(7.5, max(1.6, 0.28 * n + 1.0)), layout="constrained")
     if n == 0:
         ax.text(0.5, 0.5, "no free parameter", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
         return save(fig, stem)
-    lo, hi = model.layout.lower, model.layout.upper
-    val = model.layout.initial()
-    with np.errstate(invalid="ignore", divide="ignore"):
-        pos = np.clip((val - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
+    searched = {g.name: g for g in (bounds or model).layout.genes}
+    genes = [searched.get(g.name, g) for g in model.layout.genes]
+    pos = np.array([bound_position(g, r.value) for g, r in zip(genes, rows, strict=True)])
+    pos = np.clip(np.nan_to_num(pos, nan=0.5), 0.0, 1.0)
     y = np.arange(n)[::-1]
     ax.barh(y, np.ones(n), color="0.9", edgecolor="0.6", height=0.6)
-    edge = (pos < 0.01) | (pos > 0.99)
+    edge = np.array([r.bound is not None for r in rows])
     ax.scatter(pos, y, color=np.where(edge, "tab:red", "tab:blue"), zorder=3, s=22)
-    for yi, g in zip(y, genes, strict=True):
-        ax.text(1.02, yi, f"{g.value:.4g}  [{g.lower:.3g}, {g.upper:.3g}]", va="center", fontsize=7)
-    labels = [f"{gene_label(model, g.name)}{'  (log)' if g.log else ''}" for g in genes]
+    for yi, r in zip(y, rows, strict=True):
+        ax.text(1.02, yi, f"{r.value:.4g}  [{r.lower:.3g}, {r.upper:.3g}]", va="center", fontsize=7)
+    labels = [f"{r.name}{'  (log)' if r.log else ''}" for r in rows]
     ax.set_yticks(y, labels, fontsize=7)
     ax.set_xlim(0, 1.42)
     ax.set_xticks([0, 0.5, 1], ["min", "mid", "max"])
@@ -182,12 +188,8 @@ def parameters(
 
 
 def gene_label(model: Model, name: str) -> str:
-    """'bond[2].stiffness' -> 'bond[2] mouth–foot: stiffness'; other names unchanged."""
-    m = re.match(r"^bond\[(\d+)\]\.(.*)$", name)
-    if not m or int(m.group(1)) >= len(model.spec.bond):
-        return name
-    bond = model.spec.bond[int(m.group(1))]
-    return f"bond[{m.group(1)}] {'–'.join(bond.particles)}: {m.group(2)}"
+    """'bond[2].stiffness' -> 'spring mouth-foot stiffness' (names.parameter_label)."""
+    return parameter_label(model.spec, name)
 
 
 def bond_labels(model: Model) -> list[str]:

@@ -1,0 +1,94 @@
+"""``activebonds evaluate``: score any model on any recording, beside the zero-force baseline."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from ..errors import InputError
+from .app import app, fail, out, parse_option_frames
+
+
+@app.command()
+def evaluate(
+    model: Annotated[
+        Path,
+        typer.Argument(help="Model file (TOML), e.g. a fit's RUN/best_model.toml."),
+    ],
+    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    markers: Annotated[
+        str | None,
+        typer.Option(
+            help="Markers followed by the particles, in order: A,B,C (default: the model's)."
+        ),
+    ] = None,
+    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    substeps: Annotated[
+        int, typer.Option(help="Integration substeps per frame (as the model was fitted).")
+    ] = 1,
+    integrator: Annotated[
+        str, typer.Option(help="euler or verlet (as the model was fitted).")
+    ] = "euler",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+):
+    """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
+    free run stays within 50 mm (as fit's summary and --validate), for the model and the
+    zero-force (constant-velocity) predictor, overall and per particle (mm)."""
+    from ..data import read_trajectory
+    from ..identify.settings import parse_frames
+    from ..model import load_model
+    from ..report.evaluate import evaluate as run_evaluate
+
+    try:
+        window = parse_option_frames(frames, parse_frames)
+        chosen = tuple(m.strip() for m in markers.split(",")) if markers else None
+        found = run_evaluate(
+            load_model(model),
+            read_trajectory(traj),
+            markers=chosen,
+            frames=window,
+            substeps=substeps,
+            integrator=integrator,
+        )
+    except InputError as e:
+        fail(e)
+    if as_json:
+        print(json.dumps({"model_file": str(model), **found.record()}, indent=2))
+        return
+    m, z = found.model, found.zero_force
+    a, b = found.frames
+    table = Table(title=f"{model} on {traj}, frames {a}:{b}")
+    table.add_column("")
+    table.add_column("model", justify="right")
+    table.add_column("zero force", justify="right")
+    table.add_row("one-step RMS (mm)", _mm(m.one_step_rms_mm), _mm(z.one_step_rms_mm))
+    table.add_row("free-run RMS (mm)", _mm(m.free_run_rms_mm), _mm(z.free_run_rms_mm))
+    table.add_row(
+        f"frames within {m.threshold_mm:g} mm (median of {len(m.starts)} starts)",
+        m.frames_text(),
+        z.frames_text(),
+    )
+    out.print(table)
+    per = Table(title="per particle (RMS error, mm)")
+    for col in ("particle", "marker"):
+        per.add_column(col)
+    for col in ("one-step", "one-step zero force", "free run", "free run zero force"):
+        per.add_column(col, justify="right")
+    for p in found.particles:
+        per.add_row(
+            p.particle,
+            p.marker,
+            _mm(p.one_step_rms_mm),
+            _mm(p.zero_force_one_step_rms_mm),
+            _mm(p.free_run_rms_mm),
+            _mm(p.zero_force_free_run_rms_mm),
+        )
+    out.print(per)
+
+
+def _mm(x: float) -> str:
+    return "—" if x != x else f"{x:.6g}"

@@ -1,0 +1,240 @@
+"""Free parameters as people read them, and which sit at or near their search bounds.
+
+A gene's ``name`` (:class:`~activebonds.model.layout.Gene`) is a machine key: it is stored in
+checkpoints, ``uncertainty.json``/``.csv``, sweep summaries and ``baselines --json``, and
+never changes. What is *shown* is :func:`parameter_label`, which names a bond by its kind and
+particles (or its type) instead of its index in the model file::
+
+    bond[0].stiffness            ->  spring A-B stiffness
+    bond[2].weights.length[1]    ->  neural mouth-foot length weight from upper_leg-foot
+    bond[3].anchor[2]            ->  unary spring A anchor z
+    type:neck.damping            ->  spring type neck damping
+    mass:Head.mass               ->  particle Head mass
+    mass:Head.weight             ->  particle Head mass weight (under total_mass)
+    drive.frequency              ->  drive frequency
+
+A bond's kind word is ``neural`` for a mechanical-neural bond, ``spring`` for any other binary
+(viscoelastic) bond, ``unary spring``, ``flexion spring`` or ``contact``; two bonds with the
+same word and particles add their index, ``#i``, to tell them apart.
+
+**At or near a bound** (:func:`at_bound`): a fitted value within :data:`NEAR_BOUND` (1 %) of
+its gene's search range from ``min`` or ``max``, measured where the search moves: in log
+space for log-scaled genes (``log(value)`` within 1 % of ``log(max) - log(min)``), linearly
+otherwise. Such a value is where the search stopped, not necessarily where the data want it:
+widen the bound and fit again. The bounds are those searched, the *input* model's (a fitted
+model file written without ``min``/``max`` derives new bounds around its fitted values).
+Free masses under ``total_mass`` are searched as weights whose common scale changes nothing;
+they are never flagged.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .layout import Gene
+from .model import Model
+from .schema import ModelSpec
+
+NEAR_BOUND = 0.01  # share of the search range (log range for log genes) that is "near"
+AXES = "xyz"
+KIND_WORDS = {
+    "binary": "spring",
+    "unary": "unary spring",
+    "ternary": "flexion spring",
+    "contact": "contact",
+}
+
+
+# ----------------------------------------------------------------------------- names
+
+
+def _word(bond) -> str:
+    if getattr(bond, "neural", False):
+        return "neural"
+    return KIND_WORDS.get(bond.kind, bond.kind)
+
+
+def bond_label(spec: ModelSpec, i: int) -> str:
+    """``spring A-B``: bond ``i``'s kind word and particles (``#i`` added when another bond
+    has the same)."""
+    b = spec.bond[i]
+    text = f"{_word(b)} {'-'.join(b.particles)}"
+    twins = [
+        j
+        for j, other in enumerate(spec.bond)
+        if _word(other) == _word(b) and other.particles == b.particles
+    ]
+    return f"{text} #{i}" if len(twins) > 1 else text
+
+
+def _source_label(spec: ModelSpec, kind: str, position: int) -> str:
+    """The particles of the ``position``-th bond of ``kind`` (a weight's input bond)."""
+    of_kind = [j for j, b in enumerate(spec.bond) if b.kind == kind]
+    if not 0 <= position < len(of_kind):
+        return f"bond {position}"
+    j = of_kind[position]
+    text = "-".join(spec.bond[j].particles)
+    return f"{text} #{j}" if bond_label(spec, j).endswith(f" #{j}") else text
+
+
+def _key_text(spec: ModelSpec, kind: str, key: str) -> str:
+    """A bond parameter's key as words: ``anchor[2]`` -> ``anchor z``, ``weights.length[1]``
+    -> ``length weight from B-C``; other keys as in the model file."""
+    m = re.fullmatch(r"[A-Za-z_]+\.([A-Za-z_]+)\[(\d+)\]", key)
+    if m:
+        return f"{m.group(1)} weight from {_source_label(spec, kind, int(m.group(2)))}"
+    m = re.fullmatch(r"([A-Za-z_]+)\[(\d+)\]", key)
+    if m:
+        ax = int(m.group(2))
+        return f"{m.group(1)} {AXES[ax] if ax < len(AXES) else ax}"
+    return key
+
+
+def parameter_label(spec: ModelSpec, name: str) -> str:
+    """The readable name of the gene (or gene group) ``name`` of a model with ``spec``; a
+    name it does not know is returned unchanged."""
+    m = re.fullmatch(r"bond\[(\d+)\](?:\.(.+))?", name)
+    if m and int(m.group(1)) < len(spec.bond):
+        i = int(m.group(1))
+        label = bond_label(spec, i)
+        if m.group(2) is None:
+            return label
+        return f"{label} {_key_text(spec, spec.bond[i].kind, m.group(2))}"
+    for b in spec.bond:
+        if b.type is None:
+            continue
+        group = f"type:{b.type}"
+        if name == group or name.startswith(group + "."):
+            label = f"{_word(b)} type {b.type}"
+            key = name[len(group) + 1 :]
+            return f"{label} {_key_text(spec, b.kind, key)}" if key else label
+    for p in spec.particle:
+        group = f"mass:{p.name}"
+        if name == group:
+            return f"particle {p.name}"
+        if name.startswith(group + "."):
+            key = name[len(group) + 1 :]
+            return f"particle {p.name} {'mass weight' if key == 'weight' else key}"
+    if re.fullmatch(r"[A-Za-z_]+\.[A-Za-z_]+", name):  # gravity.magnitude, drive.frequency
+        return name.replace(".", " ")
+    return name
+
+
+def parameter_labels(model: Model) -> list[str]:
+    """The readable name of each gene of ``model``, in genome order."""
+    return [parameter_label(model.spec, g.name) for g in model.layout.genes]
+
+
+# ----------------------------------------------------------------------------- bounds
+
+
+def bound_position(gene: Gene, value: float) -> float:
+    """Where ``value`` sits in ``gene``'s search range: 0 at ``min``, 1 at ``max`` (log space
+    for a log-scaled gene; outside [0, 1] beyond the bounds); NaN for an empty range."""
+    lo, hi, v = float(gene.lower), float(gene.upper), float(value)
+    if gene.log:
+        if lo <= 0 or hi <= 0:
+            return float("nan")
+        lo, hi = math.log(lo), math.log(hi)
+        v = math.log(v) if v > 0 else -math.inf
+    if not (hi > lo) or not math.isfinite(hi - lo):
+        return float("nan")
+    return (v - lo) / (hi - lo)
+
+
+def is_mass_weight(gene: Gene) -> bool:
+    """A free mass under ``total_mass``: a weight whose common scale changes nothing."""
+    return gene.name.startswith("mass:") and gene.name.endswith(".weight")
+
+
+def at_bound(gene: Gene, value: float, share: float = NEAR_BOUND) -> str | None:
+    """``"min"`` or ``"max"`` when ``value`` is within ``share`` of ``gene``'s search range
+    from that bound (or beyond it), else None (also for an empty range and mass weights)."""
+    if is_mass_weight(gene):
+        return None
+    pos = bound_position(gene, value)
+    if math.isnan(pos):
+        return None
+    if pos < share:
+        return "min"
+    if pos > 1.0 - share:
+        return "max"
+    return None
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    """One free parameter as shown: readable name, machine key, fitted value, search bounds
+    and whether it is at or near one of them."""
+
+    key: str  # the gene's name (machine key)
+    name: str  # readable (parameter_label)
+    value: float  # natural units
+    lower: float  # search bounds, natural units
+    upper: float
+    log: bool  # searched in log space
+    bound: str | None  # "min" or "max": within NEAR_BOUND of it; None otherwise
+
+    def bound_text(self) -> str:
+        """``at max 1000``-style words for a flagged row, "" otherwise."""
+        if self.bound is None:
+            return ""
+        limit = self.lower if self.bound == "min" else self.upper
+        return f"near {self.bound} {limit:.6g}"
+
+
+def parameter_rows(
+    model: Model,
+    values: Sequence[float] | np.ndarray | None = None,
+    *,
+    bounds: Model | None = None,
+    share: float = NEAR_BOUND,
+) -> list[ParameterRow]:
+    """Every free parameter of ``model`` as a :class:`ParameterRow`.
+
+    ``values``: the fitted values in natural units, in genome order (default: the values of
+    ``model``'s own genes, e.g. a best model read from its file). ``bounds``: the model whose
+    genes hold the search bounds (default ``model``; give the input model of a fit, whose
+    bounds were searched), matched by gene name."""
+    genes = model.layout.genes
+    vals = [g.value for g in genes] if values is None else [float(v) for v in values]
+    searched = {g.name: g for g in (bounds or model).layout.genes}
+    rows = []
+    for g, v in zip(genes, vals, strict=True):
+        b = searched.get(g.name, g)
+        rows.append(
+            ParameterRow(
+                key=g.name,
+                name=parameter_label(model.spec, g.name),
+                value=float(v),
+                lower=float(b.lower),
+                upper=float(b.upper),
+                log=bool(b.log),
+                bound=at_bound(b, v, share),
+            )
+        )
+    return rows
+
+
+def flagged(rows: Sequence[ParameterRow]) -> list[ParameterRow]:
+    """The rows at or near a bound."""
+    return [r for r in rows if r.bound is not None]
+
+
+def bounds_line(rows: Sequence[ParameterRow]) -> str | None:
+    """One line naming the parameters at or near a bound (``fit``'s summary), None if none:
+    ``2 of 9 parameters at or near a search bound (within 1 % of the range): spring A-B
+    stiffness = 1000 (near max 1000), ...``."""
+    hits = flagged(rows)
+    if not hits:
+        return None
+    listed = ", ".join(f"{r.name} = {r.value:.6g} ({r.bound_text()})" for r in hits)
+    return (
+        f"{len(hits)} of {len(rows)} parameters at or near a search bound (within "
+        f"{NEAR_BOUND * 100:g} % of the range; widen it and fit again): {listed}"
+    )

@@ -1,0 +1,181 @@
+"""Score any model on any recording: ``activebonds evaluate`` as a Python function.
+
+:func:`evaluate` cuts the recording to the model's markers and a frame window, as a fit
+selects its data (:func:`~activebonds.identify.problem.select_data`), and measures there,
+for the model and for the zero-force (constant-velocity) predictor:
+
+* the three numbers of ``fit``'s summary and ``fit --validate``, from the same function
+  (:func:`~activebonds.report.metrics.window_metrics`): one-step RMS (mm), free-run RMS
+  (mm) and the median number of frames a free run stays within 50 mm of every marker;
+* per particle, the one-step and free-run RMS (mm) over the same terms
+  (:func:`~activebonds.report.predict.predict` for the model,
+  :func:`~activebonds.report.predict.rms_mm` of the constant-velocity predictions for the
+  zero force). Squared and averaged with each particle's count of terms, they give the
+  overall numbers back.
+
+The model's time starts at the window's first frame (only a model with a rhythmic drive
+sees it). Nothing is fitted: a model identified on one trial can be judged on another.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import ValidationError
+
+from ..data import Trajectory
+from ..errors import InputError
+from ..model import Model
+from .metrics import DEFAULT_STARTS, THRESHOLD_MM, FreeRunMetrics, start_frames, window_metrics
+from .predict import predict, rms_mm
+
+
+@dataclass(frozen=True)
+class ParticleScore:
+    """One particle's RMS errors (mm): the model's and the zero-force predictor's."""
+
+    particle: str
+    marker: str
+    one_step_rms_mm: float
+    zero_force_one_step_rms_mm: float
+    free_run_rms_mm: float  # from the first free-run start, as FreeRunMetrics
+    zero_force_free_run_rms_mm: float
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A model scored on a recorded window (errors in mm)."""
+
+    model_name: str
+    source: str  # the recording
+    frames: tuple[int, int]  # [start, stop) of the recording
+    markers: tuple[str, ...]  # in the model's particle order
+    substeps: int
+    integrator: str
+    model: FreeRunMetrics
+    zero_force: FreeRunMetrics
+    particles: tuple[ParticleScore, ...]
+
+    def record(self) -> dict:
+        """Plain JSON values (non-finite floats as 'inf', '-inf' or 'nan', as
+        :meth:`FreeRunMetrics.to_dict`)."""
+        return {
+            "model_name": self.model_name,
+            "trajectory": self.source,
+            "frames": list(self.frames),
+            "markers": list(self.markers),
+            "substeps": self.substeps,
+            "integrator": self.integrator,
+            "model": self.model.to_dict(),
+            "zero_force": self.zero_force.to_dict(),
+            "particles": [
+                {
+                    "particle": p.particle,
+                    "marker": p.marker,
+                    "one_step_rms_mm": {
+                        "model": _plain(p.one_step_rms_mm),
+                        "zero_force": _plain(p.zero_force_one_step_rms_mm),
+                    },
+                    "free_run_rms_mm": {
+                        "model": _plain(p.free_run_rms_mm),
+                        "zero_force": _plain(p.zero_force_free_run_rms_mm),
+                    },
+                }
+                for p in self.particles
+            ],
+        }
+
+
+def _plain(x: float) -> float | str:
+    return float(x) if np.isfinite(x) else str(float(x))
+
+
+def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
+    """The constant-velocity predictor's one-step predictions [F, P, D] (NaN for frames 0
+    and 1 and where an input frame is incomplete, as the model's) and its free run from frames ``start - 1`` and ``start`` (NaN up to ``start``),
+    as :func:`~activebonds.report.metrics.zero_force_metrics` makes them."""
+    rec = np.asarray(positions, np.float64)
+    one = np.full_like(rec, np.nan)
+    one[2:] = 2.0 * rec[1:-1] - rec[:-2]
+    complete = np.isfinite(rec).all(axis=(1, 2))
+    one[2:][~(complete[1:-1] & complete[:-2])] = np.nan  # the terms the metrics count
+    run = np.full_like(rec, np.nan)
+    steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
+    run[start + 1 :] = rec[start] + steps * (rec[start] - rec[start - 1])
+    return one, run
+
+
+def evaluate(
+    model: Model,
+    recording: Trajectory,
+    *,
+    markers: Sequence[str] | None = None,
+    frames: tuple[int, int | None] = (0, None),
+    substeps: int = 1,
+    integrator: str = "euler",
+    starts: int | Sequence[int] = DEFAULT_STARTS,
+    threshold_mm: float = THRESHOLD_MM,
+) -> Evaluation:
+    """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
+    particle, in order; default the model's). ``substeps`` and ``integrator``: the
+    integration the model was fitted with. Raises :class:`InputError` (one line) for markers
+    or frames the recording does not have."""
+    from ..identify.problem import select_data
+    from ..identify.settings import FitSettings
+
+    try:
+        settings = FitSettings(
+            markers=tuple(markers) if markers else None,
+            frames=tuple(frames),
+            substeps=substeps,
+            integrator=integrator,
+        )
+    except ValidationError as e:  # as the command line's options: the first problem
+        first = e.errors()[0]
+        name = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "options"
+        raise InputError(name, first["msg"].removeprefix("Value error, ")) from None
+    start = settings.frames[0]
+    data = select_data(model, recording, settings)
+    found = window_metrics(
+        model, data, substeps, integrator, starts=starts, threshold_mm=threshold_mm
+    )
+    pred = predict(model, data, substeps=substeps, method=integrator)
+    rec = np.asarray(data.positions, np.float64)
+    first = start_frames(rec, 1)
+    zero_one, zero_run = zero_force_predictions(rec, first[0] if first else rec.shape[0])
+    zero_one_rms = rms_mm(zero_one, rec)
+    zero_run_rms = rms_mm(zero_run, rec)
+    particles = tuple(
+        ParticleScore(
+            particle=name,
+            marker=marker,
+            one_step_rms_mm=float(pred.one_step_rms_mm[i]),
+            zero_force_one_step_rms_mm=float(zero_one_rms[i]),
+            free_run_rms_mm=float(pred.free_run_rms_mm[i]) if first else float("nan"),
+            zero_force_free_run_rms_mm=float(zero_run_rms[i]),
+        )
+        for i, (name, marker) in enumerate(zip(model.particle_names, data.markers, strict=True))
+    )
+    return Evaluation(
+        model_name=model.name,
+        source=str(recording.source or ""),
+        frames=(int(start), int(start + data.n_frames)),
+        markers=tuple(data.markers),
+        substeps=int(substeps),
+        integrator=integrator,
+        model=found["model"],
+        zero_force=found["zero_force"],
+        particles=particles,
+    )
+
+
+def evaluate_files(model: str | Path, trajectory: str | Path, **options) -> Evaluation:
+    """:func:`evaluate` of a model file on a trajectory file (any format ``read_trajectory``
+    reads)."""
+    from ..data import read_trajectory
+    from ..model import load_model
+
+    return evaluate(load_model(model), read_trajectory(trajectory), **options)
