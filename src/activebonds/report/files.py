@@ -11,7 +11,7 @@ from .. import atomic
 from ..atomic import write_text_atomic
 from ..errors import InputError
 
-FIGURE_SUFFIXES = {".png", ".svg", ".gif", ".json"}
+FIGURE_SUFFIXES = {".png", ".svg", ".gif", ".mp4", ".json"}
 
 
 def check_replaceable(target: Path) -> None:

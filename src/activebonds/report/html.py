@@ -84,7 +84,13 @@ def _asset(name: str) -> str:
 
 
 def _img(path: Path, alt: str) -> str:
+    """An embedded image, or for an MP4 an embedded video (a data: URI either way)."""
     data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    if Path(path).suffix.lower() == ".mp4":
+        return (
+            f'<video controls loop muted preload="metadata" aria-label="{html.escape(alt)}" '
+            f'src="data:video/mp4;base64,{data}"></video>'
+        )
     mime = {".png": "image/png", ".gif": "image/gif", ".svg": "image/svg+xml"}.get(
         Path(path).suffix.lower(), "image/png"
     )
@@ -496,7 +502,8 @@ def write_report(
     run_dir: str | Path, out: str | Path | None = None, *, frames: int | None = None
 ) -> Path:
     """Write the report of one run: ``RUN/report.html`` (or ``out``) and its figures
-    (``RUN/figures/*.png|svg`` and ``animation.gif``; beside ``out``: ``STEM-figures/``).
+    (``RUN/figures/*.png|svg``, ``animation.gif`` and, with ffmpeg, ``animation.mp4``;
+    beside ``out``: ``STEM-figures/``).
 
     ``frames``: how many frames of the original recording to predict, from the fitted
     window's start (default: twice the window; only the window if the recording is gone or
@@ -519,18 +526,22 @@ def write_report(
 
 
 def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Section]:
-    """The sections of a one-run report; figures are written into ``fig_dir``."""
+    """The sections of a one-run report; figures are written into ``fig_dir``. Frames are
+    numbered as in the recording (the fitted window's first frame is the run's ``--frames``
+    start)."""
     model = record.model
+    first = int(record.settings.frames[0])
+    frame_at = {"first_frame": first, "start_time": float(record.window.start_time)}
     labels = plots.bond_labels(model)
     refs = [(name, fitted) for name, fitted, _ in baseline_rows(record, pred)[1:]]
     conv = plots.convergence(
         [plots.Series(record.label, [record.history])], fig_dir / "convergence", references=refs
     )
-    traj = plots.trajectories(pred, fig_dir / "trajectories")
+    traj = plots.trajectories(pred, fig_dir / "trajectories", **frame_at)
     searched = searched_model(record)
     params = plots.parameters(model, fig_dir / "parameters", bounds=searched)
     variants = plots.variant_success(record.history, fig_dir / "variants")
-    gif = animation.write_gif([(record.label, pred)], fig_dir / "animation.gif")
+    media = animation.write_animation([(record.label, pred)], fig_dir / "animation.gif", **frame_at)
     extra = []
     if not pred.extended:
         extra.append(
@@ -538,7 +549,7 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
             "holds no later frame, or no more frames were asked for."
         )
     if pred.diverged_at is not None:
-        extra.append(f"The free run went non-finite at frame {pred.diverged_at}.")
+        extra.append(f"The free run went non-finite at frame {first + pred.diverged_at}.")
     sections = [
         Section(
             "Summary",
@@ -559,20 +570,35 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         Section(
             "Recorded vs model",
             text=[
-                f"Frames 0–{pred.fit_frames - 1} were fitted"
+                f"Frames {first}–{first + pred.fit_frames - 1} of the recording were fitted"
                 + (
-                    f"; frames {pred.fit_frames}–{pred.n_frames - 1} test generalisation."
+                    f"; frames {first + pred.fit_frames}–{first + pred.n_frames - 1} test "
+                    "generalisation."
                     if pred.extended
                     else "."
                 )
             ],
-            animation=animation.payload([(record.label, pred)], title="recorded vs model"),
+            animation=animation.payload(
+                [(record.label, pred)], title="recorded vs model", **frame_at
+            ),
             figures=[
-                Figure(traj[0], "Positions against time: recorded, one-step predictions, free run.")
+                Figure(
+                    traj[0],
+                    "Positions against the recording's frame number (time on top): recorded, "
+                    "one-step predictions, free run.",
+                ),
+                *(
+                    [Figure(media.mp4, f"The animation as a video ({media.mp4.name}).")]
+                    if media.mp4
+                    else []
+                ),
             ],
             notes=[
                 *extra,
-                f"The same animation is saved as {gif.name} in the figures folder.",
+                f"The same animation is saved as {media.gif.name}"
+                + (f" and {media.mp4.name}" if media.mp4 else "")
+                + " in the figures folder.",
+                *([media.note] if media.note else []),
             ],
             anchor="animation",
         ),
@@ -599,7 +625,7 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         sections.append(unc)
     if pred.neural.any():
         heat = plots.weight_heatmap(model, fig_dir / "weights")
-        act = plots.activations(pred, labels, fig_dir / "activations")
+        act = plots.activations(pred, labels, fig_dir / "activations", **frame_at)
         sections.append(
             Section(
                 "Neurons",

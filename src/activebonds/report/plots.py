@@ -7,6 +7,7 @@ comparison take the default colour cycle in order.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -87,8 +88,41 @@ def convergence(
     log scale. With several runs in a series and ``band`` (default: when any series has more
     than one run), the lines are medians across runs and the best cost's interquartile range
     is shaded. ``references``: (label, RMS mm) drawn as horizontal lines (e.g. the zero-force
-    baseline, an exact optimum, a floor) where they fall within 100x of the curves."""
+    baseline, an exact optimum, a floor) where they fall within 100x of the curves. The
+    final best value of each series is written beside its last point, and labelled ticks
+    (powers of ten) bracket it on the y axis."""
+    fig = convergence_figure(series, band=band, title=title, references=references)
+    return save(fig, stem)
+
+
+def final_values(fig) -> list[float]:
+    """The final best values that :func:`convergence_figure` marked (mm)."""
+    return list(getattr(fig, "activebonds_final", []))
+
+
+def _decade_ticks(lo: float, hi: float, finals: Sequence[float]) -> list[float]:
+    """Major ticks of a log axis from ``lo`` to ``hi``: powers of ten (every decade up to 12
+    of them, else a regular stride), always with the two that bracket each final value."""
+    a, b = math.floor(math.log10(lo)), math.ceil(math.log10(hi))
+    stride = max(1, math.ceil((b - a + 1) / 12))
+    exps = set(range(a - a % stride, b + 1, stride))
+    for v in finals:
+        e = math.log10(v)
+        exps |= {math.floor(e), math.ceil(e)}
+    return [10.0**e for e in sorted(exps)]
+
+
+def convergence_figure(
+    series: Sequence[Series],
+    *,
+    band: bool | None = None,
+    title: str = "Convergence",
+    references: Sequence[tuple[str, float | None]] = (),
+):
+    """The figure of :func:`convergence` (unsaved); its final best values are listed by
+    :func:`final_values`."""
     fig, ax = _subplots(figsize=(7.5, 4.2), layout="constrained")
+    finals: list[tuple[float, float, str] | None] = []  # (generation, value, colour)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     if band is None:
         band = any(len(s.histories) > 1 for s in series)
@@ -105,6 +139,7 @@ def convergence(
             q = _nanpercentile(best, [25, 50, 75])
             ax.fill_between(gens, q[0], q[2], color=color, alpha=0.25, linewidth=0)
             ax.plot(gens, q[1], color=color, lw=1.8, label=f"{s.label}: best (median of {n}, IQR)")
+            finals.append(_last(gens, q[1], color))
             ax.plot(
                 gens,
                 _nanpercentile(median, [50])[0],
@@ -117,6 +152,7 @@ def convergence(
             for k in range(n):
                 lab = s.label if n == 1 else f"{s.label} #{k + 1}"
                 ax.plot(gens, best[k], color=color, lw=1.6, label=f"{lab}: best")
+                finals.append(_last(gens, best[k], color))
                 ax.plot(
                     gens, median[k], color=color, lw=1, ls="--", label=f"{lab}: population median"
                 )
@@ -132,10 +168,32 @@ def convergence(
                 value, color="0.35", lw=1.1, ls=styles[k % len(styles)],
                 label=f"{label}: {value:.4g} mm",
             )  # fmt: skip
+        marked = [f for f in finals if f is not None]
+        values = [v for _, v, _ in marked]
+        if values:  # the decades around each final value are in view (labelled ticks)
+            lo, hi = ax.get_ylim()
+            below = 10.0 ** math.floor(math.log10(min(values)))
+            above = 10.0 ** math.ceil(math.log10(max(values)))
+            ax.set_ylim(min(lo, below / 1.15), max(hi, above * 1.15))
+        lo, hi = ax.get_ylim()
+        ax.yaxis.set_major_locator(mticker.FixedLocator(_decade_ticks(lo, hi, values)))
         plain = mticker.FuncFormatter(lambda v, _: f"{v:g}")
         ax.yaxis.set_major_formatter(plain)
-        lo, hi = ax.get_ylim()
         ax.yaxis.set_minor_formatter(plain if hi / lo < 30 else mticker.NullFormatter())
+        for gen, value, color in marked:
+            ax.plot([gen], [value], "o", color=color, ms=4)
+            ax.annotate(
+                f"{value:.3g} mm",
+                (gen, value),
+                xytext=(-4, -9),
+                textcoords="offset points",
+                ha="right",
+                va="top",
+                fontsize=8,
+                color=color,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+            )
+        fig.activebonds_final = values
         ax.legend(fontsize=8, loc="upper right")
     else:
         ax.text(
@@ -145,7 +203,15 @@ def convergence(
     ax.set_ylabel("RMS position error (mm)")
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
-    return save(fig, stem)
+    return fig
+
+
+def _last(gens: np.ndarray, values: np.ndarray, color) -> tuple[float, float, str] | None:
+    """(generation, value, colour) of the last finite positive value, or None."""
+    ok = np.flatnonzero(np.isfinite(values) & (values > 0))
+    if ok.size == 0:
+        return None
+    return float(gens[ok[-1]]), float(values[ok[-1]]), color
 
 
 def parameters(
@@ -289,12 +355,44 @@ def _limits(rec: np.ndarray) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
+def frame_numbers(pred: Prediction, first_frame: int = 0) -> np.ndarray:
+    """The recording's numbers of the prediction's frames (its first is ``first_frame``)."""
+    return int(first_frame) + np.arange(pred.n_frames)
+
+
+def _time_axis(ax, pred: Prediction, first_frame: int, start_time: float, **label) -> None:
+    """A secondary x axis on top: the recording's time (s) of the frame numbers below."""
+    dt, t0 = float(pred.dt), float(start_time) - int(first_frame) * float(pred.dt)
+    top = ax.secondary_xaxis("top", functions=(lambda f: t0 + f * dt, lambda t: (t - t0) / dt))
+    top.set_xlabel("time in the recording (s)", **label)
+    top.tick_params(labelsize=7)
+
+
 def trajectories(
-    pred: Prediction, stem: str | Path, *, title: str = "Recorded vs predicted"
+    pred: Prediction,
+    stem: str | Path,
+    *,
+    title: str = "Recorded vs predicted",
+    first_frame: int = 0,
+    start_time: float = 0.0,
 ) -> list[Path]:
-    """One panel per particle and axis (position in mm against time): the recording, the
-    one-step predictions and the free run; the end of the fitted window is a vertical line.
-    The y range follows the recording, so a diverging free run leaves the panel."""
+    """One panel per particle and axis (position in mm against the frame number in the
+    recording, time on top): the recording, the one-step predictions and the free run; the end
+    of the fitted window is a vertical line. The y range follows the recording, so a
+    diverging free run leaves the panel. ``first_frame``/``start_time``: the recording's
+    number and time (s) of the prediction's first frame."""
+    fig = trajectories_figure(pred, title=title, first_frame=first_frame, start_time=start_time)
+    return save(fig, stem)
+
+
+def trajectories_figure(
+    pred: Prediction,
+    *,
+    title: str = "Recorded vs predicted",
+    first_frame: int = 0,
+    start_time: float = 0.0,
+):
+    """The figure of :func:`trajectories` (unsaved)."""
     n_p, dim = pred.recorded.shape[1], pred.recorded.shape[2]
     fig, axes = _subplots(
         n_p,
@@ -304,7 +402,7 @@ def trajectories(
         squeeze=False,
         layout="constrained",
     )
-    t = pred.times
+    t = frame_numbers(pred, first_frame)
     for p in range(n_p):
         for d in range(dim):
             ax = axes[p, d]
@@ -329,27 +427,38 @@ def trajectories(
             ax.tick_params(labelsize=7)
             if p == 0:
                 ax.set_title(f"{AXES[d]} (mm)", fontsize=9)
+                _time_axis(ax, pred, first_frame, start_time, fontsize=7)
             if d == 0:
                 ax.set_ylabel(pred.names[p], fontsize=9)
             if p == n_p - 1:
-                ax.set_xlabel("time (s)", fontsize=8)
+                ax.set_xlabel("frame (of the recording)", fontsize=8)
     axes[0, 0].legend(fontsize=7, loc="best")
     note = "  (dotted line: end of the fitted window)" if pred.extended else ""
     fig.suptitle(title + note, fontsize=10)
-    return save(fig, stem)
+    return fig
 
 
-def activations(pred: Prediction, labels: Sequence[str], stem: str | Path) -> list[Path]:
-    """Neuron activations along the free run, with the saturation limits (|a| = 0.95)."""
+def activations(
+    pred: Prediction,
+    labels: Sequence[str],
+    stem: str | Path,
+    *,
+    first_frame: int = 0,
+    start_time: float = 0.0,
+) -> list[Path]:
+    """Neuron activations along the free run, with the saturation limits (|a| = 0.95),
+    against the frame number in the recording (time on top)."""
     fig, ax = _subplots(figsize=(7.5, 3.0), layout="constrained")
+    frames = frame_numbers(pred, first_frame)
     for b in np.flatnonzero(pred.neural):
-        ax.plot(pred.times, pred.activation[:, b], lw=1.3, label=f"neuron {labels[b]}")
+        ax.plot(frames, pred.activation[:, b], lw=1.3, label=f"neuron {labels[b]}")
     for y in (-0.95, 0.95):
         ax.axhline(y, color="0.5", lw=0.8, ls=":")
     if pred.extended:
-        ax.axvline(pred.times[pred.fit_frames - 1], color="0.5", lw=0.8, ls=":")
+        ax.axvline(frames[pred.fit_frames - 1], color="0.5", lw=0.8, ls=":")
     ax.set_ylim(-1.05, 1.05)
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel("frame (of the recording)")
+    _time_axis(ax, pred, first_frame, start_time)
     ax.set_ylabel("activation a")
     share = pred.saturated_share
     sat = f"{100 * share:.0f} % of samples saturated" if np.isfinite(share) else "no neuron"

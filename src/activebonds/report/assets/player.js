@@ -131,22 +131,49 @@
       });
     }
 
+    // The legend in the canvas's top right corner, sized to its longest label (a smaller font,
+    // then an ellipsis, when that would take more than 60 % of the width): never clipped.
+    // Its box [x, y, width, height] is left in the canvas's data-legend attribute.
     function legend(items) {
-      ctx.font = "12px sans-serif";
-      var y = 16;
+      var pad = 6, swatch = 24, gap = 6, maxW = Math.floor(0.6 * W);
+      var size = 12, widest = 0;
+      function measure() {
+        ctx.font = size + "px sans-serif";
+        widest = 0;
+        items.forEach(function (it) { widest = Math.max(widest, ctx.measureText(it[0]).width); });
+      }
+      measure();
+      var room = maxW - 2 * pad - swatch - gap;
+      if (widest > room) {
+        size = Math.max(9, Math.floor(size * room / widest));
+        measure();
+      }
+      function fit(text) {
+        if (ctx.measureText(text).width <= room) { return text; }
+        while (text.length > 1 && ctx.measureText(text + "\u2026").width > room) {
+          text = text.slice(0, -1);
+        }
+        return text + "\u2026";
+      }
+      var rowH = size + 5;
+      var w = Math.ceil(Math.min(widest, room) + 2 * pad + swatch + gap);
+      var h = items.length * rowH + 2 * pad - 4;
+      var x0 = W - 4 - w, y0 = 4;
+      ctx.fillStyle = "rgba(255,255,255,0.85)";
+      ctx.fillRect(x0, y0, w, h);
+      var y = y0 + pad + size - 2;
       items.forEach(function (it) {
-        ctx.fillStyle = "rgba(255,255,255,0.85)";
-        ctx.fillRect(W - 190, y - 11, 186, 16);
         ctx.strokeStyle = it[1];
-        ctx.fillStyle = it[1];
         ctx.lineWidth = 2;
         ctx.setLineDash(it[2]);
-        ctx.beginPath(); ctx.moveTo(W - 184, y - 4); ctx.lineTo(W - 160, y - 4); ctx.stroke();
+        var mid = y - Math.round(size / 3);
+        ctx.beginPath(); ctx.moveTo(x0 + pad, mid); ctx.lineTo(x0 + pad + swatch, mid); ctx.stroke();
         ctx.setLineDash([]);
         ctx.fillStyle = "#222";
-        ctx.fillText(it[0], W - 154, y);
-        y += 17;
+        ctx.fillText(fit(it[0]), x0 + pad + swatch + gap, y);
+        y += rowH;
       });
+      canvas.setAttribute("data-legend", [x0, y0, w, h].join(","));
     }
 
     function draw() {
@@ -178,7 +205,8 @@
       });
       legend(items);
       var fn = anim.frame_numbers[frame];
-      var where = fn < anim.fit_frames ? "fitted window" : "beyond the fit (generalisation)";
+      var fitEnd = anim.fit_end !== undefined ? anim.fit_end : anim.fit_frames;
+      var where = fn < fitEnd ? "fitted window" : "beyond the fit (generalisation)";
       label.textContent = "frame " + fn + " / " + anim.frame_numbers[n - 1] +
         "  \u00b7  t = " + anim.times[frame].toFixed(3) + " s  \u00b7  " + where;
     }
