@@ -1,9 +1,35 @@
-"""Shared test setup (the test process is an entry point): the command line's XLA flags, and
-every test runs JAX in float64."""
+"""Shared test setup (the test process is an entry point): the command line's XLA flags, every
+test runs JAX in float64, and one compilation cache for the whole run.
 
-import jax
+The cache: the first process (pytest's controller) makes a fresh folder and names it in
+``ACTIVEBONDS_CACHE``, which the xdist workers and every command line a test starts inherit, so
+a program one test compiled is loaded, not compiled again, by the next (the results are the
+same: a cached program is the same program). It is removed at the end of the run; the user's
+``~/.cache/activebonds`` is never used. ``ACTIVEBONDS_CACHE=off pytest`` runs without it.
+"""
 
-from activebonds.runtime import fast_cpu_flags
+import os
+import shutil
+import tempfile
+
+# programs that took a third of a second to compile are worth keeping (JAX's default: 1 s);
+# set before JAX is imported, so the command lines the tests start read it too
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
+
+import jax  # noqa: E402
+
+from activebonds.runtime import compilation_cache, fast_cpu_flags  # noqa: E402
+
+_OWNER = "ACTIVEBONDS_TEST_CACHE_OWNER"
+if "ACTIVEBONDS_CACHE" not in os.environ:
+    os.environ["ACTIVEBONDS_CACHE"] = tempfile.mkdtemp(prefix="activebonds-test-jax-")
+    os.environ[_OWNER] = str(os.getpid())
 
 fast_cpu_flags()
 jax.config.update("jax_enable_x64", True)
+compilation_cache()
+
+
+def pytest_unconfigure(config):
+    if os.environ.get(_OWNER) == str(os.getpid()):
+        shutil.rmtree(os.environ["ACTIVEBONDS_CACHE"], ignore_errors=True)
