@@ -44,9 +44,13 @@ def _progress_runner(experiments: list[str], scale: str, seeds: list[int], folde
 
 
 def _finish(summaries: dict, folder: Path, started: float) -> Path:
-    from ..experiments.report import write_experiments_report
+    from rich.console import Console
 
-    report = write_experiments_report(summaries, folder)
+    from ..experiments.report import write_experiments_report
+    from .progress import status_line
+
+    with status_line(Console(stderr=True), "writing the report"):  # figures: tens of seconds
+        report = write_experiments_report(summaries, folder)
     for name, s in summaries.items():
         for config, c in s["configs"].items():
             st, ne = c["series"]["standard"], c["series"]["neural"]

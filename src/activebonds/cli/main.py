@@ -2,21 +2,27 @@
 
 Bad input (model file, trajectory, option, run directory) prints one line naming the file and
 field and exits with code 2; nothing is half-written. An interrupted fit exits with 130 after
-saving a checkpoint.
+saving a checkpoint (cli/interrupts.py); a write that fails mid-run (a full disk) exits with 1,
+its newest checkpoint kept (cli/preflight.py).
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
-import typer
-from rich.table import Table
+from . import interrupts
 
-from ..errors import InputError
-from .app import app, fail, out, parse_option_frames
+interrupts.install()  # the command line's own process only, before the slow imports
+
+import typer  # noqa: E402
+from rich.table import Table  # noqa: E402
+
+from ..errors import InputError  # noqa: E402
+from .app import app, fail, out, parse_option_frames  # noqa: E402
 
 
 @app.command()
@@ -222,9 +228,13 @@ def fit(
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
     from ..identify import fit as run_fit
+    from ..identify.driver import compiling_text
+    from ..identify.rundir import RunWriteError
     from ..identify.settings import parse_frames
     from .options import settings_from_options
+    from .preflight import check_output_folder, write_failure_line
 
+    interrupts.expect_run(out_dir)
     try:
         settings = settings_from_options(
             markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
@@ -245,6 +255,7 @@ def fit(
             init=init,
             optimizer=optimizer,
         )
+        check_output_folder(out_dir, overwrite)  # before any computation
         if strict:  # checked before anything is written; the fit then reads them as usual
             from ..data import read_trajectory
 
@@ -255,15 +266,35 @@ def fit(
         held_out = _validation_window(model, first, settings, validate) if validate else None
         out.print(predictions, markup=False, highlight=False)
         data = traj if len(traj) > 1 else first
-        with _progress(generations) as progress:
+        with _progress(generations, compiling_text(optimizer)) as progress:
             result = run_fit(
-                model, data, settings, out=out_dir, overwrite=overwrite, progress=progress
+                model,
+                data,
+                settings,
+                out=out_dir,
+                overwrite=overwrite,
+                progress=progress,
+                status=progress.status,
             )
+        interrupts.fit_returned(result.status)
     except InputError as e:
         fail(e)
+    except RunWriteError as e:
+        fail(write_failure_line(out_dir, e), code=1)
     except KeyboardInterrupt:
-        fail(f"interrupted; continue with: activebonds resume {out_dir}", code=130)
-    _summary(result, held_out)
+        interrupts.stop(_interrupted_fit(out_dir))
+    try:
+        _summary(result, held_out)  # writes RUN/validation.json
+    except RunWriteError as e:
+        fail(write_failure_line(out_dir, e), code=1)
+
+
+def _interrupted_fit(out_dir: Path) -> str:
+    """The true message of a fit interrupted (in-process: the command line's own process acts
+    on interrupts only once its run exists, cli/interrupts.py)."""
+    if interrupts.active() or (out_dir / "run.json").is_file():
+        return interrupts.resume_advice(out_dir)
+    return "interrupted before the run started; nothing was written"
 
 
 @app.command()
@@ -278,23 +309,38 @@ def resume(
 ):
     """Continue an interrupted fit exactly where its last checkpoint stopped."""
     from ..identify import resume as run_resume
-    from ..identify.rundir import read_meta
+    from ..identify.rundir import RunWriteError, read_meta
+    from .preflight import write_failure_line
 
     try:
         total = generations or read_meta(run)["settings"]["generations"]
-        with _progress(total) as progress:
-            result = run_resume(run, force=force, generations=generations, progress=progress)
+        interrupts.resuming(run)
+        with _progress(total, "loading the run and compiling") as progress:
+            result = run_resume(
+                run, force=force, generations=generations, progress=progress, status=progress.status
+            )
+        interrupts.fit_returned(result.status)
     except InputError as e:
         fail(e)
+    except RunWriteError as e:
+        fail(write_failure_line(run, e), code=1)
     except KeyboardInterrupt:
-        fail(f"interrupted; continue with: activebonds resume {run}", code=130)
+        interrupts.stop(interrupts.resume_advice(run))
     _summary(result)
 
 
-def _progress(total: int):
+@contextmanager
+def _progress(total: int, starting: str):
+    """The fit's progress bar and status lines (cli/progress.py); each finished chunk is a
+    point where an interrupt is acted on."""
+    from rich.console import Console
+
     from .progress import fit_progress
 
-    return fit_progress(total, out)
+    status_console = Console(stderr=True)
+    with fit_progress(total, out, status_console, on_update=interrupts.check) as progress:
+        progress.begin(starting)
+        yield progress
 
 
 def refinement_lines(result) -> list[str]:

@@ -1,4 +1,5 @@
-"""A rich progress bar for long fits: generation, best RMS error, generations per second, ETA."""
+"""What long commands show while they run: a fit's progress bar (generation, best RMS error,
+generations per second, ETA) and status lines for its silent phases, a sweep's bar."""
 
 from __future__ import annotations
 
@@ -16,43 +17,113 @@ from rich.progress import (
 )
 
 
-@contextmanager
-def fit_progress(total: int, console: Console):
-    """A progress bar that appears with the first finished chunk: input errors found before
-    then stay a single line."""
-    columns = (
-        TextColumn("[bold]generation"),
-        MofNCompleteColumn(),
-        BarColumn(),
-        TextColumn("best {task.fields[rms]} mm"),
-        TextColumn("{task.fields[speed]} gen/s"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-    )
-    bar = Progress(*columns, console=console, transient=False)
-    state: dict = {"task": None, "t": None, "g": 0}
+class FitProgress:
+    """What a fit shows while it runs: ``progress(generation, total, rms)`` after each chunk
+    (a bar on ``console``, from the first finished chunk, so input errors found before stay a
+    single line) and ``progress.status(text)`` before a long silent phase (on ``status_console``:
+    a spinner in a terminal, a plain line ``text ...`` otherwise). One live display at a time:
+    a status stops the bar (which stays printed), the next chunk stops the status.
+    ``on_update`` runs after each chunk's update (the command line's interrupt check)."""
 
-    def update(generation: int, total_now: int, rms: float) -> None:
+    def __init__(self, total: int, console: Console, status_console: Console, on_update=None):
+        columns = (
+            TextColumn("[bold]generation"),
+            MofNCompleteColumn(),
+            BarColumn(),
+            TextColumn("best {task.fields[rms]} mm"),
+            TextColumn("{task.fields[speed]} gen/s"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+        )
+        self.bar = Progress(*columns, console=console, transient=False)
+        self.status_console, self.on_update = status_console, on_update
+        self.task = None
+        self.t: float | None = None  # wall time of the first finished chunk
+        self.g = 0
+        self.spinner = None
+        self.said = ""  # the status shown
+        self.live = False  # the bar is shown
+
+    def __call__(self, generation: int, total_now: int, rms: float) -> None:
+        self._stop_spinner()
         now = time.time()
-        if state["task"] is None:
-            bar.start()
-            state["task"] = bar.add_task("fit", total=total_now, rms="-", speed="-")
-        if state["t"] is None:  # the first chunk includes compilation: rate from here on
-            state["t"], state["g"] = now, generation
+        if self.task is None:
+            self.task = self.bar.add_task("fit", total=total_now, rms="-", speed="-")
+        if not self.live:
+            self.bar.start()
+            self.live = True
+        if self.t is None:  # the first chunk includes compilation: rate from here on
+            self.t, self.g = now, generation
             speed = "-"
         else:
-            dt = max(now - state["t"], 1e-9)
-            speed = f"{(generation - state['g']) / dt:,.0f}"
-        bar.update(
-            state["task"], completed=generation, total=total_now, rms=f"{rms:.4g}", speed=speed
+            speed = f"{(generation - self.g) / max(now - self.t, 1e-9):,.0f}"
+        self.bar.update(
+            self.task, completed=generation, total=total_now, rms=f"{rms:.4g}", speed=speed
         )
+        if self.on_update is not None:
+            self.on_update()
 
+    def status(self, text: str) -> None:
+        """Say what happens next, until the next chunk or status (or the end)."""
+        if self.live:
+            self.bar.stop()
+            self.live = False
+        if self.spinner is not None and self.said == text:
+            return  # already shown
+        self._stop_spinner()
+        self.spinner, self.said = show_status(self.status_console, text), text
+
+    def begin(self, text: str) -> None:
+        """A spinner from the start (in a terminal only: a plain line comes with the first
+        :meth:`status`, once the inputs were accepted, so that a refused fit stays one line)."""
+        if self.status_console.is_terminal:
+            self.status(text)
+
+    def close(self) -> None:
+        self._stop_spinner()
+        if self.live:
+            self.bar.stop()
+            self.live = False
+
+    def _stop_spinner(self) -> None:
+        if self.spinner is not None:
+            self.spinner.stop()
+            self.spinner = None
+
+
+def show_status(console: Console, text: str):
+    """A spinner with ``text ...`` on ``console`` if it is a terminal (returned: ``.stop()``
+    it), else the plain line ``text ...`` (returns None)."""
+    if console.is_terminal:
+        spinner = console.status(f"{text} ...")
+        spinner.start()
+        return spinner
+    console.print(f"{text} ...", markup=False, highlight=False, soft_wrap=True)
+    return None
+
+
+@contextmanager
+def status_line(console: Console, text: str):
+    """:func:`show_status` for the duration of a block."""
+    spinner = show_status(console, text)
     try:
-        yield update
+        yield
     finally:
-        if state["task"] is not None:
-            bar.stop()
+        if spinner is not None:
+            spinner.stop()
+
+
+@contextmanager
+def fit_progress(
+    total: int, console: Console, status_console: Console | None = None, on_update=None
+):
+    """A :class:`FitProgress` for the duration of a fit (its displays stopped at the end)."""
+    shown = FitProgress(total, console, status_console or console, on_update)
+    try:
+        yield shown
+    finally:
+        shown.close()
 
 
 @contextmanager

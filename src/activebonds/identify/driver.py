@@ -30,6 +30,9 @@ from .refine import Refinement, Stage
 from .settings import FitSettings
 
 Progress = Callable[[int, int, float], None]  # (generation, total, best RMS mm)
+# What the run does next, for people, before a phase that may take long with no progress to
+# show: "compiling the cost and the evolution strategy", "refining ...", "estimating ...".
+Status = Callable[[str], None]
 
 
 @dataclass
@@ -67,6 +70,7 @@ def fit(
     *,
     overwrite: bool = False,
     progress: Progress | None = None,
+    status: Status | None = None,
     **options,
 ) -> FitResult:
     """Identify the free parameters of ``model`` from ``data``.
@@ -74,14 +78,18 @@ def fit(
     ``model`` and ``data`` are objects or file paths (``data`` may be a list of several
     recordings, fitted at once: their costs add up); ``settings`` a :class:`FitSettings`
     (or its fields as keyword ``options``). With ``out``, a run directory is written
-    (settings, hashes, history, checkpoints, best model) and the run can be resumed.
+    (settings, hashes, history, checkpoints, best model) and the run can be resumed; a folder
+    without the free space the run needs is refused up front, and a write that fails later
+    raises :class:`~activebonds.identify.rundir.RunWriteError` with the newest checkpoint
+    kept. ``progress`` is called after each chunk of generations, ``status`` before the long
+    silent phases (compilation, refinement, uncertainty) with what happens.
     """
     settings = settings or FitSettings(**options)
     with _precision(settings):
-        return _fit(model, data, settings, out, overwrite, progress)
+        return _fit(model, data, settings, out, overwrite, progress, status)
 
 
-def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress) -> FitResult:
+def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress, status=None):
     model_path = Path(model) if isinstance(model, str | Path) else None
     many = isinstance(data, list | tuple)
     items = list(data) if many else [data]
@@ -93,7 +101,7 @@ def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress) -> 
     if out is not None:
         model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
         run = _create_run(out, model_text, ident, settings, model_path, paths, overwrite)
-    return _evolve(ident, settings, run, progress)
+    return _evolve(ident, settings, run, progress, status=status)
 
 
 def _create_run(out, model_text, ident, settings, model_path, data_paths, overwrite) -> Path:
@@ -112,7 +120,23 @@ def _create_run(out, model_text, ident, settings, model_path, data_paths, overwr
     files = {"model.toml": model_text}
     for i, d in enumerate(ident.all_data):
         files[rundir.data_name(i)] = render_npz(d, Path(rundir.data_name(i)))
-    return rundir.create(out, files, meta, overwrite)
+    n_particles = len(ident.model.particle_names)
+    state = _state_bytes(strategy, n_particles, _dtype(settings))
+    need = rundir.expected_bytes(state, len(meta["history"]["columns"]), settings.generations)
+    need += 2 * sum(len(v) for k, v in files.items() if k != "model.toml")  # refinement states
+    return rundir.create(out, files, meta, overwrite, need_bytes=need)
+
+
+def _state_bytes(strategy, n_particles: int, dtype) -> int:
+    """Bytes of the strategy's state (its shapes, traced with a stand-in cost: nothing is
+    computed or compiled), plus the loop's counters."""
+
+    def evaluate(genes):
+        n = genes.shape[0]
+        return jnp.zeros(n, dtype), jnp.zeros((n, n_particles), dtype)
+
+    shapes = jax.eval_shape(lambda key: strategy.init(key, evaluate), jax.random.PRNGKey(0))
+    return sum(8 * int(np.prod(leaf.shape)) for leaf in jax.tree.leaves(shapes)) + 16
 
 
 def _stored_identification(run: Path, settings: FitSettings) -> Identification:
@@ -127,6 +151,7 @@ def resume(
     force: bool = False,
     generations: int | None = None,
     progress: Progress | None = None,
+    status: Status | None = None,
 ) -> FitResult:
     """Continue an interrupted run from its newest complete checkpoint.
 
@@ -147,14 +172,14 @@ def resume(
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
     with _precision(settings):
-        return _resume(run, meta, settings, progress)
+        return _resume(run, meta, settings, progress, status)
 
 
-def _resume(run: Path, meta: dict, settings: FitSettings, progress) -> FitResult:
+def _resume(run: Path, meta: dict, settings: FitSettings, progress, status=None) -> FitResult:
     ident = _stored_identification(run, settings)
     if meta.get("upgraded_from"):  # a run of an older format continues in the current one
         rundir.write_meta(run, {k: v for k, v in meta.items() if k != "upgraded_from"})
-    return _evolve(ident, settings, run, progress, resuming=True)
+    return _evolve(ident, settings, run, progress, resuming=True, status=status)
 
 
 def _skipped(skipped: list[str]) -> str:
@@ -194,7 +219,12 @@ def _check_unchanged(run: Path, meta: dict) -> None:
 
 
 def _evolve(
-    ident: Identification, settings: FitSettings, run: Path | None, progress, resuming=False
+    ident: Identification,
+    settings: FitSettings,
+    run: Path | None,
+    progress,
+    resuming=False,
+    status=None,
 ):
     """Start (or, with a run directory holding a checkpoint, continue) the run and evolve it
     to ``settings.generations``, checkpointing every ``checkpoint_every`` generations and on
@@ -212,9 +242,11 @@ def _evolve(
     saved = None
     if resuming:
         template = loop.template(init_key)
-        saved = rundir.load_checkpoint(run, rundir.state_shapes(template))
+        shapes = rundir.state_shapes(template)
+        saved = rundir.load_checkpoint(run, shapes)
         if saved[0] is None and saved[2]:
             raise InputError(run, "no complete checkpoint to resume from" + _skipped(saved[2]))
+        _check_space_to_resume(run, shapes, len(loop.columns), total)
     if saved is not None and saved[0] is not None:
         arrays, history, _ = saved
         history = rundir.upgrade_history(history, rundir.read_meta(run))
@@ -231,6 +263,8 @@ def _evolve(
     started = time.time()
     if progress is not None and gen > 0 and len(history["best_rms_mm"]):
         progress(gen, total, float(history["best_rms_mm"][-1]))  # a resumed run starts here
+    if status is not None and gen < total:
+        status(compiling_text(strategy.name))
     try:
         every = settings.checkpoint_every if run is not None else None
         for latest, rows in loop.run(gen_key, state, total, every):
@@ -248,7 +282,24 @@ def _evolve(
             args = (run, ident, settings, strategy, state, history, integer)
             _checkpoint(*args, "interrupted", started)
         raise
-    return _finish(ident, settings, run, strategy, state, history, integer, "completed", started)
+    args = (ident, settings, run, strategy, state, history, integer, "completed", started)
+    return _finish(*args, say=status)
+
+
+def _check_space_to_resume(run: Path, shapes: dict, columns: int, total: int) -> None:
+    """Refuse (one line) to resume in a folder without the space the rest of the run needs:
+    what the run writes in all, less what it holds now (replaced as it goes), and at least
+    one more checkpoint beside the kept ones."""
+    state = rundir.state_bytes(shapes)
+    need = rundir.expected_bytes(state, columns, total) - rundir.used_bytes(run)
+    one = state + total * columns * 8
+    rundir.check_space(run, run, max(need, one), "resuming writes")
+
+
+def compiling_text(optimizer: str) -> str:
+    """What a fit does before its first generations, for people."""
+    words = {"es": "evolution strategy", "cmaes": "CMA-ES", "random": "random search"}
+    return f"compiling the cost and the {words.get(optimizer, optimizer)}"
 
 
 def _cast(evaluate, dtype):
@@ -283,7 +334,9 @@ def _checkpoint(run, ident, settings, strategy, state, history, integer, status,
     )
 
 
-def _finish(ident, settings, run, strategy, state, history, integer, status, started=None):
+def _finish(
+    ident, settings, run, strategy, state, history, integer, status, started=None, *, say=None
+):
     genome, cost, local = _best(strategy, state)
     display = Display(ident.windows.n_terms)
     if run is not None:
@@ -292,6 +345,9 @@ def _finish(ident, settings, run, strategy, state, history, integer, status, sta
     if status == "completed" and settings.refine != "none" and np.isfinite(cost):
         if run is not None:
             rundir.write_status(run, **{**rundir.read_status(run), "status": "refining"})
+        if say is not None:
+            n = len(settings.horizon)
+            say(f"refining the best model (Levenberg-Marquardt, {n} stage{'s' * (n > 1)})")
         genome, stages, states = _refine(ident, settings, run, genome, int(state.generation))
         cost, local = (np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(genome))
         cost = float(cost)
@@ -300,6 +356,8 @@ def _finish(ident, settings, run, strategy, state, history, integer, status, sta
             done = {"status": status, "best_rms_mm": float(display(cost))}
             rundir.write_status(run, **{**rundir.read_status(run), **done})
     if run is not None and status == "completed" and np.isfinite(cost):
+        if say is not None:
+            say("estimating the uncertainty of the parameters")
         _uncertainty(ident, settings, run, genome, stages, states)
     per_particle = ident.windows.weight.sum(axis=(0, 1))
     model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model

@@ -29,7 +29,9 @@ import hashlib
 import io
 import json
 import platform
+import shutil
 import sys
+import threading
 import time
 import warnings
 from importlib import metadata
@@ -38,12 +40,40 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..atomic import remove_leftovers, staged_directory, write_atomic, write_text_atomic
+from .. import atomic
+from ..atomic import remove_leftovers, staged_directory
 from ..errors import InputError
 
 FORMAT = 2  # 2: the strategy, history columns and cost display are recorded in run.json
 KEEP_CHECKPOINTS = 2
 LOOP_KEYS = ("generation", "failed_total")  # the loop's own entries of a checkpointed state
+# Held while this process creates a run directory or probes the folder it goes in: the
+# command line's interrupt handler (cli/interrupts.py) waits for it, so an interrupt never
+# leaves a half-made run or a probe file behind.
+CREATING = threading.Lock()
+SMALL_FILES = 256 * 1024  # run.json, status, best model, refinement, uncertainty: at most
+
+
+class RunWriteError(OSError):
+    """A file of a run directory could not be written (a full disk, a lost permission): the
+    OSError of the write, with the file's path. The atomic writes leave the file they were to
+    replace, and every older checkpoint, as they were."""
+
+    def __init__(self, path: str | Path, error: OSError):
+        super().__init__(error.errno, error.strerror or str(error), str(path))
+        self.path, self.error = Path(path), error
+
+
+def write_atomic(path: str | Path, write) -> Path:
+    """:func:`activebonds.atomic.write_atomic`; a failure is a :class:`RunWriteError`."""
+    try:
+        return atomic.write_atomic(path, write)
+    except OSError as err:
+        raise RunWriteError(path, err) from err
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    return write_atomic(path, lambda fh: fh.write(text.encode("utf-8")))
 
 
 def sha256_file(path: str | Path) -> str:
@@ -85,23 +115,92 @@ def _safe_run_path(out: str | Path) -> Path:
     return out
 
 
-def create(out: str | Path, files: dict[str, bytes], meta: dict, overwrite: bool) -> Path:
-    """Create RUN/ atomically: everything is written into a hidden sibling first, then renamed.
-    An existing run is never replaced unless ``overwrite``."""
+def check_new(out: str | Path, overwrite: bool) -> Path:
+    """Refuse (:class:`InputError`) a run directory path that :func:`create` would refuse:
+    '..', an existing run without ``overwrite``, anything else that exists, a parent folder
+    that does not exist or is a file."""
     out = _safe_run_path(out)
     if out.exists() and not overwrite:
         raise InputError(out, "already exists; choose another --out or pass --overwrite")
     if out.exists() and not (out.is_dir() and (out / "run.json").is_file()):
         raise InputError(out, "exists and is not a run directory; --overwrite only replaces runs")
     parent = out.absolute().parent
+    for above in (parent, *parent.parents):
+        if above.exists() and not above.is_dir():
+            raise InputError(out, f"{above} is a file, not a folder")
     if not parent.is_dir():
         raise InputError(out, f"the parent folder {parent} does not exist")
-    with staged_directory(out) as tmp:
-        (tmp / "checkpoints").mkdir()
-        for name, data in files.items():
-            (tmp / name).write_bytes(data)
-        (tmp / "run.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
     return out
+
+
+def create(
+    out: str | Path, files: dict[str, bytes], meta: dict, overwrite: bool, need_bytes: int = 0
+) -> Path:
+    """Create RUN/ atomically: everything is written into a hidden sibling first, then renamed.
+    An existing run is never replaced unless ``overwrite``. With ``need_bytes`` (what the run
+    will write besides ``files``), a folder with less free space is refused up front."""
+    out = check_new(out, overwrite)
+    need = need_bytes + sum(len(data) for data in files.values())
+    check_space(out, out.absolute().parent, need, "the run writes")
+    try:
+        with CREATING, staged_directory(out) as tmp:
+            (tmp / "checkpoints").mkdir()
+            for name, data in files.items():
+                (tmp / name).write_bytes(data)
+            (tmp / "run.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    except OSError as err:
+        raise RunWriteError(out, err) from err
+    return out
+
+
+def expected_bytes(state_bytes: int, columns: int, generations: int) -> int:
+    """What a run writes besides the copies of its inputs, estimated from above: its
+    checkpoints (two kept, a third being written: the loop state of ``state_bytes`` and the
+    history, ``columns`` numbers per generation), history.csv and the small files."""
+    history = generations * columns * 8
+    return 3 * (state_bytes + history + 4096) + generations * columns * 25 + SMALL_FILES
+
+
+def state_bytes(shapes: dict[str, tuple]) -> int:
+    """Bytes of a checkpointed state of these shapes (:func:`state_shapes`), 8 per number."""
+    return sum(8 * int(np.prod(shape)) for shape in shapes.values())
+
+
+def check_space(run: Path, folder: Path, need: int, what: str) -> None:
+    """One line (:class:`InputError`) if ``folder`` has less than ``need`` bytes free."""
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return  # unknown: the writes themselves will tell
+    if free < need:
+        raise InputError(
+            run,
+            f"not enough free space: {what} about {_megabytes(need)} and {folder} has "
+            f"{_megabytes(free)} free; free some space or choose another folder",
+        )
+
+
+def _megabytes(n: int) -> str:
+    return f"{n / 1e6:.2g} MB" if n < 1e7 else f"{n / 1e6:.0f} MB"
+
+
+def used_bytes(run: Path) -> int:
+    """Bytes the files of RUN/ (and RUN/checkpoints/) take now."""
+    total = 0
+    for folder in (run, run / "checkpoints"):
+        for p in folder.glob("*"):
+            if p.is_file():
+                total += p.stat().st_size
+    return total
+
+
+def newest_checkpoint(run: Path) -> int | None:
+    """The generation of the newest checkpoint file in RUN/checkpoints (checkpoints are
+    renamed into place complete), or None."""
+    gens = [
+        g for p in (run / "checkpoints").glob("gen-*.npz") if (g := _generation_of(p)) is not None
+    ]
+    return max(gens) if gens else None
 
 
 def read_meta(run: Path) -> dict:
@@ -354,7 +453,10 @@ def display_of(meta: dict) -> dict:
 def save_best_model(run: Path, model) -> None:
     from ..model import save_model
 
-    save_model(model, run / "best_model.toml")
+    try:
+        save_model(model, run / "best_model.toml")
+    except OSError as err:
+        raise RunWriteError(run / "best_model.toml", err) from err
 
 
 def read_best_model(run: Path):
