@@ -552,7 +552,11 @@ from .report_cmd import report  # noqa: E402
 
 app.command(name="report")(report)
 
-from . import baselines_cmd, structure_cmd, sweep_cmd  # noqa: E402,F401
-from . import evaluate_cmd  # noqa: E402,F401
-from . import datasets_cmd  # noqa: E402,F401
-from . import export_cmd  # noqa: E402,F401
+from . import (  # noqa: E402,F401
+    baselines_cmd,
+    datasets_cmd,  # noqa: E402,F401
+    evaluate_cmd,  # noqa: E402,F401
+    export_cmd,  # noqa: E402,F401
+    structure_cmd,
+    sweep_cmd,
+)
