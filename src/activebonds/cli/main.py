@@ -554,9 +554,9 @@ app.command(name="report")(report)
 
 from . import (  # noqa: E402,F401
     baselines_cmd,
-    datasets_cmd,  # noqa: E402,F401
-    evaluate_cmd,  # noqa: E402,F401
-    export_cmd,  # noqa: E402,F401
+    datasets_cmd,
+    evaluate_cmd,
+    export_cmd,
     structure_cmd,
     sweep_cmd,
 )
