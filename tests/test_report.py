@@ -364,7 +364,9 @@ def test_invalid_run_directories_are_one_line_errors(tmp_path, setup, message):
 
 def test_report_command(neural_run, tmp_path):
     result, report, cli = neural_run
-    assert cli.output.strip() == str(report)  # prints the path of the report it wrote
+    assert cli.stdout.strip() == str(report)  # prints the path of the report it wrote
+    # and says on stderr what it is doing meanwhile (a spinner in a terminal)
+    assert cli.stderr.strip() == "writing the report (predictions, figures, animation) ..."
     runner = CliRunner()
     res = runner.invoke(report_app(), [str(tmp_path / "missing")])
     assert res.exit_code == 2

@@ -30,10 +30,18 @@ def report(
 ):
     """Write an HTML report of a run: summary, convergence, parameters, neurons, animation."""
     from ..report import write_report
-    from .app import fail
+    from .app import err, fail
+    from .progress import show_status
 
+    shown = []
     try:
-        path = write_report(run, out, frames=frames)
+        path = write_report(
+            run, out, frames=frames, status=lambda text: shown.append(show_status(err, text))
+        )
     except InputError as e:
         fail(e)
+    finally:
+        for spinner in shown:
+            if spinner is not None:
+                spinner.stop()
     print(path)

@@ -499,7 +499,11 @@ def _report_paths(run: Path, out: str | Path | None) -> tuple[Path, Path]:
 
 
 def write_report(
-    run_dir: str | Path, out: str | Path | None = None, *, frames: int | None = None
+    run_dir: str | Path,
+    out: str | Path | None = None,
+    *,
+    frames: int | None = None,
+    status=None,
 ) -> Path:
     """Write the report of one run: ``RUN/report.html`` (or ``out``) and its figures
     (``RUN/figures/*.png|svg``, ``animation.gif`` and, with ffmpeg, ``animation.mp4``;
@@ -507,7 +511,9 @@ def write_report(
 
     ``frames``: how many frames of the original recording to predict, from the fitted
     window's start (default: twice the window; only the window if the recording is gone or
-    changed). Raises :class:`InputError` for a missing or invalid run."""
+    changed). ``status``: called with a line saying what is being done, once the run and the
+    output are checked (the command line shows it). Raises :class:`InputError` for a missing
+    or invalid run."""
     run = Path(run_dir)
     record = load_run(run)
     if frames is not None and frames < 1:
@@ -516,6 +522,8 @@ def write_report(
     if not html_path.absolute().parent.is_dir():
         raise InputError(html_path, "the folder does not exist")
     check_replaceable(fig_dir)
+    if status is not None:
+        status("writing the report (predictions, figures, animation)")
     pred, _ = predict_run(record, frames if frames is not None else default_frames(record))
     with staged_directory(fig_dir) as tmp:
         sections = run_sections(record, pred, tmp)
