@@ -18,7 +18,7 @@ no traceback or "Exception ignored" on stderr, and a true message:
   with ``-m slow`` one such run is resumed through the command line to its end;
 * "interrupted after the fit completed; its results are in RUN", or exit 0: the run completed.
 
-The default run has 7 tries (37 s here), ``-m slow`` 26 and one resume to the end (116 s).
+The default run has 20 tries, ``-m slow`` 26 and one resume to the end (116 s).
 ``python tests/test_interrupts.py [SRC]`` runs the 26 against any package source: on the
 package before the fix (commit 82bdae9) 8 of 26 died by a signal (6 segmentation faults), 5
 lost the Ctrl-C in JAX's gc callback and went on to exit 0, 18 had a problem; after, none
@@ -47,15 +47,15 @@ FIT = ("--population", "10", "--generations", "2000", "--seed", "1")
 # SIGINT watcher, the first thread it starts), "run" = RUN exists, "gen0" = RUN's first
 # checkpoint exists, "end" = the ES's last checkpoint exists (refinement, uncertainty and
 # summary follow); "twice" sends a second SIGINT 0.3 s after the first.
-DEFAULT_TRIES = [
-    ("ready", 0.0),
-    ("ready", 0.7),
-    ("run", 0.0),
-    ("run", 0.4, "twice"),
-    ("gen0", 0.2),
-    ("gen0", 1.5),
-    ("end", 0.3),
-]
+# The default run: 20 tries, most of them landing in the compilations (start-up, the start's
+# population, the first chunk), where the segmentation faults were.
+DEFAULT_TRIES = (
+    [("ready", d) for d in (0.0, 0.15, 0.3, 0.5, 0.8, 1.2, 1.8)]
+    + [("run", d) for d in (0.0, 0.1, 0.25, 0.5, 0.8)]
+    + [("gen0", d) for d in (0.0, 0.7, 2.0)]
+    + [("ready", 0.5, "twice"), ("run", 0.1, "twice"), ("gen0", 0.5, "twice")]
+    + [("end", d) for d in (0.3, 3.0)]
+)
 SLOW_TRIES = (
     [("ready", d) for d in (0.0, 0.15, 0.3, 0.5, 0.8, 1.2, 1.8)]
     + [("run", d) for d in (0.0, 0.1, 0.25, 0.5, 0.8)]
