@@ -196,9 +196,7 @@ def test_refuses_a_moving_anchor_and_a_missing_position():
     with pytest.raises(InputError, match=r"1 unary bond with a moving anchor .*\(bond\[2\]\)"):
         to_mjcf(loads_model(moving))
     nowhere = CHAIN3D.replace("position = [0.3, 0.0, 0.05]\n", "")
-    with pytest.raises(
-        InputError, match="1 of [0-9]+ particles have no initial position \\('p1'\\)"
-    ):
+    with pytest.raises(InputError, match="1 of [0-9]+ particles have no position \\('p1'\\)"):
         to_mjcf(loads_model(nowhere))
 
 

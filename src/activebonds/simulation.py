@@ -101,14 +101,13 @@ def simulate(
 def require_initial_state(model: Model, where="model") -> None:
     """Refuse (InputError) a free run from the model file when some particle has no
     ``position``: its start would be made up (the origin), not the model's."""
-    missing = [p.name for p in model.spec.particle if p.position is None]
-    if not missing:
+    unplaced = model.unplaced()
+    if unplaced is None:
         return
-    shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
     raise InputError(
         where,
-        f"the model has no initial state: {len(missing)} of {len(model.spec.particle)} "
-        f"particles have no position ({shown}); give each [[particle]] a position = [...] "
+        f"the model has no initial state: {unplaced}; give each [[particle]] a position = "
+        f"[...] "
         f"(and optionally velocity = [...]), or start from a recording's first two frames "
         f"with --from TRAJ (Python: simulate(..., start=trajectory))",
     )

@@ -105,15 +105,12 @@ def check_exportable(model, source: str = "model") -> None:
             f"cannot export to MJCF: MuJoCo cannot express {', '.join(refused)}; "
             f"only {EXPRESSIBLE} map",
         )
-    missing = [p.name for p in model.spec.particle if p.position is None]
-    if missing:
-        shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
+    unplaced = model.unplaced()
+    if unplaced is not None:
         raise InputError(
             source,
-            f"cannot export to MJCF: {len(missing)} of {len(model.spec.particle)} particles "
-            f"have no initial position "
-            f"({shown}); give each [[particle]] a position = [...] (and optionally "
-            f"velocity = [...])",
+            f"cannot export to MJCF: {unplaced}; give each [[particle]] a position = [...] "
+            f"(and optionally velocity = [...])",
         )
 
 

@@ -63,6 +63,15 @@ class Model:
         v = np.array([p.velocity or [0.0] * d for p in self.spec.particle], dtype=np.float64)
         return x, v
 
+    def unplaced(self) -> str | None:
+        """Which particles have no ``position`` (None if every one has), in words: "2 of 3
+        particles have no position ('A', 'B')"."""
+        missing = [p.name for p in self.spec.particle if p.position is None]
+        if not missing:
+            return None
+        shown = ", ".join(f"'{n}'" for n in missing[:5]) + (" ..." if len(missing) > 5 else "")
+        return f"{len(missing)} of {len(self.spec.particle)} particles have no position ({shown})"
+
     def with_genome(self, genome: np.ndarray) -> Model:
         """The model with its free parameters set from a genome (search space)."""
         return build(with_values(self, self.layout.natural(genome)), disable=self.disabled)
