@@ -133,6 +133,36 @@ def test_a_read_only_folder_is_refused_before_the_fit(tmp_path, inputs, no_fit):
         folder.chmod(0o700)
 
 
+def _immutable(folder: Path, on: bool) -> bool:
+    """``chattr +i`` / ``-i`` (Linux, root): a folder no one, root included, can write in."""
+    import subprocess
+
+    if shutil.which("chattr") is None:
+        return False
+    flag = "+i" if on else "-i"
+    return subprocess.run(["chattr", flag, str(folder)], capture_output=True).returncode == 0
+
+
+@pytest.mark.skipif(
+    not hasattr(os, "geteuid") or os.geteuid() != 0, reason="chattr +i needs root (see chmod)"
+)
+def test_a_read_only_folder_is_refused_before_the_fit_even_as_root(tmp_path, inputs, no_fit):
+    """Root ignores permissions, so the folder is made immutable instead (read-only for
+    everyone): the probe is refused with EPERM, one line, exit 2, nothing written."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    if not _immutable(folder, True):
+        pytest.skip("chattr +i is not allowed here")
+    try:
+        res = invoke("fit", *inputs, "--out", folder / "RUN", *FIT)
+        assert res.exit_code == 2, res.output
+        line = error_line(res)
+        assert f"cannot write in {folder}" in line and "Operation not permitted" in line, line
+        assert list(folder.iterdir()) == []
+    finally:
+        _immutable(folder, False)
+
+
 @pytest.mark.skipif(not Path("/sys/kernel").is_dir(), reason="Linux's sysfs")
 def test_a_folder_where_even_root_cannot_create_files_is_refused(tmp_path, inputs, no_fit):
     """sysfs takes no new file from anyone, root included: the probe write is refused."""
