@@ -34,7 +34,7 @@ STRIDE_FRAMES = 60.0 / 1.445
 
 
 def judged(model, traj) -> dict:
-    from activebonds.report.metrics import free_run_metrics
+    from activebonds.identify.metrics import free_run_metrics
 
     held = traj.window(*TEST)
     free = free_run_metrics(model, held, offset=TEST[0] - FIT[0])
@@ -60,8 +60,8 @@ def main(argv=None) -> int:
     horizons = tuple(int(h) for h in args.horizon.split(","))
 
     from activebonds import fit, read_trajectory
+    from activebonds.identify.metrics import zero_force_metrics
     from activebonds.model import load_model
-    from activebonds.report.metrics import zero_force_metrics
 
     traj = read_trajectory(DATA)
     model = load_model(MODEL)

@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 
 from activebonds.cli.main import app
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
+from activebonds.identify.metrics import window_metrics
 from activebonds.model import load_model, loads_model
 from activebonds.report.evaluate import evaluate
-from activebonds.report.metrics import window_metrics
 from activebonds.report.predict import predict
 from activebonds.simulation import simulate
 from helpers import TRIANGLE

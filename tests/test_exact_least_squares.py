@@ -15,16 +15,16 @@ from scipy.optimize import minimize
 
 from activebonds.data import read_trajectory
 from activebonds.errors import InputError
-from activebonds.experiments.baselines import (
+from activebonds.identify import fit
+from activebonds.identify.baselines import (
     model_floor_rms_mm,
     momentum_floor_rms_mm,
     zero_force_rms_mm,
 )
-from activebonds.identify import fit
 from activebonds.identify.cost import make_cost, make_windows
 from activebonds.identify.lsq import equation_error_fit, least_squares, linear_problem
+from activebonds.identify.predictions import one_step
 from activebonds.model import as_standard, load_model, loads_model
-from activebonds.report.predict import one_step
 from activebonds.simulation import simulate
 from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, ROOT, cli
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory
-from activebonds.experiments.baselines import momentum_floor_rms_mm
 from activebonds.experiments.paper import EXPERIMENTS
+from activebonds.identify.baselines import momentum_floor_rms_mm
 from activebonds.model import load_model
 from activebonds.simulation import simulate
 from helpers import EXAMPLES

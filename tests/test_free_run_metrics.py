@@ -9,11 +9,8 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
-from activebonds.experiments.baselines import zero_force_rms_mm
-from activebonds.identify.settings import FitSettings
-from activebonds.model import load_model, loads_model
-from activebonds.report import predict, write_report
-from activebonds.report.metrics import (
+from activebonds.identify.baselines import zero_force_rms_mm
+from activebonds.identify.metrics import (
     THRESHOLD_MM,
     censored_median,
     frames_within,
@@ -24,7 +21,10 @@ from activebonds.report.metrics import (
     validation_record,
     zero_force_metrics,
 )
-from activebonds.report.predict import free_run
+from activebonds.identify.predictions import free_run
+from activebonds.identify.settings import FitSettings
+from activebonds.model import load_model, loads_model
+from activebonds.report import predict, write_report
 from activebonds.simulation import simulate
 from helpers import TRIANGLE, cli
 

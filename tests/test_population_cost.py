@@ -143,8 +143,8 @@ def test_a_mixed_precision_fit_recovers_the_triangle():
     """--precision mixed (the ES's one-step cost in float32) against a known truth: the ES
     alone gets within 5 % of every parameter, and its float64 refinement within 0.1 %; the
     fit is far below the zero-force baseline."""
-    from activebonds.experiments.baselines import zero_force_rms_mm
     from activebonds.identify import fit
+    from activebonds.identify.baselines import zero_force_rms_mm
 
     model = load_model(TRIANGLE)
     data = simulate(model, 60, 60.0)

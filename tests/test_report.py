@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from activebonds.data import Trajectory
 from activebonds.errors import InputError
 from activebonds.identify import fit
+from activebonds.identify.predictions import rms_mm
 from activebonds.model import as_standard, load_model, loads_model
 from activebonds.report import (
     Figure,
@@ -36,7 +37,7 @@ from activebonds.report import (
     write_comparison_report,
     write_report,
 )
-from activebonds.report.predict import near_zero_share, rms_mm, saturation_share
+from activebonds.report.predict import near_zero_share, saturation_share
 from activebonds.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -425,7 +426,7 @@ def test_comparison_report(neural_run, tmp_path):
 def test_report_shows_the_fit_beside_its_baselines(neural_run):
     """The zero-force predictor and the momentum floor on the same frames, with their
     numbers recomputed independently here (the fit window is the horse's frames 0-9)."""
-    from activebonds.experiments.baselines import momentum_floor_rms_mm, zero_force_rms_mm
+    from activebonds.identify.baselines import momentum_floor_rms_mm, zero_force_rms_mm
     from activebonds.report.html import baselines_table
 
     result, report, _ = neural_run

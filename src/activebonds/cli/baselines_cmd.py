@@ -28,7 +28,7 @@ def baselines(
     the momentum floor of internal-force models, and the exact bounded least-squares optimum of
     the model's linear parameters (neural gains at 0)."""
     from ..data import read_trajectory
-    from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
+    from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
     from ..identify.cost import make_windows
     from ..identify.lsq import least_squares
     from ..identify.problem import select_data, variant

@@ -371,10 +371,10 @@ def parse_horizons(text: str) -> tuple[int, ...]:
 def _validation_window(model, traj, settings, text: str):
     """(frames, data) of ``--validate START:STOP``, checked before the fit starts."""
     from ..data import read_trajectory
+    from ..identify.metrics import validation_data
     from ..identify.problem import variant
     from ..identify.settings import parse_frames
     from ..model import load_model
-    from ..report.metrics import validation_data
 
     try:
         frames = parse_frames(text)
@@ -453,7 +453,7 @@ def _metrics_line(label: str, found: dict) -> str:
 def _summary(result, held_out=None) -> None:
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
-    from ..report.metrics import read_validation, validation_record, window_metrics
+    from ..identify.metrics import read_validation, validation_record, window_metrics
 
     undecided = sum(1 for b in result.model.spec.bond if b.optional and b.present is None)
     if undecided:
@@ -464,7 +464,7 @@ def _summary(result, held_out=None) -> None:
             highlight=False,
         )
     data = result.identification.data
-    from ..experiments.baselines import zero_force_rms_mm_of
+    from ..identify.baselines import zero_force_rms_mm_of
 
     zero = zero_force_rms_mm_of(result.identification.all_data)
     out.print(

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
+from ..identify.baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.es import ESSettings
 from ..identify.lsq import least_squares
@@ -33,7 +34,6 @@ from ..model import Model, as_neural, as_standard, load_model, save_model
 from ..report.predict import predict
 from ..runtime import float64
 from ..simulation import simulate
-from .baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from .resources import example, horse_trot
 from .seeds import SeedRuns, run_seeds
 

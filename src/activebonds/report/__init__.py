@@ -1,6 +1,7 @@
 """Reports of identification runs: predictions, figures, an animated GIF and one
 self-contained HTML file (no external resource; works offline)."""
 
+from ..identify.metrics import FreeRunMetrics, free_run_metrics, zero_force_metrics
 from .animation import payload, projection_axes, write_gif
 from .files import staged_directory
 from .html import (
@@ -14,7 +15,6 @@ from .html import (
     write_comparison_report,
     write_report,
 )
-from .metrics import FreeRunMetrics, free_run_metrics, zero_force_metrics
 from .plots import Series
 from .predict import Prediction, predict, predict_run
 from .runs import RunRecord, load_run

@@ -19,8 +19,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
+from ..identify.predictions import to_mm
 from .plots import AXES, DPI, FREE_RUN, ONE_STEP
-from .predict import Prediction, to_mm
+from .predict import Prediction
 
 MODEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 

@@ -5,7 +5,7 @@ selects its data (:func:`~activebonds.identify.problem.select_data`), and measur
 for the model and for the zero-force (constant-velocity) predictor:
 
 * the three numbers of ``fit``'s summary and ``fit --validate``, from the same function
-  (:func:`~activebonds.report.metrics.window_metrics`): one-step RMS (mm), free-run RMS
+  (:func:`~activebonds.identify.metrics.window_metrics`): one-step RMS (mm), free-run RMS
   (mm) and the median number of frames a free run stays within 50 mm of every marker;
 * per particle, the one-step and free-run RMS (mm) over the same terms
   (:func:`~activebonds.report.predict.predict` for the model,
@@ -28,9 +28,17 @@ from pydantic import ValidationError
 
 from ..data import Trajectory
 from ..errors import InputError
+from ..identify.baselines import zero_force_predictions
+from ..identify.metrics import (
+    DEFAULT_STARTS,
+    THRESHOLD_MM,
+    FreeRunMetrics,
+    start_frames,
+    window_metrics,
+)
+from ..identify.predictions import rms_mm
 from ..model import Model
-from .metrics import DEFAULT_STARTS, THRESHOLD_MM, FreeRunMetrics, start_frames, window_metrics
-from .predict import predict, rms_mm
+from .predict import predict
 
 
 @dataclass(frozen=True)
@@ -91,21 +99,6 @@ class Evaluation:
 
 def _plain(x: float) -> float | str:
     return float(x) if np.isfinite(x) else str(float(x))
-
-
-def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
-    """The constant-velocity predictor's one-step predictions [F, P, D] (NaN for frames 0
-    and 1 and where an input frame is incomplete, as the model's) and its free run from frames ``start - 1`` and ``start`` (NaN up to ``start``),
-    as :func:`~activebonds.report.metrics.zero_force_metrics` makes them."""
-    rec = np.asarray(positions, np.float64)
-    one = np.full_like(rec, np.nan)
-    one[2:] = 2.0 * rec[1:-1] - rec[:-2]
-    complete = np.isfinite(rec).all(axis=(1, 2))
-    one[2:][~(complete[1:-1] & complete[:-2])] = np.nan  # the terms the metrics count
-    run = np.full_like(rec, np.nan)
-    steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
-    run[start + 1 :] = rec[start] + steps * (rec[start] - rec[start - 1])
-    return one, run
 
 
 def evaluate(

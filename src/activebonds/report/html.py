@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..experiments.baselines import model_floor_rms_mm, zero_force_rms_mm
+from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.lsq import least_squares, nonlinear_genes
 from ..model.names import NEAR_BOUND, parameter_label, parameter_rows
@@ -410,7 +410,7 @@ def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
 
 def free_run_table(record: RunRecord) -> Table:
     """One-step RMS, free-run RMS and frames within the threshold
-    (:func:`activebonds.report.metrics.free_run_metrics`) of the model and the zero-force
+    (:func:`activebonds.identify.metrics.free_run_metrics`) of the model and the zero-force
     predictor on the fitted frames and, after ``fit --validate``, on the validation frames."""
     s = record.settings
     start = s.frames[0]

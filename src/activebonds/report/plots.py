@@ -20,9 +20,10 @@ from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from ..identify.operators import VARIANTS
+from ..identify.predictions import neural_bonds, to_mm
 from ..model import Model
 from ..model.names import bound_position, parameter_label, parameter_rows
-from .predict import Prediction, neural_bonds, neural_weights, to_mm
+from .predict import Prediction, neural_weights
 from .runs import history_rms_mm
 
 RECORDED = "black"

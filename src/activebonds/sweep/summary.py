@@ -3,8 +3,8 @@
 Each row is measured the way ``fit``'s summary and ``report`` measure one run, with their
 functions: the fit's RMS error (status.json, as the run stored it), the zero-force
 (constant-velocity) baseline over the same one-step terms of every fitted recording
-(:func:`~activebonds.experiments.baselines.zero_force_rms_mm_of`), the free-run RMS and the
-frames a free run stays within 50 mm (:func:`~activebonds.report.metrics.window_metrics` on the
+(:func:`~activebonds.identify.baselines.zero_force_rms_mm_of`), the free-run RMS and the
+frames a free run stays within 50 mm (:func:`~activebonds.identify.metrics.window_metrics` on the
 first fitted recording), and the identified value of every free parameter (best_model.toml).
 """
 
@@ -18,10 +18,10 @@ from pathlib import Path
 
 from ..atomic import write_text_atomic
 from ..errors import InputError
-from ..experiments.baselines import zero_force_rms_mm_of
 from ..identify import rundir
+from ..identify.baselines import zero_force_rms_mm_of
+from ..identify.metrics import THRESHOLD_MM, censored_text, window_metrics
 from ..report.html import Section, Table, render
-from ..report.metrics import THRESHOLD_MM, censored_text, window_metrics
 from ..report.runs import load_run
 from .manifest import Job
 from .run import Outcome

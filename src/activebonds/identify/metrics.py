@@ -6,11 +6,11 @@ velocity) predictor. The report, ``fit``'s summary and ``fit --validate`` all ca
 the numbers agree everywhere.
 
 * **One-step RMS** (mm): every frame predicted from the two recorded frames before it, as the
-  fit cost predicts it (:func:`~activebonds.report.predict.one_step`); the RMS over every
+  fit cost predicts it (:func:`~activebonds.identify.predictions.one_step`); the RMS over every
   (frame, marker) term whose target is recorded and whose two input frames are complete. For
   a run of horizon 1 it is the fit's own RMS error.
 * **Free-run RMS** (mm): one free run from the first two complete consecutive frames
-  (:func:`~activebonds.report.predict.free_run`), never looking at the data again; the RMS
+  (:func:`~activebonds.identify.predictions.free_run`), never looking at the data again; the RMS
   over every later recorded (frame, marker). A run that went non-finite gives +inf.
 * **Frames within the threshold**: free runs started from several frames ``s`` (the start
   frames, where frames ``s - 1`` and ``s`` are both complete; by default
@@ -36,7 +36,8 @@ import numpy as np
 
 from ..data import Trajectory
 from ..model import Model
-from .predict import free_run, one_step
+from .baselines import zero_force_predictions
+from .predictions import free_run, one_step
 
 THRESHOLD_MM = 50.0  # a free run is "off" once a marker is this far from its recording
 DEFAULT_STARTS = 10  # free runs started, spread evenly over the window
@@ -270,13 +271,10 @@ def zero_force_metrics(
     """The same numbers for the zero-force (constant-velocity) predictor: one step
     ``x_t = 2 x_{t-1} - x_{t-2}``, free run ``x_t = x_s + (t - s) (x_s - x_{s-1})``."""
     rec = np.asarray(trajectory.positions, np.float64)
-    n = rec.shape[0]
-    one = np.full_like(rec, np.nan)
-    one[2:] = 2.0 * rec[1:-1] - rec[:-2]
+    one = zero_force_predictions(rec, 1)[0]
 
     def run_from(s: int) -> np.ndarray:
-        steps = np.arange(1, n - s, dtype=np.float64)[:, None, None]
-        return rec[s] + steps * (rec[s] - rec[s - 1])
+        return zero_force_predictions(rec, s)[1][s + 1 :]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
 
@@ -307,7 +305,7 @@ def validation_data(
     overlapping the fitted frames (``settings.frames``), shorter than
     :data:`MIN_VALIDATION_FRAMES` or with fewer than :data:`MIN_STARTS` possible starts."""
     from ..errors import InputError
-    from ..identify.problem import select_data
+    from .problem import select_data
 
     n = recording.n_frames
     start, stop = frames
