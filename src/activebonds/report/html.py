@@ -19,11 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..identify import metrics
 from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.lsq import least_squares, nonlinear_genes
 from ..model.names import NEAR_BOUND, parameter_label, parameter_rows
-from . import animation, metrics, plots
+from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
 from .runs import RunRecord, load_run
