@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import os
 import shutil
 import signal
@@ -19,7 +20,9 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
+from activebonds.atomic import staged_directory
 from activebonds.cli.main import app
+from activebonds.identify import rundir
 from activebonds.sweep import load_manifest
 from helpers import ACTIVEBONDS, EXAMPLES
 
@@ -288,6 +291,27 @@ def test_a_killed_worker_is_retried_and_its_fit_ends_as_if_uninterrupted(on_ray,
     run = on_ray["out"] / "long-seed1"
     assert _result(run) == _result(without_ray / "long-seed1")
     assert len(list((run / "checkpoints").glob("gen-*.npz"))) == 2
+
+
+def test_every_run_records_the_sweeps_command_line_not_its_workers(on_ray, inputs):
+    out = on_ray["out"]
+    expected = f"activebonds sweep {inputs / 'sweep.toml'} --out {out} --workers 2"
+    for name in NAMES:
+        assert json.loads((out / name / "run.json").read_text())["command"] == expected, name
+
+
+def test_a_killed_create_leaves_staging_folders_that_remove_partial_removes(tmp_path):
+    run = tmp_path / "fit-a"
+    with pytest.raises(KeyboardInterrupt), staged_directory(run) as staging:
+        (staging / "run.json").write_text("{}")
+        kept = shutil.copytree(staging, tmp_path / f"{staging.name}-copy")  # as if killed
+        raise KeyboardInterrupt
+    others = [tmp_path / ".fit-b.partial-x", tmp_path / "fit-a.partial-x", tmp_path / "fit-b"]
+    for folder in others:
+        folder.mkdir()
+    rundir.remove_partial(run)
+    assert not kept.exists() and not run.exists()
+    assert all(folder.is_dir() for folder in others)
 
 
 def test_the_same_command_again_skips_every_finished_fit(inputs, without_ray, tmp_path):

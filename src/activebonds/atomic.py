@@ -55,6 +55,11 @@ def remove_leftovers(folder: str | Path) -> int:
     return n
 
 
+def staged_prefix(target: str | Path) -> str:
+    """The name with which :func:`staged_directory`'s folders for ``target`` begin."""
+    return f".{Path(target).name}.partial-"
+
+
 @contextmanager
 def staged_directory(target: str | Path) -> Iterator[Path]:
     """Yield a new empty folder beside ``target`` (its parent must exist); on success it
@@ -62,7 +67,7 @@ def staged_directory(target: str | Path) -> Iterator[Path]:
     was. Callers decide beforehand whether ``target`` may be replaced."""
     target = Path(target)
     parent = target.absolute().parent
-    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.partial-"))
+    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=staged_prefix(target)))
     try:
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp

@@ -6,7 +6,17 @@ report follow from its declaration.
 """
 
 from . import binary, contact, ternary, unary
-from .kind import ANGLE, NON_NEGATIVE, POSITIVE, BondKind, Check, LinearPart, Parameter, spread
+from .kind import (
+    ANGLE,
+    NON_NEGATIVE,
+    POSITIVE,
+    BondKind,
+    Check,
+    LinearPart,
+    Parameter,
+    PopulationForm,
+    spread,
+)
 from .registry import get, kinds, names, register, registered, unregister
 
 register(unary.KIND)
@@ -22,6 +32,7 @@ __all__ = [
     "Check",
     "LinearPart",
     "Parameter",
+    "PopulationForm",
     "get",
     "kinds",
     "names",

@@ -66,3 +66,11 @@ def _gathered(n: int, terms) -> jnp.ndarray:
     rows = [rows if sign > 0 else -rows for _, sign, rows in terms]
     padded = jnp.concatenate([*rows, jnp.zeros((1, rows[0].shape[-1]), rows[0].dtype)])
     return jnp.sum(padded[table], axis=1)
+
+
+def spread_form(n_rows: int, n_particles: int, dense_limit: int) -> str:
+    """How a population's per-bond rows become particle forces: "dense" (a product with the
+    signed incidence of every restart, [P D, B]: fastest while rows x particles is at most
+    ``dense_limit``) or "gathered" (each particle's rows by index: work grows with the bond
+    ends, not with bonds x particles)."""
+    return "dense" if n_rows * n_particles <= dense_limit else "gathered"

@@ -21,8 +21,8 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from .accumulate import accumulate
-from .kind import NON_NEGATIVE, POSITIVE, BondKind, LinearPart, Parameter, spread
+from .accumulate import accumulate, gather_table, spread_form
+from .kind import NON_NEGATIVE, POSITIVE, BondKind, LinearPart, Parameter, PopulationForm, spread
 
 
 def kinematics(topology, x, v):
@@ -43,15 +43,26 @@ def activation(params, n: int, elongation, rate, t=0.0):
     drive = (params["length_weights"] * off) @ elongation + (params["rate_weights"] * off) @ rate
     net = drive - params["threshold"]
     if "drive_weight" in params:  # absent from hand-made parameter dicts (older tests)
-        phase = 2.0 * jnp.pi * params["drive_frequency"] * t + params["drive_phase"]
-        net = net + params["drive_weight"] * jnp.sin(phase)
+        net = net + rhythm(
+            params["drive_weight"], params["drive_frequency"], params["drive_phase"], t
+        )
     return jnp.tanh(net)
+
+
+def passive(stiffness, damping, elongation, rate):
+    """The viscoelastic tension k e + c Ldot (any shapes that broadcast)."""
+    return stiffness * elongation + damping * rate
+
+
+def rhythm(weight, frequency, phase, t):
+    """The rhythmic drive of a neuron's input, w sin(2 pi f t + phi)."""
+    return weight * jnp.sin(2.0 * jnp.pi * frequency * t + phase)
 
 
 def forces(params, topology, x, v, t):
     u, length, rate = kinematics(topology, x, v)
     elongation = length - params["rest_length"]
-    tension = params["stiffness"] * elongation + params["damping"] * rate
+    tension = passive(params["stiffness"], params["damping"], elongation, rate)
     neural = topology["neural"]
     if neural.any():
         a = activation(params, len(neural), elongation, rate, t)
@@ -127,6 +138,80 @@ def _columns(values, index, topology, x, v, unknowns):
             target[:, j[b]] -= tension * u
 
 
+# ----------------------------------------------------------------------------- population form
+# The same law for a whole population at fixed restart states (the ES's one-step cost): L, Ldot
+# and u do not depend on the genome, so the neuron inputs of every individual are one matrix
+# product, [S, 2B] @ [2B, N B] (restarts x [L, Ldot] against every individual's off-diagonal
+# weights), plus a bias per individual (-W_L l0 - theta and the rhythmic drive); the tensions
+# become particle forces by a product with the fixed u-weighted signed incidence of each
+# restart (or, for large models, gathered by particle).
+
+
+def _population_prepare(topology, x0, v0, n_particles: int, dtype, dense_limit: int) -> dict:
+    """Per restart: lengths L [S, B, 1], rates Ldot [S, B, 1], the neuron inputs [S, 2B], and
+    the map from tensions to particle forces: dense [S, P D, B] (``+u`` at a bond's first
+    particle, ``-u`` at its second) or gathered by particle; and the bonds' neural flags."""
+    pairs = np.asarray(topology["particles"])
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = x0[:, j] - x0[:, i]
+    length = np.linalg.norm(d, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = d / length[..., None]
+    rate = np.sum((v0[:, j] - v0[:, i]) * u, axis=-1)
+    s, b, dim = u.shape
+    out = {
+        "length": length[..., None],
+        "rate": rate[..., None],
+        "inputs": np.concatenate([length, rate], axis=1),
+    }
+    if spread_form(b, n_particles, dense_limit) == "dense":
+        incidence = np.zeros((s, n_particles, dim, b))
+        incidence[:, i, :, np.arange(b)] += u.transpose(1, 0, 2)
+        incidence[:, j, :, np.arange(b)] -= u.transpose(1, 0, 2)
+        out["spread"] = incidence.reshape(s, n_particles * dim, b)
+    else:  # particle p sums the tensions of bonds table[p] along ends[:, p] (0 past its ends)
+        table, total = gather_table(n_particles, [i, j])
+        bond = np.where(table < total, table % b, 0)
+        sign = np.where(table < total, np.where(table < b, 1.0, -1.0), 0.0)
+        out["ends"] = sign[None, :, :, None] * u[:, bond]  # [S, P, K, D]
+    out = {k: jnp.asarray(v, dtype) for k, v in out.items()}
+    if "ends" in out:
+        out["bond"] = bond  # [P, K], an index
+    out["neural"] = np.asarray(topology["neural"], bool)
+    return out
+
+
+def _population_forces(params, prepared, t0, n_p: int, dim: int):
+    """Forces of the binary bonds of every individual at every restart: [S, P, D, N]."""
+    length, rate, neural = prepared["length"], prepared["rate"], prepared["neural"]  # [S, B, 1]
+    elongation = length - params["rest_length"].T[None]  # [S, B, N]
+    tension = passive(params["stiffness"].T[None], params["damping"].T[None], elongation, rate)
+    if neural.any():
+        b = len(neural)
+        off = jnp.asarray(1.0 - np.eye(b), length.dtype)
+        w_len = params["length_weights"] * off  # [N, B, B]
+        w_rate = params["rate_weights"] * off
+        # neuron inputs: [S, 2B] @ [2B, B N] -> [S, B, N]
+        n = w_len.shape[0]
+        weights = jnp.concatenate([w_len, w_rate], axis=2).transpose(2, 1, 0)  # [2B, B, N]
+        net = (prepared["inputs"] @ weights.reshape(2 * b, b * n)).reshape(-1, b, n)
+        bias = -jnp.einsum("nbj,nj->bn", w_len, params["rest_length"]) - params["threshold"].T
+        net = net + bias[None]
+        if "drive_weight" in params:
+            freq = jnp.broadcast_to(params["drive_frequency"], params["rest_length"].shape).T
+            t = t0[:, None, None]
+            net = net + rhythm(
+                params["drive_weight"].T[None], freq[None], params["drive_phase"].T[None], t
+            )
+        gain = jnp.where(jnp.asarray(neural)[:, None], params["gain"].T, 0.0)  # [B, N]
+        tension = tension + gain[None] * jnp.tanh(net)
+    n_s, n = tension.shape[0], tension.shape[-1]
+    if "spread" in prepared:  # [S, P D, B] @ [S, B, N]
+        return jnp.matmul(prepared["spread"], tension).reshape(n_s, n_p, dim, n)
+    bond, ends = prepared["bond"], prepared["ends"]  # [P, K], [S, P, K, D]
+    return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])
+
+
 _NEURAL = "neural"
 KIND = BondKind(
     off=("stiffness", "damping"),
@@ -185,4 +270,5 @@ KIND = BondKind(
     what="binary bonds",
     activity=activity,
     linear=LinearPart(frozenset({"stiffness", "rest_length", "damping"}), _switch_off, _columns),
+    population=PopulationForm(_population_prepare, _population_forces),
 )

@@ -89,6 +89,23 @@ class LinearPart:
     columns: Callable
 
 
+@dataclass(frozen=True)
+class PopulationForm:
+    """A kind's forces for a whole population at once, at fixed recorded states (the ES's
+    one-step cost, :mod:`activebonds.identify.population_cost`): the same law as
+    :attr:`BondKind.forces`, vmapped over individuals and states, to rounding.
+
+    ``prepare(topology, x0, v0, n_particles, dtype, dense_limit)`` computes once what does not
+    depend on the genome, from the restart states ``x0, v0`` [S, P, D] (float64 NumPy), in
+    ``dtype``; ``dense_limit`` is the largest bonds x particles spread by a dense product.
+    ``forces(params, prepared, t0, n_particles, dim)`` gives [S, P, D, N] for N individuals
+    (``params`` this kind's arrays, the population first: [N, ...]; ``t0`` [S] the restarts'
+    times)."""
+
+    prepare: Callable
+    forces: Callable
+
+
 def _timeless(forces: Callable) -> Callable:
     def timed(params, topology, x, v, t):
         return forces(params, topology, x, v)
@@ -115,6 +132,7 @@ class BondKind:
     what: str = ""  # its parameters in words, for messages ("flexion springs")
     activity: Callable | None = None  # (params, topology, x, v[, t]) -> [N] neuron activations
     linear: LinearPart | None = None
+    population: PopulationForm | None = None  # else vmapped over the population
     timed: bool = False  # forces take the time t as a fifth argument
     shared: tuple[Parameter, ...] = ()  # model-level parameters ("drive.frequency")
     off: tuple[str, ...] = ()  # fields that, all at 0, remove every force of a bond: a kind

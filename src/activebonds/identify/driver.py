@@ -71,6 +71,7 @@ def fit(
     overwrite: bool = False,
     progress: Progress | None = None,
     status: Status | None = None,
+    command: list[str] | None = None,
     **options,
 ) -> FitResult:
     """Identify the free parameters of ``model`` from ``data``.
@@ -82,14 +83,17 @@ def fit(
     without the free space the run needs is refused up front, and a write that fails later
     raises :class:`~activebonds.identify.rundir.RunWriteError` with the newest checkpoint
     kept. ``progress`` is called after each chunk of generations, ``status`` before the long
-    silent phases (compilation, refinement, uncertainty) with what happens.
+    silent phases (compilation, refinement, uncertainty) with what happens. ``command`` is
+    the command line run.json records (default: this process's, ``sys.argv``).
     """
     settings = settings or FitSettings(**options)
     with _precision(settings):
-        return _fit(model, data, settings, out, overwrite, progress, status)
+        return _fit(model, data, settings, out, overwrite, progress, status, command)
 
 
-def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress, status=None):
+def _fit(
+    model, data, settings: FitSettings, out, overwrite: bool, progress, status=None, command=None
+):
     model_path = Path(model) if isinstance(model, str | Path) else None
     many = isinstance(data, list | tuple)
     items = list(data) if many else [data]
@@ -100,11 +104,13 @@ def _fit(model, data, settings: FitSettings, out, overwrite: bool, progress, sta
     run = None
     if out is not None:
         model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
-        run = _create_run(out, model_text, ident, settings, model_path, paths, overwrite)
+        run = _create_run(out, model_text, ident, settings, model_path, paths, overwrite, command)
     return _evolve(ident, settings, run, progress, status=status)
 
 
-def _create_run(out, model_text, ident, settings, model_path, data_paths, overwrite) -> Path:
+def _create_run(
+    out, model_text, ident, settings, model_path, data_paths, overwrite, command=None
+) -> Path:
     inputs = {}
     named = [("model", model_path)] + [
         ("data" if i == 0 else f"data-{i + 1}", p) for i, p in enumerate(data_paths)
@@ -115,7 +121,7 @@ def _create_run(out, model_text, ident, settings, model_path, data_paths, overwr
     strategy = strategies.make(settings.optimizer, ident.problem, settings, _dtype(settings))
     display = Display(ident.windows.n_terms)
     meta = rundir.new_meta(
-        settings, inputs, strategy.name, history_columns(strategy, display), display
+        settings, inputs, strategy.name, history_columns(strategy, display), display, command
     )
     files = {"model.toml": model_text}
     for i, d in enumerate(ident.all_data):

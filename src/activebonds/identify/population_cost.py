@@ -1,18 +1,17 @@
 """The one-step cost of a whole population at once (the ES's fast path).
 
 With the paper's one-step cost (horizon 1, semi-implicit Euler, one substep) every prediction
-starts from a *recorded* state, so the bond lengths L, elongation rates Ldot and unit vectors u
-at the restart states do not depend on the genome. The prediction of individual n is
+starts from a *recorded* state, so the bond geometry at the restart states (lengths, rates,
+directions) does not depend on the genome. The prediction of individual n is
 
     x_1 = x_0 + dt v_0 + dt^2 a_n(x_0, v_0, t_0),
 
 so the error is a fixed part (``x_0 + dt v_0 - target``, computed once in float64) plus
-``dt^2 a_n``. For binary bonds (standard and mechanical-neural) the neuron inputs of the whole
-population are one matrix product, ``[S, 2B] @ [2B, N B]`` (restarts x [L, Ldot] against every
-individual's off-diagonal weights), plus a per-individual bias (``-W_L l0 - theta`` and the
-rhythmic drive); the tensions become particle forces by a product with the fixed
-``u``-weighted signed incidence of each restart. Other bond kinds, and the uniform field, are
-evaluated per individual (vmapped) at the same fixed states.
+``dt^2 a_n``. A bond kind that declares a population form
+(:class:`~activebonds.bonds.kind.PopulationForm`) computes its forces for every individual at
+once from that fixed geometry (e.g. the neuron inputs of the whole population as one matrix
+product); the other kinds, and the uniform field, are evaluated per individual (vmapped) at
+the same fixed states.
 
 The result equals :func:`~activebonds.identify.cost.make_cost` vmapped over the population (to
 rounding: tested), and is used by the ES whenever the one-step form applies
@@ -29,12 +28,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import bonds
-from ..bonds.accumulate import gather_table
 from ..model.model import Model
 from .cost import Windows
 
-_BINARY = "binary"
-DENSE_LIMIT = 512  # bonds x particles up to which tensions are spread by a dense product
+DENSE_LIMIT = 512  # bonds x particles up to which a kind's rows are spread by a dense product
 
 
 def applies(windows: Windows, substeps: int, method: str) -> bool:
@@ -59,16 +56,16 @@ def make_population_cost(
     fixed = x0 + windows.dt * v0 - windows.target[used, 0]  # [S, P, D], float64
     work = dtype or jnp.result_type(float)
     dt2 = windows.dt**2
+    n_p, dim = topo.n_particles, topo.dimension
     kinds = topo.active()
-    binary = _BINARY in kinds
-    others = tuple(k for k in kinds if k != _BINARY)
-    if binary:
-        geometry = _binary_geometry(topo.bonds[_BINARY], x0, v0, topo.n_particles)
-        geometry = {k: v if k == "bond" else jnp.asarray(v, work) for k, v in geometry.items()}
-        neural = np.asarray(topo.bonds[_BINARY]["neural"], bool)
+    batched = tuple(k for k in kinds if bonds.get(k).population is not None)
+    others = tuple(k for k in kinds if bonds.get(k).population is None)
+    prepared = {
+        k: bonds.get(k).population.prepare(topo.bonds[k], x0, v0, n_p, work, DENSE_LIMIT)
+        for k in batched
+    }
     fixed_j, weight_j = jnp.asarray(fixed, work), jnp.asarray(weight, work)
     x0_j, v0_j, t0_j = (jnp.asarray(a, work) for a in (x0, v0, t0))
-    n_p, dim = topo.n_particles, topo.dimension
 
     def other_forces(params):  # one individual: [S, P, D]
         def at(x, v, t):
@@ -85,9 +82,9 @@ def make_population_cost(
         n, n_s = genes.shape[0], fixed.shape[0]
         # the population is the last axis throughout (contiguous: vectorised along it)
         force = jnp.zeros((n_s, n_p, dim, n), work)  # [S, P, D, N]
-        if binary:
-            bond_params = params.bonds[_BINARY]
-            force = force + _binary_forces(bond_params, geometry, neural, t0_j, n_p, dim)
+        for kind in batched:
+            form = bonds.get(kind).population
+            force = force + form.forces(params.bonds[kind], prepared[kind], t0_j, n_p, dim)
         if others:
             force = force + jax.vmap(other_forces)(params).transpose(1, 2, 3, 0)
         inv_m = (1.0 / params.mass).T  # [P, N]
@@ -98,71 +95,3 @@ def make_population_cost(
         return jnp.sum(local, axis=-1), local
 
     return evaluate
-
-
-def _binary_geometry(topology, x0, v0, n_particles: int) -> dict[str, np.ndarray]:
-    """Per restart: lengths L [S, B, 1], rates Ldot [S, B, 1], the neuron inputs [S, 2B], and
-    the map from tensions to particle forces: dense [S, P D, B] (``+u`` at a bond's first
-    particle, ``-u`` at its second) or, for large models, gathered by particle."""
-    pairs = np.asarray(topology["particles"])
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = x0[:, j] - x0[:, i]
-    length = np.linalg.norm(d, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = d / length[..., None]
-    rate = np.sum((v0[:, j] - v0[:, i]) * u, axis=-1)
-    s, b, dim = u.shape
-    out = {
-        "length": length[..., None],
-        "rate": rate[..., None],
-        "inputs": np.concatenate([length, rate], axis=1),
-    }
-    if spread_form(b, n_particles) == "dense":
-        spread = np.zeros((s, n_particles, dim, b))
-        spread[:, i, :, np.arange(b)] += u.transpose(1, 0, 2)
-        spread[:, j, :, np.arange(b)] -= u.transpose(1, 0, 2)
-        out["spread"] = spread.reshape(s, n_particles * dim, b)
-    else:  # particle p sums the tensions of bonds table[p] along ends[:, p] (0 past its ends)
-        table, total = gather_table(n_particles, [i, j])
-        bond = np.where(table < total, table % b, 0)
-        sign = np.where(table < total, np.where(table < b, 1.0, -1.0), 0.0)
-        out["ends"] = sign[None, :, :, None] * u[:, bond]  # [S, P, K, D]
-        out["bond"] = bond
-    return out
-
-
-def spread_form(n_bonds: int, n_particles: int) -> str:
-    """How tensions become particle forces: "dense" (a product with the signed incidence of
-    every restart, [P D, B]: fastest while small) or "gathered" (each particle's bonds by
-    index: work grows with the bond ends, not with bonds x particles)."""
-    return "dense" if n_bonds * n_particles <= DENSE_LIMIT else "gathered"
-
-
-def _binary_forces(params, geometry, neural: np.ndarray, t0, n_p: int, dim: int):
-    """Forces of the binary bonds of every individual at every restart: [S, P, D, N]."""
-    length, rate = geometry["length"], geometry["rate"]  # [S, B, 1]
-    rest = params["rest_length"].T  # [B, N]
-    elongation = length - rest[None]  # [S, B, N]
-    tension = params["stiffness"].T[None] * elongation + params["damping"].T[None] * rate
-    if neural.any():
-        b = len(neural)
-        off = jnp.asarray(1.0 - np.eye(b), length.dtype)
-        w_len = params["length_weights"] * off  # [N, B, B]
-        w_rate = params["rate_weights"] * off
-        # neuron inputs: [S, 2B] @ [2B, B N] -> [S, B, N]
-        n = w_len.shape[0]
-        weights = jnp.concatenate([w_len, w_rate], axis=2).transpose(2, 1, 0)  # [2B, B, N]
-        net = (geometry["inputs"] @ weights.reshape(2 * b, b * n)).reshape(-1, b, n)
-        bias = -jnp.einsum("nbj,nj->bn", w_len, params["rest_length"]) - params["threshold"].T
-        net = net + bias[None]
-        if "drive_weight" in params:
-            freq = jnp.broadcast_to(params["drive_frequency"], params["rest_length"].shape).T
-            phase = 2.0 * jnp.pi * freq[None] * t0[:, None, None] + params["drive_phase"].T[None]
-            net = net + params["drive_weight"].T[None] * jnp.sin(phase)
-        gain = jnp.where(jnp.asarray(neural)[:, None], params["gain"].T, 0.0)  # [B, N]
-        tension = tension + gain[None] * jnp.tanh(net)
-    n_s, n = tension.shape[0], tension.shape[-1]
-    if "spread" in geometry:  # [S, P D, B] @ [S, B, N]
-        return jnp.matmul(geometry["spread"], tension).reshape(n_s, n_p, dim, n)
-    bond, ends = geometry["bond"], geometry["ends"]  # [P, K], [S, P, K, D]
-    return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])

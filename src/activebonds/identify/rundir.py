@@ -425,8 +425,11 @@ def load_checkpoint(run: Path, shapes: dict[str, tuple]):
     return None, None, skipped
 
 
-def new_meta(settings, inputs: dict, strategy: str, columns, display) -> dict:
-    """run.json of a new run: what decides it, and how its history is to be read."""
+def new_meta(
+    settings, inputs: dict, strategy: str, columns, display, command: list[str] | None = None
+) -> dict:
+    """run.json of a new run: what decides it, and how its history is to be read.
+    ``command``: the command line that made it (default: this process's, ``sys.argv``)."""
     return {
         "format": FORMAT,
         "settings": settings.model_dump(mode="json"),
@@ -440,7 +443,7 @@ def new_meta(settings, inputs: dict, strategy: str, columns, display) -> dict:
         },
         "versions": versions(),
         "backend": backend(),
-        "command": python_command(),
+        "command": python_command(command),
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
 
@@ -577,5 +580,15 @@ def read_refinement_record(run: Path) -> dict | None:
     return _read_record(run / "refine.json", "refinement record")
 
 
-def python_command() -> str:
-    return " ".join([Path(sys.argv[0]).name, *sys.argv[1:]])
+def python_command(command: list[str] | None = None) -> str:
+    """``command`` (default ``sys.argv``) as run.json records it: the program's name, then
+    its arguments."""
+    argv = sys.argv if command is None else command
+    return " ".join([Path(argv[0]).name, *argv[1:]])
+
+
+def remove_partial(run: Path) -> None:
+    """Remove what a :func:`create` of ``run`` that was killed left: its hidden staging
+    folders beside ``run`` (never renamed into place)."""
+    for partial in Path(run).parent.glob(f"{atomic.staged_prefix(run)}*"):
+        shutil.rmtree(partial, ignore_errors=True)

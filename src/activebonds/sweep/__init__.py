@@ -7,7 +7,8 @@ The ``sweep`` command is these in order; docs/SWEEP.md describes the manifest.
 """
 
 from .manifest import Job, load_manifest
-from .run import Outcome, check_out, ray_available, run_job, run_ray, run_sequential, start_ray
+from .outcome import Outcome
+from .run import check_out, ray_available, run_job, run_ray, run_sequential, start_ray
 from .summary import write_summary
 
 __all__ = [

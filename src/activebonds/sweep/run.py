@@ -15,40 +15,20 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import socket
 import sys
 import warnings
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
 from ..identify import FitSettings, fit, resume, rundir
 from .manifest import Job
+from .outcome import Done, Outcome
+from .summary import row
 
 MAX_RETRIES = 3  # attempts after a worker dies (each resumes from the newest checkpoint)
 STOP_SECONDS = 60.0  # after Ctrl-C, how long running fits get to save their checkpoints
 RUNNING = ".running"  # OUT/.running/NAME.pid: which worker process runs which fit
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What one fit did in this sweep and where its run stands."""
-
-    name: str
-    action: str  # ran, resumed, skipped or error
-    status: str  # the run's status (completed, failed, ...), or error, lost
-    message: str = ""  # why, for an error
-    row: dict = field(default_factory=dict)  # the summary's numbers (summary.row)
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "completed"
-
-
-Done = Callable[[Outcome], None]
 
 
 # ----------------------------------------------------------------------------- one fit
@@ -57,15 +37,13 @@ Done = Callable[[Outcome], None]
 def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outcome:
     """Bring the run of ``job`` under ``out`` to its end (see the module docstring) and
     measure it for the summary. Errors of the fit become an outcome, not an exception; a
-    Ctrl-C (KeyboardInterrupt) is raised after the fit saved its checkpoint."""
-    from .summary import row
-
+    Ctrl-C (KeyboardInterrupt) is raised after the fit saved its checkpoint. ``command``:
+    the sweep's command line, recorded in a new run's run.json (default: this process's)."""
     out = Path(out)
     run = out / job.name
     pid_file = _mark_running(out, job.name)
     try:
-        with _argv(command):
-            action = _advance(job, run)
+        action = _advance(job, run, command)
         status, message = rundir.read_status(run).get("status", "unknown"), ""
     except InputError as err:
         action, status, message = "error", "error", err.line()
@@ -81,7 +59,7 @@ def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outc
     return Outcome(job.name, action, status, " ".join(message.split()), measured)
 
 
-def _advance(job: Job, run: Path) -> str:
+def _advance(job: Job, run: Path, command: list[str] | None) -> str:
     planned = job.settings.generations
     if (run / "run.json").is_file():
         st = rundir.read_status(run)
@@ -93,9 +71,8 @@ def _advance(job: Job, run: Path) -> str:
         # a checkpoint to continue from (or none yet: resume then starts afresh)
         resume(run, generations=planned)
         return "resumed"
-    for partial in run.parent.glob(f".{run.name}.partial-*"):  # a create that was killed
-        shutil.rmtree(partial, ignore_errors=True)
-    fit(job.model, job.data_arg, job.settings, out=run)
+    rundir.remove_partial(run)  # a create that was killed
+    fit(job.model, job.data_arg, job.settings, out=run, command=command)
     return "ran"
 
 
@@ -105,21 +82,6 @@ def _mark_running(out: Path, name: str) -> Path:
     path = folder / f"{name}.pid"
     path.write_text(f"{os.getpid()} {socket.gethostname()}\n")
     return path
-
-
-@contextmanager
-def _argv(command: list[str] | None) -> Iterator[None]:
-    """The sweep's command line as this process's, while a worker process runs a fit: the
-    run records it (run.json), not the worker's own."""
-    if command is None:
-        yield
-        return
-    saved = sys.argv
-    sys.argv = list(command)
-    try:
-        yield
-    finally:
-        sys.argv = saved
 
 
 # ----------------------------------------------------------------------------- before running
@@ -284,8 +246,6 @@ def _tidy(out: Path) -> None:
 
 
 def _lost(job: Job, out: Path, err: Exception) -> Outcome:
-    from .summary import row
-
     first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
     message = f"{type(err).__name__}: {first}; rerun the sweep to resume it"
     return Outcome(job.name, "error", "lost", message, row(out / job.name))

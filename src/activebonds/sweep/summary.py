@@ -24,7 +24,7 @@ from ..identify.metrics import THRESHOLD_MM, censored_text, window_metrics
 from ..report.html import Section, Table, render
 from ..report.runs import load_run
 from .manifest import Job
-from .run import Outcome
+from .outcome import Outcome
 
 FRAMES_WITHIN = f"frames_within_{THRESHOLD_MM:g}mm"
 MEASURES = (  # (CSV column, HTML heading)
