@@ -1,10 +1,19 @@
 """The command-line application object and its one-line error printer, shared by every
-command module (the modules register their commands on it; :mod:`.main` imports them all)."""
+command module (the modules register their commands on it; :mod:`.main` imports them all).
+
+Nothing here or in the command modules imports JAX or the numerics at module level: help,
+``--version`` and a bad option answer at once (``benchmarks/cli_startup.py``); each command
+imports what it computes with, and :func:`command_line` runs the process's JAX settings only
+once a command's arguments are parsed.
+"""
 
 from __future__ import annotations
 
+import functools
 import sys
 import warnings
+from collections.abc import Callable
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -17,6 +26,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
 # Not a terminal (a log, a pipe): no 80-column wrapping of paths and summaries.
 out = Console() if sys.stdout.isatty() else Console(width=160, soft_wrap=True)
@@ -58,3 +68,53 @@ def show_warning_line(message, category, filename, lineno, file=None, line=None)
 def one_line_warnings() -> None:
     """Install :func:`show_warning_line` (called by ``main()``)."""
     warnings.showwarning = show_warning_line
+
+
+def _print_version(value: bool) -> None:
+    if not value:
+        return
+    from importlib import metadata
+
+    try:
+        version = metadata.version("activebonds")
+    except metadata.PackageNotFoundError:  # run from a source tree that was never installed
+        from .. import __version__ as version
+    print(f"activebonds {version}")
+    raise typer.Exit(0)
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            help="Print the version and exit.",
+            is_eager=True,
+            callback=_print_version,
+        ),
+    ] = False,
+) -> None:
+    pass
+
+
+def command_line(setup: Callable[[], None]):
+    """The click command of :data:`app` with ``setup()`` run at the start of every command,
+    after its arguments are parsed: ``--help``, ``--version`` and a usage error never run it
+    (``main()`` passes the JAX settings, :func:`activebonds.runtime.compilation_cache`,
+    which import JAX)."""
+    from typer.main import get_command
+
+    group = get_command(app)
+    for command in group.commands.values():
+        command.callback = _after(setup, command.callback)
+    return group
+
+
+def _after(setup: Callable[[], None], body: Callable) -> Callable:
+    @functools.wraps(body)
+    def run(*args, **kwargs):
+        setup()
+        return body(*args, **kwargs)
+
+    return run

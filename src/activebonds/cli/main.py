@@ -522,13 +522,12 @@ def _summary(result, held_out=None) -> None:
 def main() -> None:
     """Entry point: usage errors become one line and exit code 2."""
     from ..runtime import compilation_cache, fast_cpu_flags
-    from .app import one_line_warnings
+    from .app import command_line, one_line_warnings
 
     one_line_warnings()  # a reader's warning about a file: "warning: FILE: line N: ..."
     fast_cpu_flags()
-    compilation_cache()
-    try:
-        code = app(standalone_mode=False)
+    try:  # the compilation cache (it imports JAX) once a command runs, not for help or errors
+        code = command_line(compilation_cache)(standalone_mode=False)
     except typer.Exit as e:
         code = e.exit_code
     except typer.Abort:
