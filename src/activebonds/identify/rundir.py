@@ -502,23 +502,65 @@ def data_name(i: int) -> str:
     return "data.npz" if i == 0 else f"data-{i + 1}.npz"
 
 
-def write_validation(run: Path, record: dict) -> None:
-    """validation.json: metrics measured on frames the fit did not use, atomically."""
-    text = json.dumps(record, indent=2, sort_keys=True, allow_nan=False) + "\n"
-    write_text_atomic(run / "validation.json", text)
+# ----------------------------------------------------------------------------- stage records
 
 
-def read_validation(run: Path) -> dict | None:
-    """validation.json, or None if the run has none (raises :class:`InputError` if it is
-    unreadable)."""
-    return _read_record(run / "validation.json", "validation")
+def _record_path(run: Path, name: str) -> Path:
+    return run / f"{name}.json"
 
 
-def _read_record(path: Path, what: str) -> dict | None:
-    """A JSON object written by this module, or None if there is no such file; one line
-    (:class:`InputError`) if it is unreadable or not an object."""
+def save_record(
+    run: Path,
+    name: str,
+    record: dict,
+    *,
+    arrays: dict[str, np.ndarray] | None = None,
+    files: dict[str, str | None] | None = None,
+) -> None:
+    """A post-fit stage's record: RUN/NAME.json (for people and the report), each write
+    atomic. With ``arrays``, RUN/NAME.npz first: the record and the arrays in one atomic
+    write (what :func:`load_record` reads back to resume). ``files``: further files of the
+    stage by suffix (``{"csv": text}`` is RUN/NAME.csv); ``None`` removes one left by an
+    earlier record."""
+    text = json.dumps(record, indent=2, sort_keys=True, allow_nan=True) + "\n"
+    if arrays is not None:
+        packed = {"record": np.frombuffer(text.encode(), np.uint8)}
+        packed.update({k: np.asarray(v) for k, v in arrays.items()})
+        buf = io.BytesIO()
+        np.savez(buf, **packed)
+        write_atomic(run / f"{name}.npz", lambda fh: fh.write(buf.getvalue()))
+    for suffix, content in (files or {}).items():
+        path = run / f"{name}.{suffix}"
+        if content is None:
+            path.unlink(missing_ok=True)
+        else:
+            write_text_atomic(path, content)
+    write_text_atomic(_record_path(run, name), text)
+
+
+def load_record(run: Path, name: str) -> tuple[dict | None, dict[str, np.ndarray]]:
+    """(record, arrays) of stage ``name``: from RUN/NAME.npz where the stage saved arrays
+    (an unreadable one reads as no record: the stage then runs again), else RUN/NAME.json
+    (no arrays); (None, {}) if there is none."""
+    path = run / f"{name}.npz"
+    if path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                record = json.loads(bytes(z["record"]).decode())
+                arrays = {k: z[k] for k in z.files if k != "record"}
+        except (OSError, ValueError, KeyError, UnicodeDecodeError, json.JSONDecodeError):
+            return None, {}
+        return (record, arrays) if isinstance(record, dict) else (None, {})
+    return read_record(run, name), {}
+
+
+def read_record(run: Path, name: str) -> dict | None:
+    """RUN/NAME.json of a stage, or None if there is none; one line (:class:`InputError`) if
+    it is unreadable or not an object."""
+    path = _record_path(run, name)
     if not path.is_file():
         return None
+    what = f"{name} record"
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
@@ -526,58 +568,6 @@ def _read_record(path: Path, what: str) -> dict | None:
     if not isinstance(record, dict):
         raise InputError(path, f"unreadable {what} (not a JSON object)")
     return record
-
-
-def write_uncertainty(run: Path, report) -> None:
-    """RUN/uncertainty.csv (one row per free parameter) and RUN/uncertainty.json (the same
-    with the rank, condition number and undetermined directions), each written atomically."""
-    write_text_atomic(run / "uncertainty.csv", report.csv_text())
-    write_text_atomic(run / "uncertainty.json", json.dumps(report.record(), indent=2) + "\n")
-
-
-def write_uncertainty_skipped(run: Path, why: str) -> None:
-    """RUN/uncertainty.json saying why there is no uncertainty report (no CSV)."""
-    (run / "uncertainty.csv").unlink(missing_ok=True)
-    text = json.dumps({"not_computed": why}, indent=2) + "\n"
-    write_text_atomic(run / "uncertainty.json", text)
-
-
-def read_uncertainty(run: Path) -> dict | None:
-    return _read_record(run / "uncertainty.json", "uncertainty")
-
-
-def save_refinement(run: Path, record: dict, states=None) -> None:
-    """The refinement so far: refine.npz (the record and the shooting states, one atomic
-    write: what resume reads) then refine.json (the same record, for people)."""
-    text = json.dumps(record, indent=2, sort_keys=True, allow_nan=True) + "\n"
-    arrays = {"record": np.frombuffer(text.encode(), np.uint8)}
-    for i, (x, v) in enumerate(states or ()):  # per recording
-        arrays[f"states_x_{i}"], arrays[f"states_v_{i}"] = np.asarray(x), np.asarray(v)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    write_atomic(run / "refine.npz", lambda fh: fh.write(buf.getvalue()))
-    write_text_atomic(run / "refine.json", text)
-
-
-def load_refinement(run: Path):
-    """(record, states or None) of the refinement so far, or (None, None) if there is none or
-    it is unreadable (the refinement is then run again)."""
-    path = run / "refine.npz"
-    if not path.is_file():
-        return None, None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            record = json.loads(bytes(z["record"]).decode())
-            n = sum(1 for k in z.files if k.startswith("states_x_"))
-            states = [(z[f"states_x_{i}"], z[f"states_v_{i}"]) for i in range(n)] or None
-    except (OSError, ValueError, KeyError, UnicodeDecodeError, json.JSONDecodeError):
-        return None, None
-    return (record, states) if isinstance(record, dict) else (None, None)
-
-
-def read_refinement_record(run: Path) -> dict | None:
-    """refine.json for reports, or None."""
-    return _read_record(run / "refine.json", "refinement record")
 
 
 def python_command(command: list[str] | None = None) -> str:

@@ -12,12 +12,12 @@ import html
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from ..document import Figure, Section, Table
 from ..errors import InputError
 from ..identify import metrics
 from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
@@ -30,36 +30,6 @@ from .predict import Prediction, default_frames, predict_run
 from .runs import RunRecord, load_run
 
 PLAYER_IDS = ("canvas", "play", "frame", "frame-label", "mode", "zoom", "speed")
-
-
-@dataclass(frozen=True)
-class Figure:
-    """A PNG figure to embed (its SVG twin, if any, stays beside it on disk)."""
-
-    path: Path
-    caption: str = ""
-
-
-@dataclass(frozen=True)
-class Table:
-    columns: Sequence[str]
-    rows: Sequence[Sequence[object]]
-    caption: str = ""
-    key_value: bool = False  # two columns: a header cell then a value
-
-
-@dataclass(frozen=True)
-class Section:
-    """A titled part of a report: text paragraphs, tables, figures, and optionally a player
-    for an :func:`activebonds.report.animation.payload`."""
-
-    title: str
-    text: Sequence[str] = ()
-    tables: Sequence[Table] = ()
-    figures: Sequence[Figure | Path] = ()
-    animation: dict | None = None
-    anchor: str = ""
-    notes: Sequence[str] = field(default_factory=tuple)
 
 
 _OPTIMIZERS = {"es": "the paper's evolution strategy (es)", "random": "random search (random)"}

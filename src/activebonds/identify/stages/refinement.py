@@ -1,0 +1,131 @@
+"""The refinement stage (``fit --refine lm``): Levenberg-Marquardt from the search's best, one
+stage per horizon of the curriculum (:mod:`activebonds.identify.refine`). Each stage is saved
+as it ends (RUN/refine.json and refine.npz with the shooting states), so a resumed run
+continues with the next one."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...document import Section, Table
+from ..refine import Refinement, Stage
+from .base import Fit, Outcome
+
+NAME = "refine"
+
+
+class RefinementStage:
+    name = NAME
+    state = "refining"
+
+    def doing(self, fit: Fit) -> str:
+        n = len(fit.settings.horizon)
+        return f"refining the best model (Levenberg-Marquardt, {n} stage{'s' * (n > 1)})"
+
+    def applies(self, fit: Fit) -> bool:
+        return fit.completed and fit.settings.refine != "none"
+
+    def run(self, fit: Fit, saved: dict | None, arrays: dict) -> Outcome:
+        settings, start = fit.settings, [float(g) for g in fit.genome]
+        refinement = Refinement(fit.ident, settings)
+        stages: list[Stage] = []
+        if (
+            saved is not None
+            and saved.get("from_generation") == fit.generation
+            and saved.get("from_genome") == start
+        ):
+            stages = [Stage(**r) for r in saved["stages"]][: len(settings.horizon)]
+            refinement.states = _states(arrays)
+        current = np.asarray(stages[-1].genome) if stages else fit.genome
+        outcome = self._outcome(fit, start, stages, refinement, current)
+        for horizon in settings.horizon[len(stages) :]:
+            stage = refinement.stage(horizon, current)
+            stages.append(stage)
+            current = np.asarray(stage.genome)
+            outcome = self._outcome(fit, start, stages, refinement, current)
+            if fit.run is not None:  # each stage kept as it ends
+                fit.run.save_record(NAME, outcome.record, arrays=outcome.arrays)
+        return outcome
+
+    @staticmethod
+    def _outcome(fit: Fit, start, stages, refinement, current) -> Outcome:
+        record = {
+            "from_generation": fit.generation,
+            "from_genome": start,
+            "cost": fit.settings.cost,
+            "horizons": list(fit.settings.horizon),
+            "stages": [s.record() for s in stages],
+        }
+        arrays = {}
+        for i, (x, v) in enumerate(refinement.states or ()):  # per recording
+            arrays[f"states_x_{i}"], arrays[f"states_v_{i}"] = np.asarray(x), np.asarray(v)
+        product = (stages, refinement.states)
+        return Outcome(record, genome=np.asarray(current), arrays=arrays, product=product)
+
+    def lines(self, record: dict) -> list[str]:
+        """One line per stage: its cost, horizon, RMS before and after, steps."""
+        stages = record.get("stages", [])
+        out = []
+        for i, st in enumerate(stages, 1):
+            joined = (
+                ""
+                if st.get("continuity_mm") is None
+                else f", windows join within {st['continuity_mm']:.2g} mm"
+            )
+            out.append(
+                f"refinement {i}/{len(stages)} ({st['cost']}, horizon {st['horizon']}): "
+                f"{st['start_rms_mm']:.4g} -> {st['end_rms_mm']:.4g} mm in {st['steps']} steps, "
+                f"{st['seconds']:.3g} s{joined}; {st['message']}"
+            )
+        return out
+
+    def sections(self, record: dict, report) -> list[Section]:
+        return [Section("Refinement", tables=[table(record)], anchor="refinement")]
+
+    def columns(self, record: dict) -> dict:
+        stages = record.get("stages", [])
+        return {"refinement_steps": sum(int(s["steps"]) for s in stages)} if stages else {}
+
+
+def table(record: dict) -> Table:
+    """One row per refinement stage: its cost and horizon, the RMS of its own residuals
+    before and after, steps, time, and how it ended."""
+    rows = [
+        (
+            i,
+            st["cost"],
+            st["horizon"],
+            st["start_rms_mm"],
+            st["end_rms_mm"],
+            "—" if st.get("continuity_mm") is None else st["continuity_mm"],
+            st["steps"],
+            st["seconds"],
+            ("" if st["accepted"] else "rejected: ") + st["message"],
+        )
+        for i, st in enumerate(record.get("stages", []), 1)
+    ]
+    columns = (
+        "stage",
+        "cost",
+        "horizon",
+        "start RMS (mm)",
+        "end RMS (mm)",
+        "windows join (mm)",
+        "steps",
+        "seconds",
+        "outcome",
+    )
+    return Table(
+        columns,
+        rows,
+        f"Refinement after generation {record.get('from_generation')} of the ES: each stage "
+        "starts from the previous one's result; RMS of the stage's own position residuals.",
+    )
+
+
+def _states(arrays: dict) -> list | None:
+    n = sum(1 for k in arrays if k.startswith("states_x_"))
+    return [(arrays[f"states_x_{i}"], arrays[f"states_v_{i}"]) for i in range(n)] or None
+
+
+STAGE = RefinementStage()

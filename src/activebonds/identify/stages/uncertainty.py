@@ -1,0 +1,91 @@
+"""The uncertainty stage: the Gauss-Newton standard errors and 95 % intervals of the free
+parameters at the fit's optimum, on the cost of its last accepted refinement stage (the
+search's cost without one) (:mod:`activebonds.identify.uncertainty`). RUN/uncertainty.csv
+(one row per parameter) and uncertainty.json; a fit whose report cannot be formed says why."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...document import Section, Table
+from ...model.names import parameter_label
+from .. import uncertainty
+from .base import Fit, Outcome
+
+NAME = "uncertainty"
+
+
+class UncertaintyStage:
+    name = NAME
+    state = None
+
+    def doing(self, fit: Fit) -> str:
+        return "estimating the uncertainty of the parameters"
+
+    def applies(self, fit: Fit) -> bool:
+        return fit.run is not None and fit.completed and np.isfinite(fit.genome).all()
+
+    def run(self, fit: Fit, saved: dict | None, arrays: dict) -> Outcome:
+        stages, states = fit.products.get("refine", ([], None))
+        last = next((s for s in reversed(stages) if s.accepted), None)
+        horizon = last.horizon if last else fit.settings.es_horizon
+        cost = last.cost if last else "restart"
+        try:
+            report = uncertainty.estimate(
+                fit.ident, fit.settings, fit.genome, horizon, cost, states
+            )
+        except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
+            return Outcome({"not_computed": str(err)}, files={"csv": None})
+        return Outcome(report.record(), files={"csv": report.csv_text()})
+
+    def lines(self, record: dict) -> list[str]:
+        if "not_computed" in record:
+            return [f"uncertainty: not computed ({record['not_computed']})"]
+        est = record["estimates"]
+        ok = sum(e["determined"] for e in est)
+        return [
+            f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals in "
+            "uncertainty.csv"
+        ]
+
+    def sections(self, record: dict, report) -> list[Section]:
+        return [section(record, report.run.model.spec)]
+
+    def columns(self, record: dict) -> dict:
+        if "not_computed" in record:
+            return {}
+        est = record.get("estimates", [])
+        return {"determined_parameters": sum(bool(e["determined"]) for e in est)}
+
+
+def section(rec: dict, spec) -> Section:
+    """Each free parameter with its standard error and 95 % interval, or "not determined"
+    and why (never a huge interval)."""
+    if "not_computed" in rec:
+        text = [f"Not computed: {rec['not_computed']}."]
+        return Section("Uncertainty", text=text, anchor="uncertainty")
+    rows = []
+    for e in rec.get("estimates", []):
+        name = e.get("label") or parameter_label(spec, e["name"])
+        if e["determined"]:
+            rows.append((name, e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", ""))
+        else:
+            rows.append((name, e["value"], "not determined", "not determined", e["note"]))
+    condition = rec.get("condition")
+    sigma = rec["sigma_mm"]
+    text = [
+        f"Gauss-Newton covariance at the optimum on the {rec['cost']} cost (horizon "
+        f"{rec['horizon']}): {rec['residuals']} residual coordinates, {rec['variables']} "
+        f"variables, rank {rec['rank']}, condition number "
+        f"{'infinite' if condition is None else f'{condition:.3g}'} (columns scaled), residual "
+        f"standard deviation {sigma if sigma is None else round(sigma, 6)} mm per coordinate.",
+        "The intervals assume independent Gaussian marker noise and an output-error cost "
+        "(shooting or a free run); on the one-step cost with noisy markers the optimum itself "
+        "is biased and no interval describes that.",
+    ]
+    text += [f"Not determined: {d}." for d in rec.get("directions", [])]
+    table = Table(("parameter", "value", "standard error", "95 % interval", "note"), rows)
+    return Section("Uncertainty", text=text, tables=[table], anchor="uncertainty")
+
+
+STAGE = UncertaintyStage()
