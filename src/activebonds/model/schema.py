@@ -262,16 +262,17 @@ class BondBase(_Strict):
         return self
 
 
-_FORMS = {"scalar": Scalar, "vector": Vector, "weights": Weights, "constant": list[FiniteFloat]}
 CONSTANT_ZERO = 1e-12  # a constant vector (a contact's normal) this short is refused as zero
 
 
 @functools.cache
 def bond_class(kind: bonds.BondKind) -> type[BondBase]:
     """The pydantic class of a kind's bond tables: its flags and parameters, all optional."""
+    from .forms import form_of  # the forms read this module's types
+
     fields: dict[str, Any] = {flag: (bool, False) for flag in kind.flags}
     for p in kind.parameters:
-        fields[p.key] = (_FORMS[p.form] | None, None)
+        fields[p.key] = (form_of(p).schema | None, None)
     name = kind.name.title().replace("_", "") + "Bond"
     return create_model(name, __base__=BondBase, **fields)
 
