@@ -15,13 +15,17 @@ written back into the bond's file value:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .. import bonds
-from .schema import FiniteFloat, Param, Scalar, Vector, VectorParam, Weights
+from .values import FiniteFloat, Param, Scalar, Vector, VectorParam, Weights
+
+PARAMETER_EXPECTED = "expected a number or a table { value = .., min = .., max = .., fixed = .. }"
+CONSTANT_ZERO = 1e-12  # a constant vector (a contact's normal) this short is refused as zero
 
 
 def set_value(p, v):
@@ -52,6 +56,14 @@ class Entry:
 
 class ScalarForm:
     schema = Scalar
+    expected = PARAMETER_EXPECTED
+
+    def number(self, value) -> float | None:
+        """The file's number, the one a parameter's :class:`~activebonds.bonds.Check` tests."""
+        return value.value if isinstance(value, Param) else value
+
+    def check(self, par: bonds.Parameter, value, where: str, d: int, n: int, kind: str) -> None:
+        """Refuse a file value of the wrong size (``where``: ``bond[i].key`` in messages)."""
 
     def shape(self, n: int, d: int) -> tuple[int, ...]:
         return (n,)
@@ -71,6 +83,19 @@ class ScalarForm:
 
 class VectorForm:
     schema = Vector
+    expected = "expected a list of numbers or a table { value = [..], min = .., max = .. }"
+
+    def number(self, value) -> float | None:
+        return None
+
+    def check(self, par: bonds.Parameter, value, where: str, d: int, n: int, kind: str) -> None:
+        vals = value if isinstance(value, list) else value.value
+        if len(vals) != d:
+            raise ValueError(f"{where}: expected {d} components, got {len(vals)}")
+        if isinstance(value, VectorParam):
+            for bound in (value.min, value.max):
+                if isinstance(bound, list) and len(bound) != d:
+                    raise ValueError(f"{where}: bounds need {d} components")
 
     def shape(self, n: int, d: int) -> tuple[int, ...]:
         return (n, d)
@@ -96,6 +121,17 @@ class VectorForm:
 
 class WeightsForm:
     schema = Weights
+    expected = "expected a table { length = .., rate = .., min = .., max = .. }"
+
+    def number(self, value) -> float | None:
+        return None
+
+    def check(self, par: bonds.Parameter, value, where: str, d: int, n: int, kind: str) -> None:
+        xs = getattr(value, par.part)
+        if isinstance(xs, list) and len(xs) != n:
+            raise ValueError(
+                f"{where}.{par.part}: expected {n} entries (one per {kind} bond), got {len(xs)}"
+            )
 
     def shape(self, n: int, d: int) -> tuple[int, ...]:
         return (n, n)
@@ -121,6 +157,16 @@ class WeightsForm:
 
 class ConstantForm:
     schema = list[FiniteFloat]
+    expected = "expected a list of numbers (a fixed vector, never searched)"
+
+    def number(self, value) -> float | None:
+        return None
+
+    def check(self, par: bonds.Parameter, value, where: str, d: int, n: int, kind: str) -> None:
+        if len(value) != d:
+            raise ValueError(f"{where}: expected {d} components, got {len(value)}")
+        if math.sqrt(sum(x * x for x in value)) <= CONSTANT_ZERO:
+            raise ValueError(f"{where}: must be a non-zero vector, got {value}")
 
     def shape(self, n: int, d: int) -> tuple[int, ...]:
         return (n, d)

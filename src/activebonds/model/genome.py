@@ -21,7 +21,8 @@ from .forms import Entry, ScalarForm, form_of
 from .genes import Gene, bond_group
 from .layout import gravity_bounds, mass_bounds, pick_log
 from .params import Params
-from .schema import GravityParam, ModelSpec, Param, VectorParam, Weights
+from .schema import GravityParam, ModelSpec
+from .values import Param, VectorParam, Weights
 
 
 def is_free(p: Any) -> bool:
