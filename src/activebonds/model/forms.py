@@ -1,9 +1,10 @@
 """The four forms of a bond parameter (:class:`activebonds.bonds.Parameter`), one class each.
 
 A form knows the shape of the parameter's array in ``params.bonds[kind]`` (N bonds of the
-kind, D dimensions), the type of its file value in the schema, the numbers one bond puts in
-that array (and which of them are genes when the parameter is free), and how a fitted row is
-written back into the bond's file value:
+kind, D dimensions), the type of its file value in the schema (``schema``; ``expected`` in
+words; ``check``: its size in the model), the numbers one bond puts in that array
+(``entries``, the genes among them when the parameter is free; ``genes``: every gene it can
+name), and how a fitted row is written back into the bond's file value (``write``):
 
 * :class:`ScalarForm`: a number or ``{ value, min, max }``; [N]; one gene ``key``;
 * :class:`VectorForm`: one value per axis (``anchor``); [N, D]; genes ``key[axis]``;
