@@ -154,8 +154,9 @@ def test_uncertainty_words_use_the_readable_names():
 # ----------------------------------------------------------------------------- bounds
 
 
-def _gene(lower, upper, log, name="bond[0].stiffness"):
-    return Gene(name, 0, lower, upper, log, lower)
+def _gene(lower, upper, log, owner="bond", key="stiffness", **fields):
+    fields = {"kind": "binary", "bonds": (0,)} if owner == "bond" else fields
+    return Gene(owner, key, **fields, lower=lower, upper=upper, log=log, value=lower)
 
 
 def test_near_means_within_one_percent_of_the_range_or_of_the_log_range():
@@ -174,7 +175,9 @@ def test_near_means_within_one_percent_of_the_range_or_of_the_log_range():
     assert at_bound(_gene(-10.0, 10.0, False), -9.9) == "min"
     assert at_bound(_gene(-10.0, 10.0, False), 0.0) is None
     assert at_bound(_gene(2.0, 2.0, False), 2.0) is None  # an empty range: nothing to say
-    assert at_bound(_gene(0.5, 5.0, True, "mass:A.weight"), 5.0) is None  # a gauge, never
+    weight = _gene(0.5, 5.0, True, "mass", "weight", particle="A")
+    assert weight.name == "mass:A.weight"
+    assert at_bound(weight, 5.0) is None  # a gauge, never
 
 
 def test_rows_flag_by_the_searched_bounds():

@@ -79,7 +79,8 @@ def baselines(
         result.get("least_squares_why_not", "") if lsq_rms is None else f"{lsq_rms:.6g}",
     )
     out.print(table)
-    from ..model.names import parameter_label
+    from ..model.names import labeller
 
+    label = labeller(m.spec)
     for name, value in result.get("least_squares", {}).items():  # keys in JSON, words here
-        out.print(f"  {parameter_label(m.spec, name)} = {value:.6g}", markup=False)
+        out.print(f"  {label(name)} = {value:.6g}", markup=False)

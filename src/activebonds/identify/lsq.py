@@ -31,7 +31,7 @@ from scipy.optimize import LinearConstraint, lsq_linear, minimize
 
 from .. import bonds
 from ..errors import InputError
-from ..model import Model
+from ..model import Gene, Model
 from ..model.params import Params
 from ..physics.forces import total_force
 from .cost import Windows
@@ -69,12 +69,26 @@ def _linear_fields(kind: str) -> frozenset[str]:
 
 def nonlinear_genes(model: Model) -> list[int]:
     """The genes outside the linear families (neural terms, masses, flexion springs): where
-    there is one, the least-squares optimum is no optimum of the model's own family."""
-    index = model.layout.index
-    arrays = [index.mass]  # a free gravity magnitude is linear (m_p n per unit of it)
-    for kind, fields in index.bonds.items():
-        arrays += [a for f, a in fields.items() if f not in _linear_fields(kind)]
-    return sorted({int(g) for a in arrays for g in np.asarray(a).ravel() if g >= 0})
+    there is one, the least-squares optimum is no optimum of the model's own family. Each
+    kind says which of its fields are linear (``kind.linear.fields``); a free gravity
+    magnitude is linear (m_p n per unit of it), a mass is not."""
+    return [g for g, gene in enumerate(model.layout.genes) if not _is_linear(gene)]
+
+
+def _is_linear(gene: Gene) -> bool:
+    if gene.owner == "gravity":
+        return True
+    return gene.kind is not None and gene.field in _linear_fields(gene.kind)
+
+
+def _switched_value(gene: Gene, g: int, layout, off: Params) -> float | None:
+    """The value its kind's ``switch_off`` gives gene ``g`` (a neuron's gain: 0), or None if
+    the kind leaves it as it is."""
+    where = np.asarray(layout.index.bonds[gene.kind][gene.field]) == g
+    now = np.asarray(layout.base.bonds[gene.kind][gene.field])[where]
+    new = np.asarray(off.bonds[gene.kind][gene.field])[where]
+    changed = new != now
+    return float(new[changed][0]) if changed.any() else None
 
 
 def _free(index) -> bool:
@@ -333,9 +347,12 @@ def least_squares(model: Model, windows: Windows, bounded: bool = True) -> Linea
     for g, gene in enumerate(layout.genes):
         if g in values:
             natural[g] = min(max(values[g], gene.lower), gene.upper)
+    off = _switched_off(model)  # the non-linear terms as the kinds switch them off
     for g in nonlinear_genes(model):
-        if layout.genes[g].name.endswith((".gain", ".drive_weight")):  # neurons off
-            natural[g] = 0.0
+        gene = layout.genes[g]
+        switched = None if gene.kind is None else _switched_value(gene, g, layout, off)
+        if switched is not None:  # e.g. the neurons off: their gains at 0
+            natural[g] = switched
     genome = np.where(layout.log, np.log(np.maximum(natural, 1e-300)), natural)
     resid = problem.columns @ theta + problem.offset - problem.target
     cost = float(resid @ resid)

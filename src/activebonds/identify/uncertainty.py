@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ..model.names import parameter_label
+from ..model.names import labeller
 from .cost import join_windows, make_residuals, make_windows
 from .problem import Identification
 from .settings import FitSettings
@@ -314,7 +314,7 @@ def estimate(
     jac, resid = jac[keep], resid[keep]
     names = [g.name for g in layout.genes]
     spans = np.array([g.upper - g.lower for g in layout.genes], np.float64)
-    masses = {i for i, g in enumerate(layout.genes) if g.name.startswith("mass:")}
+    masses = {i for i, g in enumerate(layout.genes) if g.owner == "mass"}
     # Continuity links are constraints (zero at a converged shooting optimum), not data.
     dof = observed - (len(theta) + nuisance) + links
     ratio = sorted(masses) if layout.mass_rest is not None else []
@@ -327,16 +327,16 @@ def estimate(
         jac = np.vstack([jac, gauge * np.linalg.norm(jac, axis=0).max()])
         resid = np.append(resid, 0.0)
         masses = set()
-    spec = ident.model.spec
+    label = labeller(ident.model.spec)
     estimates, rank, condition, s2, directions = from_jacobian(
-        jac, resid, names, theta, spans, dof, masses, lambda n: parameter_label(spec, n)
+        jac, resid, names, theta, spans, dof, masses, label
     )
     if ratio and np.isfinite(s2):
         kg_spans = spans[ratio] * layout.mass_rest / theta[ratio].sum()
         estimates = _masses_in_kg(
             estimates, _decompose(jac), s2, ratio, theta, layout.mass_rest, kg_spans
         )
-    estimates = [replace(e, label=parameter_label(spec, e.name)) for e in estimates]
+    estimates = [replace(e, label=label(e.name)) for e in estimates]
     return Uncertainty(
         estimates=estimates,
         cost=cost,

@@ -12,13 +12,13 @@ from pydantic import ValidationError
 from .. import bonds
 from ..atomic import write_text_atomic
 from ..errors import InputError
+from .forms import PARAMETER_EXPECTED
 from .model import Model, build
 from .schema import ModelSpec
 
 _NOISE = {"float_type", "float_parsing", "list_type", "model_type", "dict_type", "is_instance_of"}
-_PARAMETER = "expected a number or a table { value = .., min = .., max = .., fixed = .. }"
-_FORM_EXPECTED = {
-    "scalar": _PARAMETER,
+_EXPECTED = {
+    "scalar": PARAMETER_EXPECTED,
     "vector": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
     "weights": "expected a table { length = .., rate = .., min = .., max = .. }",
     "constant": "expected a list of numbers (a fixed vector, never searched)",
@@ -30,8 +30,8 @@ _EXPECTED = {
     "direction = [..] }",
     "position": "expected a list of numbers",
     "velocity": "expected a list of numbers",
-    "mass": _PARAMETER,
-    "frequency": _PARAMETER,
+    "mass": PARAMETER_EXPECTED,
+    "frequency": PARAMETER_EXPECTED,
     "drive": "expected a table { frequency = .. } (Hz: a number or { value, min, max })",
 }
 
@@ -41,7 +41,7 @@ def _expected(key: str, otherwise: str) -> str:
     for kind in bonds.kinds():
         for p in kind.parameters:
             if p.key == key:
-                return _FORM_EXPECTED[p.form]
+                return _EXPECTED[p.form]
     return _EXPECTED.get(key, otherwise)
 
 

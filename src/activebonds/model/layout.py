@@ -1,6 +1,6 @@
 """The genome layout: which numbers are free, their bounds, and their bond-type groups.
 
-DESIGN.md §3: genes are grouped by bond type (all occurrences of a type share one parameter
+DESIGN.md §3: genes (:class:`~activebonds.model.genes.Gene`) are grouped by bond type (all occurrences of a type share one parameter
 set); every gene has bounds; positive quantities with wide bounds are searched in log space.
 ``decode`` maps a genome (search space) to :class:`Params` with one gather per leaf, so it
 vmaps over a population at no cost; then (:meth:`Layout.derive`) a free gravity magnitude
@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .genes import Gene
 from .params import Params
 
 
@@ -30,16 +31,6 @@ def mass_bounds(v: float) -> tuple[float, float]:
 # Bounds of a free gravity magnitude given without min/max, from the file value g.
 def gravity_bounds(g: float) -> tuple[float, float]:
     return (g / 2, g * 2) if g > 0 else (g - 10.0, g + 10.0)
-
-
-@dataclass(frozen=True)
-class Gene:
-    name: str  # e.g. "type:leg.stiffness" or "bond[2].weights.length[0]"
-    group: int  # bond-type group (crossover unit)
-    lower: float  # natural units
-    upper: float
-    log: bool
-    value: float  # the model file's value (natural units)
 
 
 @dataclass(frozen=True, eq=False)

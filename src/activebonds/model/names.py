@@ -30,13 +30,14 @@ they are never flagged.
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .layout import Gene
+from .. import bonds
+from .forms import form_of
+from .genes import Gene, bond_group
 from .model import Model
 from .schema import ModelSpec
 
@@ -82,52 +83,108 @@ def _source_label(spec: ModelSpec, kind: str, position: int) -> str:
     return f"{text} #{j}" if bond_label(spec, j).endswith(f" #{j}") else text
 
 
-def _key_text(spec: ModelSpec, kind: str, key: str) -> str:
-    """A bond parameter's key as words: ``anchor[2]`` -> ``anchor z``, ``weights.length[1]``
-    -> ``length weight from B-C``; other keys as in the model file."""
-    m = re.fullmatch(r"[A-Za-z_]+\.([A-Za-z_]+)\[(\d+)\]", key)
-    if m:
-        return f"{m.group(1)} weight from {_source_label(spec, kind, int(m.group(2)))}"
-    m = re.fullmatch(r"([A-Za-z_]+)\[(\d+)\]", key)
-    if m:
-        ax = int(m.group(2))
-        return f"{m.group(1)} {AXES[ax] if ax < len(AXES) else ax}"
-    return key
+def _type_label(spec: ModelSpec, type: str) -> str:
+    """``spring type neck``: the kind word of the type's first bond and the type."""
+    b = next(b for b in spec.bond if b.type == type)
+    return f"{_word(b)} type {type}"
+
+
+class _Words:
+    """The labels of one spec's genes, each bond's words worked out once."""
+
+    def __init__(self, spec: ModelSpec):
+        self.spec = spec
+        self.known: dict[tuple, str] = {}
+
+    def _head(self, gene: Gene) -> str:
+        key = ("type", gene.type) if gene.type else ("bond", gene.bonds[0])
+        if key not in self.known:
+            spec = self.spec
+            self.known[key] = (
+                _type_label(spec, gene.type) if gene.type else bond_label(spec, gene.bonds[0])
+            )
+        return self.known[key]
+
+    def _source(self, kind: str, position: int) -> str:
+        key = ("source", kind, position)
+        if key not in self.known:
+            self.known[key] = _source_label(self.spec, kind, position)
+        return self.known[key]
+
+    def label(self, gene: Gene) -> str:
+        """``spring A-B stiffness``, ``unary spring C anchor z``, ``neural B-C length weight
+        from A-B``, ``particle A mass``, ``drive frequency``: from the gene's fields."""
+        if gene.owner == "mass":
+            return f"particle {gene.particle} {'mass weight' if gene.key == 'weight' else gene.key}"
+        if gene.owner == "gravity":
+            return f"gravity {gene.key}"
+        if gene.owner == "shared":
+            return " ".join(gene.key.split(".", 1))  # its top-level table and entry
+        if gene.part is not None:
+            words = f"{gene.part} weight from {self._source(gene.kind, gene.source)}"
+        elif gene.axis is not None:
+            words = f"{gene.key} {AXES[gene.axis] if gene.axis < len(AXES) else gene.axis}"
+        else:
+            words = gene.key
+        return f"{self._head(gene)} {words}"
+
+
+def _named(spec: ModelSpec) -> dict[str, Gene | str]:
+    """Every gene a model with ``spec`` can have, by name (as if every parameter were free,
+    and every kind's shared ones), and the labels of its groups and of its bonds' parameter
+    tables (``bond[2]``, ``type:neck``, ``mass:A``, ``bond[1].weights``)."""
+    out: dict[str, Gene | str] = {}
+    for p in spec.particle:
+        out[f"mass:{p.name}"] = f"particle {p.name}"
+        for key in ("mass", "weight"):
+            gene = Gene("mass", key, particle=p.name)
+            out[gene.name] = gene
+    gene = Gene("gravity", "magnitude")
+    out[gene.name] = gene
+    for kind in bonds.kinds():
+        for par in kind.shared:
+            gene = Gene("shared", par.key, kind=kind.name, field=par.field)
+            out[gene.name] = gene
+    counts = {k: sum(b.kind == k for b in spec.bond) for k in bonds.names()}
+    types: set[str] = set()
+    for i, b in enumerate(spec.bond):
+        owners = [None]  # the bond itself, and its type the first time it is seen
+        if b.type is not None and b.type not in types:
+            types.add(b.type)
+            owners.append(b.type)
+        for t in owners:
+            group = bond_group(i, t)
+            out[group] = _type_label(spec, t) if t else bond_label(spec, i)
+            for par in bonds.get(b.kind).parameters:
+                out[f"{group}.{par.key}"] = f"{out[group]} {par.key}"
+                for fields in form_of(par).genes(par, counts[b.kind], spec.dimension):
+                    gene = Gene("bond", par.key, b.kind, (i,), t, field=par.field, **fields)
+                    out[gene.name] = gene
+    return out
+
+
+def labeller(spec: ModelSpec) -> Callable[[str], str]:
+    """``name -> label`` for the genes (and gene groups) of a model with ``spec``, as
+    :func:`parameter_label`; made once to label many names."""
+    named, words = _named(spec), _Words(spec)
+
+    def label(name: str) -> str:
+        entry = named.get(name, name)
+        return words.label(entry) if isinstance(entry, Gene) else entry
+
+    return label
 
 
 def parameter_label(spec: ModelSpec, name: str) -> str:
     """The readable name of the gene (or gene group) ``name`` of a model with ``spec``; a
     name it does not know is returned unchanged."""
-    m = re.fullmatch(r"bond\[(\d+)\](?:\.(.+))?", name)
-    if m and int(m.group(1)) < len(spec.bond):
-        i = int(m.group(1))
-        label = bond_label(spec, i)
-        if m.group(2) is None:
-            return label
-        return f"{label} {_key_text(spec, spec.bond[i].kind, m.group(2))}"
-    for b in spec.bond:
-        if b.type is None:
-            continue
-        group = f"type:{b.type}"
-        if name == group or name.startswith(group + "."):
-            label = f"{_word(b)} type {b.type}"
-            key = name[len(group) + 1 :]
-            return f"{label} {_key_text(spec, b.kind, key)}" if key else label
-    for p in spec.particle:
-        group = f"mass:{p.name}"
-        if name == group:
-            return f"particle {p.name}"
-        if name.startswith(group + "."):
-            key = name[len(group) + 1 :]
-            return f"particle {p.name} {'mass weight' if key == 'weight' else key}"
-    if re.fullmatch(r"[A-Za-z_]+\.[A-Za-z_]+", name):  # gravity.magnitude, drive.frequency
-        return name.replace(".", " ")
-    return name
+    return labeller(spec)(name)
 
 
 def parameter_labels(model: Model) -> list[str]:
-    """The readable name of each gene of ``model``, in genome order."""
-    return [parameter_label(model.spec, g.name) for g in model.layout.genes]
+    """The readable name of each gene of ``model``, in genome order (from its fields)."""
+    words = _Words(model.spec)
+    return [words.label(g) for g in model.layout.genes]
 
 
 # ----------------------------------------------------------------------------- bounds
@@ -149,7 +206,7 @@ def bound_position(gene: Gene, value: float) -> float:
 
 def is_mass_weight(gene: Gene) -> bool:
     """A free mass under ``total_mass``: a weight whose common scale changes nothing."""
-    return gene.name.startswith("mass:") and gene.name.endswith(".weight")
+    return gene.owner == "mass" and gene.key == "weight"
 
 
 def at_bound(gene: Gene, value: float, share: float = NEAR_BOUND) -> str | None:
@@ -204,13 +261,14 @@ def parameter_rows(
     genes = model.layout.genes
     vals = [g.value for g in genes] if values is None else [float(v) for v in values]
     searched = {g.name: g for g in (bounds or model).layout.genes}
+    words = _Words(model.spec)
     rows = []
     for g, v in zip(genes, vals, strict=True):
         b = searched.get(g.name, g)
         rows.append(
             ParameterRow(
                 key=g.name,
-                name=parameter_label(model.spec, g.name),
+                name=words.label(g),
                 value=float(v),
                 lower=float(b.lower),
                 upper=float(b.upper),

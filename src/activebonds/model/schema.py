@@ -23,9 +23,6 @@ import math
 from typing import Annotated, Any, Literal
 
 from pydantic import (
-    AfterValidator,
-    BaseModel,
-    ConfigDict,
     Field,
     StrictBool,
     WrapValidator,
@@ -35,104 +32,8 @@ from pydantic import (
 )
 
 from .. import bonds
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-def _finite(x: float, what: str = "value") -> float:
-    if not math.isfinite(x):
-        raise ValueError(f"{what} must be a finite number, got {x}")
-    return x
-
-
-FiniteFloat = Annotated[float, AfterValidator(_finite)]
-
-
-def _value_of(p: float | Param | None) -> float | None:
-    return p.value if isinstance(p, Param) else p
-
-
-class Param(_Strict):
-    """A scalar parameter: fixed, or free within [min, max] (log-scaled search if ``log``)."""
-
-    value: float
-    min: float | None = None
-    max: float | None = None
-    fixed: bool = False
-    log: bool | None = None
-
-    @field_validator("value", "min", "max")
-    @classmethod
-    def _check_finite(cls, x: float | None) -> float | None:
-        return None if x is None else _finite(x)
-
-    @model_validator(mode="after")
-    def _check_bounds(self) -> Param:
-        if self.min is not None and self.max is not None and self.min >= self.max:
-            raise ValueError(f"min: min ({self.min}) must be below max ({self.max})")
-        if self.min is not None and self.value < self.min:
-            raise ValueError(f"value {self.value} is below min {self.min}")
-        if self.max is not None and self.value > self.max:
-            raise ValueError(f"value {self.value} is above max {self.max}")
-        if self.log and self.min is not None and self.min <= 0:
-            raise ValueError("a log-scaled parameter needs min > 0")
-        return self
-
-
-class VectorParam(_Strict):
-    """A vector parameter (anchor, gravity): one value per axis, shared scalar or per-axis bounds."""
-
-    value: list[FiniteFloat]
-    min: FiniteFloat | list[FiniteFloat] | None = None
-    max: FiniteFloat | list[FiniteFloat] | None = None
-    fixed: bool = False
-
-    @model_validator(mode="after")
-    def _check_bounds(self) -> VectorParam:
-        n = len(self.value)
-        for name in ("min", "max"):
-            b = getattr(self, name)
-            if isinstance(b, list) and len(b) != n:
-                raise ValueError(f"{name}: expected {n} components, got {len(b)}")
-        lo = self.min if isinstance(self.min, list) else [self.min] * n
-        hi = self.max if isinstance(self.max, list) else [self.max] * n
-        for ax, (v, a, b) in enumerate(zip(self.value, lo, hi, strict=True)):
-            if a is not None and b is not None and a >= b:
-                raise ValueError(f"min: min ({a}) must be below max ({b}) on axis {ax}")
-            if a is not None and v < a:
-                raise ValueError(f"value: component {ax} = {v} is below min {a}")
-            if b is not None and v > b:
-                raise ValueError(f"value: component {ax} = {v} is above max {b}")
-        return self
-
-
-class Weights(_Strict):
-    """Neural input weights of one mechanical-neural bond (DESIGN.md §2).
-
-    ``length[j]`` multiplies the elongation of binary bond j, ``rate[j]`` its elongation rate.
-    A scalar is broadcast to every other binary bond.
-    """
-
-    length: FiniteFloat | list[FiniteFloat] = 0.0
-    rate: FiniteFloat | list[FiniteFloat] = 0.0
-    min: FiniteFloat = -10.0
-    max: FiniteFloat = 10.0
-    fixed: bool = False
-
-    @model_validator(mode="after")
-    def _check(self) -> Weights:
-        if self.min >= self.max:
-            raise ValueError(f"min: min ({self.min}) must be below max ({self.max})")
-        for name in ("length", "rate"):
-            xs = getattr(self, name)
-            for x in xs if isinstance(xs, list) else [xs]:
-                if not self.min <= x <= self.max:
-                    raise ValueError(
-                        f"{name}: weight {x} outside [min, max] = [{self.min}, {self.max}]"
-                    )
-        return self
+from .forms import form_of
+from .values import FiniteFloat, Param, Scalar, _finite, _Strict, _value_of
 
 
 class GravityParam(Param):
@@ -159,10 +60,6 @@ class Drive(_Strict):
     ``drive.frequency``)."""
 
     frequency: FiniteFloat | Param
-
-
-Scalar = FiniteFloat | Param
-Vector = list[FiniteFloat] | VectorParam
 
 
 class Particle(_Strict):
@@ -256,14 +153,10 @@ class BondBase(_Strict):
             if p.default is None and getattr(self, p.key) is None:
                 raise ValueError(f"{p.key}: a {self.kind} bond needs {p.key}{p.note}")
         for p in kind.parameters:
-            value = _value_of(getattr(self, p.key)) if p.form == "scalar" else None
+            value = form_of(p).number(getattr(self, p.key))
             if p.check and value is not None and not p.check.test(value):
                 raise ValueError(f"{p.key}: must be {p.check.text}, got {value}")
         return self
-
-
-_FORMS = {"scalar": Scalar, "vector": Vector, "weights": Weights, "constant": list[FiniteFloat]}
-CONSTANT_ZERO = 1e-12  # a constant vector (a contact's normal) this short is refused as zero
 
 
 @functools.cache
@@ -271,7 +164,7 @@ def bond_class(kind: bonds.BondKind) -> type[BondBase]:
     """The pydantic class of a kind's bond tables: its flags and parameters, all optional."""
     fields: dict[str, Any] = {flag: (bool, False) for flag in kind.flags}
     for p in kind.parameters:
-        fields[p.key] = (_FORMS[p.form] | None, None)
+        fields[p.key] = (form_of(p).schema | None, None)
     name = kind.name.title().replace("_", "") + "Bond"
     return create_model(name, __base__=BondBase, **fields)
 
@@ -368,32 +261,7 @@ class ModelSpec(_Strict):
                     raise ValueError(
                         f"bond[{i}].{p.key}: needs the model's top-level [{p.needs}] table"
                     )
-                if p.form == "vector":
-                    vals = value if isinstance(value, list) else value.value
-                    if len(vals) != d:
-                        raise ValueError(
-                            f"bond[{i}].{p.key}: expected {d} components, got {len(vals)}"
-                        )
-                    if isinstance(value, VectorParam):
-                        for bound in (value.min, value.max):
-                            if isinstance(bound, list) and len(bound) != d:
-                                raise ValueError(f"bond[{i}].{p.key}: bounds need {d} components")
-                if p.form == "constant":
-                    if len(value) != d:
-                        raise ValueError(
-                            f"bond[{i}].{p.key}: expected {d} components, got {len(value)}"
-                        )
-                    if math.sqrt(sum(x * x for x in value)) <= CONSTANT_ZERO:
-                        raise ValueError(
-                            f"bond[{i}].{p.key}: must be a non-zero vector, got {value}"
-                        )
-                if p.form == "weights":
-                    xs, n = getattr(value, p.part), counts[b.kind]
-                    if isinstance(xs, list) and len(xs) != n:
-                        raise ValueError(
-                            f"bond[{i}].{p.key}.{p.part}: expected {n} entries "
-                            f"(one per {b.kind} bond), got {len(xs)}"
-                        )
+                form_of(p).check(p, value, f"bond[{i}].{p.key}", d, counts[b.kind], b.kind)
             if b.type is not None:
                 sig = (b.kind, *(getattr(b, flag) for flag in kind.flags))
                 if b.type in types and types[b.type] != sig:

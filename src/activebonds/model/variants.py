@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .model import Model, build
-from .schema import Param, Weights
+from .values import Param, Weights
 
 
 def as_standard(model: Model) -> Model:

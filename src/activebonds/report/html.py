@@ -23,7 +23,7 @@ from ..identify import metrics
 from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.lsq import least_squares, nonlinear_genes
-from ..model.names import NEAR_BOUND, parameter_label, parameter_rows
+from ..model.names import NEAR_BOUND, labeller, parameter_rows
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
@@ -255,8 +255,9 @@ def uncertainty_section(record: RunRecord) -> Section | None:
         text = [f"Not computed: {rec['not_computed']}."]
         return Section("Uncertainty", text=text, anchor="uncertainty")
     rows = []
+    label = labeller(record.model.spec)
     for e in rec.get("estimates", []):
-        name = e.get("label") or parameter_label(record.model.spec, e["name"])
+        name = e.get("label") or label(e["name"])
         if e["determined"]:
             rows.append((name, e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", ""))
         else:

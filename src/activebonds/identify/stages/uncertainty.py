@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...document import Section, Table
-from ...model.names import parameter_label
+from ...model.names import labeller
 from .. import uncertainty
 from .base import Fit, Outcome
 
@@ -65,8 +65,9 @@ def section(rec: dict, spec) -> Section:
         text = [f"Not computed: {rec['not_computed']}."]
         return Section("Uncertainty", text=text, anchor="uncertainty")
     rows = []
+    label = labeller(spec)
     for e in rec.get("estimates", []):
-        name = e.get("label") or parameter_label(spec, e["name"])
+        name = e.get("label") or label(e["name"])
         if e["determined"]:
             rows.append((name, e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", ""))
         else:
