@@ -22,11 +22,12 @@ from ..data import Trajectory, read_trajectory
 from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model
-from . import rundir, strategies, uncertainty
+from . import rundir, stages, strategies
 from .cost import Display
 from .evolve import Evolution, history_columns, keys
 from .problem import Identification, identification
-from .refine import Refinement, Stage
+from .refine import Stage
+from .rundir import RunDir
 from .settings import FitSettings
 
 Progress = Callable[[int, int, float], None]  # (generation, total, best RMS mm)
@@ -51,6 +52,18 @@ class FitResult:
     run: Path | None = None
     refinement: list[Stage] = field(default_factory=list)  # the stages after the ES, if any
     es_genome: np.ndarray | None = None  # the ES's best, before any refinement
+    # the post-fit stages' records by name (identify.stages: refine, baselines, uncertainty,
+    # validation, ...), as RUN/NAME.json holds them
+    records: dict[str, dict] = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        """What the post-fit stages say of this fit, one line each, in their order."""
+        return [
+            line
+            for stage in stages.stages()
+            if stage.name in self.records
+            for line in stage.lines(self.records[stage.name])
+        ]
 
 
 def _precision(settings: FitSettings):
@@ -101,16 +114,29 @@ def _fit(
     model_obj = load_model(model_path) if model_path else model
     trajs = [read_trajectory(p) if p else d for p, d in zip(paths, items, strict=True)]
     ident = identification(model_obj, trajs if many else trajs[0], settings)
+    held_out = validation_frames(ident.model, trajs[0], settings)
     run = None
     if out is not None:
         model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
-        run = _create_run(out, model_text, ident, settings, model_path, paths, overwrite, command)
-    return _evolve(ident, settings, run, progress, status=status)
+        run = _create_run(
+            out, model_text, ident, settings, model_path, paths, overwrite, command, held_out
+        )
+    return _evolve(ident, settings, run, progress, status=status, held_out=held_out)
+
+
+def validation_frames(model: Model, recording: Trajectory, settings: FitSettings):
+    """The frames ``settings.validation`` of ``recording`` (the model's markers), checked
+    (:class:`InputError` naming ``--validate``), or None without validation."""
+    if settings.validation is None:
+        return None
+    from .metrics import validation_data
+
+    return validation_data(model, recording, settings, settings.validation)
 
 
 def _create_run(
-    out, model_text, ident, settings, model_path, data_paths, overwrite, command=None
-) -> Path:
+    out, model_text, ident, settings, model_path, data_paths, overwrite, command=None, held_out=None
+) -> RunDir:
     inputs = {}
     named = [("model", model_path)] + [
         ("data" if i == 0 else f"data-{i + 1}", p) for i, p in enumerate(data_paths)
@@ -130,7 +156,7 @@ def _create_run(
     state = _state_bytes(strategy, n_particles, _dtype(settings))
     need = rundir.expected_bytes(state, len(meta["history"]["columns"]), settings.generations)
     need += 2 * sum(len(v) for k, v in files.items() if k != "model.toml")  # refinement states
-    return rundir.create(out, files, meta, overwrite, need_bytes=need)
+    return RunDir.create(out, files, meta, overwrite, need_bytes=need, held_out=held_out)
 
 
 def _state_bytes(strategy, n_particles: int, dtype) -> int:
@@ -145,8 +171,8 @@ def _state_bytes(strategy, n_particles: int, dtype) -> int:
     return sum(8 * int(np.prod(leaf.shape)) for leaf in jax.tree.leaves(shapes)) + 16
 
 
-def _stored_identification(run: Path, settings: FitSettings) -> Identification:
-    model, windows = rundir.read_input_model(run), rundir.read_windows(run)
+def _stored_identification(run: RunDir, settings: FitSettings) -> Identification:
+    model, windows = run.input_model(), run.windows()
     data = windows if len(windows) > 1 else windows[0]
     return identification(model, data, settings.model_copy(update={"frames": (0, None)}))
 
@@ -165,14 +191,14 @@ def resume(
     the software versions differ from those recorded, unless ``force``. ``generations`` may
     extend the run.
     """
-    run = Path(run)
-    meta = rundir.read_meta(run)
+    run = RunDir(run)
+    meta = run.meta()
     try:
         settings = FitSettings(**meta["settings"])
     except Exception as err:  # noqa: BLE001 - report any bad settings as one line
-        raise InputError(run / "run.json", f"settings are not valid ({err})") from None
+        raise InputError(run.path / "run.json", f"settings are not valid ({err})") from None
     if not force:
-        _check_unchanged(run, meta)
+        run.check_unchanged(meta)
     if generations is not None:
         if generations < 1:
             raise InputError("--generations", "must be at least 1")
@@ -181,56 +207,27 @@ def resume(
         return _resume(run, meta, settings, progress, status)
 
 
-def _resume(run: Path, meta: dict, settings: FitSettings, progress, status=None) -> FitResult:
+def _resume(run: RunDir, meta: dict, settings: FitSettings, progress, status=None) -> FitResult:
     ident = _stored_identification(run, settings)
     if meta.get("upgraded_from"):  # a run of an older format continues in the current one
-        rundir.write_meta(run, {k: v for k, v in meta.items() if k != "upgraded_from"})
-    return _evolve(ident, settings, run, progress, resuming=True, status=status)
+        run.write_meta({k: v for k, v in meta.items() if k != "upgraded_from"})
+    held_out = run.held_out()
+    return _evolve(ident, settings, run, progress, True, status, held_out=held_out)
 
 
 def _skipped(skipped: list[str]) -> str:
     return f" (unreadable: {', '.join(skipped)})" if skipped else ""
 
 
-def _check_unchanged(run: Path, meta: dict) -> None:
-    for name, rec in meta.get("inputs", {}).items():
-        path = Path(rec["path"])
-        if not path.is_file():
-            raise InputError(
-                run, f"the {name} file {path} is gone; pass --force to use the copy in the run"
-            )
-        if rundir.sha256_file(path) != rec["sha256"]:
-            raise InputError(
-                run,
-                f"the {name} file {path} changed since the run started; pass --force to continue anyway",
-            )
-    now = rundir.versions()
-    for pkg, version in meta.get("versions", {}).items():
-        if now.get(pkg) != version:
-            raise InputError(
-                run,
-                f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway",
-            )
-    stored = rundir.read_status(run).get("job")
-    if stored is not None and meta.get("upgraded_from") == 1:
-        stored = {"optimizer": "es", **stored}  # format 1 had the paper's ES only
-    current = FitSettings(**meta["settings"]).job()
-    if stored is not None and stored != current:
-        changed = sorted(k for k in set(stored) | set(current) if stored.get(k) != current.get(k))
-        detail = ", ".join(f"{k} {stored.get(k)!r} -> {current.get(k)!r}" for k in changed)
-        raise InputError(
-            run / "run.json",
-            f"settings changed since the run started ({detail}); pass --force to continue anyway",
-        )
-
-
 def _evolve(
     ident: Identification,
     settings: FitSettings,
-    run: Path | None,
+    run: RunDir | None,
     progress,
     resuming=False,
     status=None,
+    *,
+    held_out=None,
 ):
     """Start (or, with a run directory holding a checkpoint, continue) the run and evolve it
     to ``settings.generations``, checkpointing every ``checkpoint_every`` generations and on
@@ -249,20 +246,21 @@ def _evolve(
     if resuming:
         template = loop.template(init_key)
         shapes = rundir.state_shapes(template)
-        saved = rundir.load_checkpoint(run, shapes)
+        saved = run.load_checkpoint(shapes)
         if saved[0] is None and saved[2]:
-            raise InputError(run, "no complete checkpoint to resume from" + _skipped(saved[2]))
+            raise InputError(run.path, "no complete checkpoint to resume from" + _skipped(saved[2]))
         _check_space_to_resume(run, shapes, len(loop.columns), total)
     if saved is not None and saved[0] is not None:
         arrays, history, _ = saved
-        history = rundir.upgrade_history(history, rundir.read_meta(run))
+        history = rundir.upgrade_history(history, run.meta())
         state = rundir.unflatten_state(arrays, template)
     else:  # a new run, or one stopped before its first checkpoint: start afresh
         state = loop.start(init_key)
         history = {c.name: np.zeros(0) for c in loop.columns}
         if not np.isfinite(float(strategy.best(state.strategy)[1])):
             failed = "failed: every candidate's simulation went non-finite"
-            return _finish(ident, settings, run, strategy, state, history, integer, failed)
+            args = (ident, settings, run, strategy, state, history, integer, failed)
+            return _finish(*args, held_out=held_out)
         if run is not None:
             _checkpoint(run, ident, settings, strategy, state, history, integer, "running")
     gen = last_ckpt = int(state.generation)
@@ -289,17 +287,17 @@ def _evolve(
             _checkpoint(*args, "interrupted", started)
         raise
     args = (ident, settings, run, strategy, state, history, integer, "completed", started)
-    return _finish(*args, say=status)
+    return _finish(*args, say=status, held_out=held_out)
 
 
-def _check_space_to_resume(run: Path, shapes: dict, columns: int, total: int) -> None:
+def _check_space_to_resume(run: RunDir, shapes: dict, columns: int, total: int) -> None:
     """Refuse (one line) to resume in a folder without the space the rest of the run needs:
     what the run writes in all, less what it holds now (replaced as it goes), and at least
     one more checkpoint beside the kept ones."""
     state = rundir.state_bytes(shapes)
-    need = rundir.expected_bytes(state, columns, total) - rundir.used_bytes(run)
+    need = rundir.expected_bytes(state, columns, total) - run.used_bytes()
     one = state + total * columns * 8
-    rundir.check_space(run, run, max(need, one), "resuming writes")
+    rundir.check_space(run.path, run.path, max(need, one), "resuming writes")
 
 
 def compiling_text(optimizer: str) -> str:
@@ -322,14 +320,13 @@ def _best(strategy, state) -> tuple[np.ndarray, float, np.ndarray]:
 
 
 def _checkpoint(run, ident, settings, strategy, state, history, integer, status, started=None):
-    rundir.save_checkpoint(run, rundir.flatten_state(state), history)
-    rundir.write_history(run, history, integer)
+    run.save_checkpoint(rundir.flatten_state(state), history)
+    run.write_history(history, integer)
     genome, cost, _ = _best(strategy, state)
     display = Display(ident.windows.n_terms)
     if np.isfinite(cost):
-        rundir.save_best_model(run, ident.model.with_genome(genome))
-    rundir.write_status(
-        run,
+        run.save_best_model(ident.model.with_genome(genome))
+    run.write_status(
         status=status,
         generation=int(state.generation),
         generations=settings.generations,
@@ -341,32 +338,43 @@ def _checkpoint(run, ident, settings, strategy, state, history, integer, status,
 
 
 def _finish(
-    ident, settings, run, strategy, state, history, integer, status, started=None, *, say=None
+    ident,
+    settings,
+    run,
+    strategy,
+    state,
+    history,
+    integer,
+    status,
+    started=None,
+    *,
+    say=None,
+    held_out=None,
 ):
     genome, cost, local = _best(strategy, state)
     display = Display(ident.windows.n_terms)
     if run is not None:
         _checkpoint(run, ident, settings, strategy, state, history, integer, status, started)
-    es_genome, stages, states = genome, [], None
-    if status == "completed" and settings.refine != "none" and np.isfinite(cost):
-        if run is not None:
-            rundir.write_status(run, **{**rundir.read_status(run), "status": "refining"})
-        if say is not None:
-            n = len(settings.horizon)
-            say(f"refining the best model (Levenberg-Marquardt, {n} stage{'s' * (n > 1)})")
-        genome, stages, states = _refine(ident, settings, run, genome, int(state.generation))
-        cost, local = (np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(genome))
-        cost = float(cost)
-        if run is not None:
-            rundir.save_best_model(run, ident.model.with_genome(genome))
-            done = {"status": status, "best_rms_mm": float(display(cost))}
-            rundir.write_status(run, **{**rundir.read_status(run), **done})
-    if run is not None and status == "completed" and np.isfinite(cost):
-        if say is not None:
-            say("estimating the uncertainty of the parameters")
-        _uncertainty(ident, settings, run, genome, stages, states)
+    es_genome = genome
+    fit = stages.Fit(ident, settings, genome, int(state.generation), status, run, held_out, say)
+    records: dict[str, dict] = {}
+    if np.isfinite(cost):
+        for stage in stages.stages():
+            if not stage.applies(fit):
+                continue
+            new = _run_stage(stage, fit, records)
+            if new is not None:  # a better model (the refinement)
+                cost, local = (
+                    np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(new)
+                )
+                cost = float(cost)
+                fit.genome = genome = new
+                if run is not None:
+                    run.save_best_model(ident.model.with_genome(genome))
+                    run.update_status(status=status, best_rms_mm=float(display(cost)))
     per_particle = ident.windows.weight.sum(axis=(0, 1))
     model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
+    refined = fit.products.get("refine", ([], None))[0]
     return FitResult(
         model=model,
         genome=genome,
@@ -380,55 +388,31 @@ def _finish(
         identification=ident,
         settings=settings,
         status=status,
-        run=run,
-        refinement=stages,
+        run=None if run is None else run.path,
+        refinement=refined,
         es_genome=es_genome,
+        records=records,
     )
 
 
-def _refine(ident, settings, run, genome, generation) -> tuple[np.ndarray, list[Stage]]:
-    """The refinement stages after the ES's best ``genome`` (generation ``generation``): those
-    a resumed run already finished are read back, the others run and are saved one by one."""
-    refinement = Refinement(ident, settings)
-    stages: list[Stage] = []
-    record, states = rundir.load_refinement(run) if run is not None else (None, None)
-    start = [float(g) for g in genome]
-    if (
-        record is not None
-        and record.get("from_generation") == generation
-        and record.get("from_genome") == start
-    ):
-        stages = [Stage(**r) for r in record["stages"]][: len(settings.horizon)]
-        refinement.states = states
-    current = np.asarray(stages[-1].genome) if stages else genome
-    for horizon in settings.horizon[len(stages) :]:
-        stage = refinement.stage(horizon, current)
-        stages.append(stage)
-        current = np.asarray(stage.genome)
-        if run is not None:
-            record = {
-                "from_generation": generation,
-                "from_genome": start,
-                "cost": settings.cost,
-                "horizons": list(settings.horizon),
-                "stages": [s.record() for s in stages],
-            }
-            rundir.save_refinement(run, record, refinement.states)
-    return current, stages, refinement.states
-
-
-def _uncertainty(ident, settings, run, genome, stages, states) -> None:
-    """RUN/uncertainty.csv and .json: the Gauss-Newton report at the fit's optimum, on the
-    cost of its last accepted stage (the ES's cost without refinement)."""
-    last = next((s for s in reversed(stages) if s.accepted), None)
-    horizon = last.horizon if last else settings.es_horizon
-    cost = last.cost if last else "restart"
-    try:
-        report = uncertainty.estimate(ident, settings, genome, horizon, cost, states)
-    except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
-        rundir.write_uncertainty_skipped(run, str(err))
-        return
-    rundir.write_uncertainty(run, report)
+def _run_stage(stage, fit: stages.Fit, records: dict) -> np.ndarray | None:
+    """Run one post-fit stage (continuing from what it saved), save its record, hand its
+    product on; returns its genome if it changed the best model."""
+    run = fit.run
+    if run is not None and stage.state is not None:
+        run.update_status(status=stage.state)
+    if fit.say is not None:
+        fit.say(stage.doing(fit))
+    saved, arrays = run.load_record(stage.name) if run is not None else (None, {})
+    outcome = stage.run(fit, saved, arrays)
+    records[stage.name] = outcome.record
+    if run is not None:
+        run.save_record(stage.name, outcome.record, arrays=outcome.arrays, files=outcome.files)
+        if stage.state is not None:
+            run.update_status(status=fit.status)
+    if outcome.product is not None:
+        fit.products[stage.name] = outcome.product
+    return None if outcome.genome is None else np.asarray(outcome.genome, np.float64)
 
 
 __all__ = ["FitResult", "FitSettings", "fit", "resume"]

@@ -497,6 +497,17 @@ def read_windows(run: Path) -> list:
     return out
 
 
+HELD_OUT = "held_out.npz"  # the validation frames (settings.validate), beside data.npz
+
+
+def read_held_out(run: Path):
+    """The validation frames stored with the run, or None."""
+    from ..data import read_trajectory
+
+    path = run / HELD_OUT
+    return read_trajectory(path) if path.is_file() else None
+
+
 def data_name(i: int) -> str:
     """The run's copy of recording i (0-based): data.npz, data-2.npz, ..."""
     return "data.npz" if i == 0 else f"data-{i + 1}.npz"
@@ -582,3 +593,140 @@ def remove_partial(run: Path) -> None:
     folders beside ``run`` (never renamed into place)."""
     for partial in Path(run).parent.glob(f"{atomic.staged_prefix(run)}*"):
         shutil.rmtree(partial, ignore_errors=True)
+
+
+def check_unchanged(run: Path, meta: dict) -> None:
+    """Refuse (one line, naming what changed) a run whose model or data file, software
+    versions or settings changed since it started."""
+    from .settings import FitSettings
+
+    for name, rec in meta.get("inputs", {}).items():
+        path = Path(rec["path"])
+        if not path.is_file():
+            raise InputError(
+                run, f"the {name} file {path} is gone; pass --force to use the copy in the run"
+            )
+        if sha256_file(path) != rec["sha256"]:
+            raise InputError(
+                run,
+                f"the {name} file {path} changed since the run started; pass --force to continue anyway",
+            )
+    now = versions()
+    for pkg, version in meta.get("versions", {}).items():
+        if now.get(pkg) != version:
+            raise InputError(
+                run,
+                f"{pkg} version changed ({version} -> {now.get(pkg)}); pass --force to continue anyway",
+            )
+    stored = read_status(run).get("job")
+    if stored is not None and meta.get("upgraded_from") == 1:
+        stored = {"optimizer": "es", **stored}  # format 1 had the paper's ES only
+    current = FitSettings(**meta["settings"]).job()
+    if stored is not None and stored != current:
+        changed = sorted(k for k in set(stored) | set(current) if stored.get(k) != current.get(k))
+        detail = ", ".join(f"{k} {stored.get(k)!r} -> {current.get(k)!r}" for k in changed)
+        raise InputError(
+            run / "run.json",
+            f"settings changed since the run started ({detail}); pass --force to continue anyway",
+        )
+
+
+class RunDir:
+    """One run directory: the only object that knows its files' names. It creates the run
+    (with the provenance given), checkpoints it, checks its inputs are unchanged, and saves
+    and loads the post-fit stages' records (``save_record(name, ...)``, ``record(name)``)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    def __fspath__(self) -> str:
+        return str(self.path)
+
+    def __repr__(self) -> str:
+        return f"RunDir({str(self.path)!r})"
+
+    @classmethod
+    def create(
+        cls,
+        out: str | Path,
+        files: dict[str, bytes],
+        meta: dict,
+        overwrite: bool,
+        need_bytes: int = 0,
+        held_out=None,
+    ) -> RunDir:
+        """:func:`create`, with the validation frames ``held_out`` stored beside the data."""
+        if held_out is not None:
+            from ..data.writers import render_npz
+
+            files = {**files, HELD_OUT: render_npz(held_out, Path(HELD_OUT))}
+        return cls(create(out, files, meta, overwrite, need_bytes))
+
+    @property
+    def best_model_path(self) -> Path:
+        return self.path / "best_model.toml"
+
+    def meta(self) -> dict:
+        return read_meta(self.path)
+
+    def check_unchanged(self, meta: dict) -> None:
+        check_unchanged(self.path, meta)
+
+    def write_meta(self, meta: dict) -> None:
+        write_meta(self.path, meta)
+
+    def status(self) -> dict:
+        return read_status(self.path)
+
+    def write_status(self, **fields) -> None:
+        write_status(self.path, **fields)
+
+    def update_status(self, **fields) -> None:
+        """status.json with ``fields`` changed, the others kept."""
+        write_status(self.path, **{**read_status(self.path), **fields})
+
+    def history(self, meta: dict | None = None) -> dict[str, np.ndarray]:
+        return read_history(self.path, meta)
+
+    def write_history(self, history: dict[str, np.ndarray], integer: set[str]) -> None:
+        write_history(self.path, history, integer)
+
+    def save_checkpoint(self, state: dict, history: dict) -> None:
+        save_checkpoint(self.path, state, history)
+
+    def load_checkpoint(self, shapes: dict):
+        return load_checkpoint(self.path, shapes)
+
+    def used_bytes(self) -> int:
+        return used_bytes(self.path)
+
+    def save_best_model(self, model) -> None:
+        save_best_model(self.path, model)
+
+    def best_model(self):
+        return read_best_model(self.path)
+
+    def input_model(self):
+        return read_input_model(self.path)
+
+    def windows(self) -> list:
+        return read_windows(self.path)
+
+    def window(self):
+        return read_window(self.path)
+
+    def held_out(self):
+        return read_held_out(self.path)
+
+    def save_record(self, name: str, record: dict, **extra) -> None:
+        save_record(self.path, name, record, **extra)
+
+    def load_record(self, name: str):
+        return load_record(self.path, name)
+
+    def record(self, name: str) -> dict | None:
+        return read_record(self.path, name)
+
+    def file(self, name: str, suffix: str) -> Path:
+        """RUN/NAME.SUFFIX of a stage (its CSV), for people to open."""
+        return self.path / f"{name}.{suffix}"

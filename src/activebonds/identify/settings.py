@@ -12,7 +12,7 @@ from .es import ESSettings
 class FitSettings(BaseModel):
     """Everything that, with the model, the data and the software versions, decides a run."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
     markers: tuple[str, ...] | None = None  # default: the model's particles' markers
     frames: tuple[int, int | None] = (0, None)  # [start, stop) of the recorded frames
@@ -39,6 +39,10 @@ class FitSettings(BaseModel):
     # float64; float32 throughout; or mixed: the ES's one-step cost evaluated in float32, the
     # ES state, history and refinement in float64 (benchmarks/README.md: speed and quality)
     precision: Literal["float32", "float64", "mixed"] = "float64"
+    # frames [start, stop) of the first recording, not fitted, on which the validation stage
+    # measures the model (``fit --validate``); None: no validation
+    # (``fit(..., validate=(START, STOP))`` in Python)
+    validation: tuple[int, int | None] | None = Field(None, alias="validate")
 
     @field_validator("smooth")
     @classmethod
@@ -75,9 +79,11 @@ class FitSettings(BaseModel):
         the refinement shoots, as a shooting state cannot be evolved."""
         return 1 if self.cost == "shooting" else self.horizon[0]
 
-    @field_validator("frames")
+    @field_validator("frames", "validation")
     @classmethod
     def _frames(cls, v):
+        if v is None:
+            return v
         start, stop = v
         if start < 0 or (stop is not None and stop <= start):
             raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
@@ -103,8 +109,10 @@ class FitSettings(BaseModel):
         )
 
     def job(self) -> dict:
-        """The settings that define the result (chunking and checkpoint frequency do not)."""
-        return self.model_dump(mode="json", exclude={"chunk", "checkpoint_every", "generations"})
+        """The settings that define the result (chunking, checkpoint frequency and the
+        validation frames do not)."""
+        exclude = {"chunk", "checkpoint_every", "generations", "validation"}
+        return self.model_dump(mode="json", exclude=exclude)
 
 
 def parse_frames(text: str) -> tuple[int, int | None]:

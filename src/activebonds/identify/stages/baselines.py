@@ -75,7 +75,9 @@ def _least_squares_rms_mm(model, data) -> float | None:
     if nonlinear_genes(model):
         return None
     try:
-        return float(least_squares(model, make_windows(data.positions, data.mask, data.dt, 1)).rms_mm)
+        return float(
+            least_squares(model, make_windows(data.positions, data.mask, data.dt, 1)).rms_mm
+        )
     except InputError:
         return None
 
@@ -118,7 +120,10 @@ def table(record: dict, pred) -> Table:
         rec = pred.recorded[fit - 2 :]
         mask = np.isfinite(rec).all(axis=-1)
         zero_beyond = zero_force_rms_mm(np.where(mask[..., None], rec, np.nan), mask, pred.dt)
-    rows = [("this model", model_fit, model_beyond), (ZERO, record["zero_force_rms_mm"], zero_beyond)]
+    rows = [
+        ("this model", model_fit, model_beyond),
+        (ZERO, record["zero_force_rms_mm"], zero_beyond),
+    ]
     if "momentum_floor_rms_mm" in record:
         rows.append((FLOOR, record["momentum_floor_rms_mm"], None))
     if record.get("least_squares_rms_mm") is not None:
