@@ -39,11 +39,12 @@ def fail(error: InputError | str, code: int = 2):
     raise typer.Exit(code)
 
 
-def parse_option_frames(text, parse):
+def parse_option_frames(text, parse, option: str = "--frames"):
+    """START:STOP of ``option`` through ``parse``, or one line naming the option."""
     try:
         return parse(text)
     except ValueError as e:
-        raise InputError("--frames", str(e)) from None
+        raise InputError(option, str(e)) from None
 
 
 _python_showwarning = warnings.showwarning

@@ -254,6 +254,9 @@ def fit(
             adapt_variants=adapt_variants,
             init=init,
             optimizer=optimizer,
+            validation=parse_option_frames(validate, parse_frames, "--validate")
+            if validate
+            else None,
         )
         check_output_folder(out_dir, overwrite)  # before any computation
         if strict:  # checked before anything is written; the fit then reads them as usual
@@ -263,7 +266,7 @@ def fit(
                 read_trajectory(path, strict=True)
         first = traj[0]
         predictions = _check_predictions(model, traj, settings)
-        held_out = _validation_window(model, first, settings, validate) if validate else None
+        _check_validation(model, first, settings)
         out.print(predictions, markup=False, highlight=False)
         data = traj if len(traj) > 1 else first
         with _progress(generations, compiling_text(optimizer)) as progress:
@@ -283,10 +286,7 @@ def fit(
         fail(write_failure_line(out_dir, e), code=1)
     except KeyboardInterrupt:
         interrupts.stop(_interrupted_fit(out_dir))
-    try:
-        _summary(result, held_out)  # writes RUN/validation.json
-    except RunWriteError as e:
-        fail(write_failure_line(out_dir, e), code=1)
+    _summary(result)
 
 
 def _interrupted_fit(out_dir: Path) -> str:
@@ -343,21 +343,6 @@ def _progress(total: int, starting: str):
         yield progress
 
 
-def refinement_lines(result) -> list[str]:
-    """One line per refinement stage: its cost, horizon, RMS before and after, steps."""
-    lines = []
-    for i, st in enumerate(result.refinement, 1):
-        joined = (
-            "" if st.continuity_mm is None else f", windows join within {st.continuity_mm:.2g} mm"
-        )
-        lines.append(
-            f"refinement {i}/{len(result.refinement)} ({st.cost}, horizon {st.horizon}): "
-            f"{st.start_rms_mm:.4g} -> {st.end_rms_mm:.4g} mm in {st.steps} steps, "
-            f"{st.seconds:.3g} s{joined}; {st.message}"
-        )
-    return lines
-
-
 def parse_horizons(text: str) -> tuple[int, ...]:
     """'1,5,20' -> (1, 5, 20), or a one-line error."""
     try:
@@ -368,22 +353,18 @@ def parse_horizons(text: str) -> tuple[int, ...]:
         ) from None
 
 
-def _validation_window(model, traj, settings, text: str):
-    """(frames, data) of ``--validate START:STOP``, checked before the fit starts."""
+def _check_validation(model, traj, settings) -> None:
+    """The ``--validate`` frames checked before the fit starts (one line if they cannot be
+    used); the fit's validation stage measures the model there."""
     from ..data import read_trajectory
-    from ..identify.metrics import validation_data
+    from ..identify.driver import validation_frames
     from ..identify.problem import variant
-    from ..identify.settings import parse_frames
     from ..model import load_model
 
-    try:
-        frames = parse_frames(text)
-    except ValueError as e:
-        raise InputError("--validate", str(e)) from None
-    recording = read_trajectory(traj)
-    data = validation_data(variant(load_model(model), settings.bonds), recording, settings, frames)
-    stop = recording.n_frames if frames[1] is None else frames[1]
-    return (frames[0], stop), data
+    if settings.validation is not None:
+        validation_frames(
+            variant(load_model(model), settings.bonds), read_trajectory(traj), settings
+        )
 
 
 def _check_predictions(model, trajs, settings) -> str:
@@ -440,83 +421,41 @@ def _check_predictions(model, trajs, settings) -> str:
     )
 
 
-def _metrics_line(label: str, found: dict) -> str:
-    m, z = found["model"], found["zero_force"]
-    return (
-        f"{label}: one-step RMS {m.one_step_rms_mm:.4g} mm, free-run RMS "
-        f"{m.free_run_rms_mm:.4g} mm, frames within {m.threshold_mm:g} mm "
-        f"{m.frames_text()} (median of {len(m.starts)} starts); zero force "
-        f"{z.one_step_rms_mm:.4g} mm, {z.free_run_rms_mm:.4g} mm, {z.frames_text()}"
-    )
-
-
-def _summary(result, held_out=None) -> None:
+def _summary(result) -> None:
+    """The fit's outcome, then what each post-fit stage says of it (identify.stages)."""
     if result.status != "completed":
         fail(f"{result.run or 'fit'}: {result.status}", code=1)
-    from ..identify.metrics import read_validation, validation_record, window_metrics
-
     undecided = sum(1 for b in result.model.spec.bond if b.optional and b.present is None)
     if undecided:
-        out.print(
+        say(
             f"note: {undecided} optional bond(s) without a decision were fitted as present; "
-            "'activebonds structure' decides which the data need",
-            markup=False,
-            highlight=False,
+            "'activebonds structure' decides which the data need"
         )
-    data = result.identification.data
-    from ..identify.baselines import zero_force_rms_mm_of
-
-    zero = zero_force_rms_mm_of(result.identification.all_data)
-    out.print(
-        f"[bold]{result.status}[/]: best RMS error {result.rms_mm:.4g} mm "
-        f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())}); "
-        f"zero-force baseline on the same frames {zero:.4g} mm"
+    say(
+        f"{result.status}: best RMS error {result.rms_mm:.4g} mm "
+        f"({', '.join(f'{k} {v:.3g}' for k, v in result.local_rms_mm.items())})"
     )
     n_recordings = len(result.identification.all_data)
     if n_recordings > 1:
-        out.print(
-            f"fitted on {n_recordings} recordings at once; the lines below are of the first "
-            f"({data.source})",
-            markup=False,
-            highlight=False,
+        say(
+            f"fitted on {n_recordings} recordings at once; the free runs below are of the "
+            f"first ({result.identification.data.source})"
         )
-    for line in refinement_lines(result):
-        out.print(line, markup=False, highlight=False)
-    s = result.settings
-    fitted = window_metrics(result.model, data, s.substeps, s.integrator)
-    out.print(_metrics_line("fitted frames", fitted), markup=False, highlight=False)
+    for line in result.lines():
+        say(line)
     from ..model.names import bounds_line, parameter_rows
 
     searched = result.identification.model  # its bounds were searched; the genome is its
     rows = parameter_rows(searched, searched.layout.natural(result.genome))
     if (line := bounds_line(rows)) is not None:
-        out.print(line, markup=False, highlight=False)
-    if held_out is not None:
-        frames, held = held_out
-        record = validation_record(result.model, held, s, frames)
-        if result.run is not None:
-            from ..identify.rundir import write_validation
-
-            write_validation(result.run, record)
-        _, found = read_validation(record)  # the stored numbers, printed
-        label = f"validation frames {frames[0]}:{frames[1]}"
-        out.print(_metrics_line(label, found), markup=False, highlight=False)
+        say(line)
     if result.run is not None:
-        from ..identify.rundir import read_uncertainty
+        say(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
 
-        unc = read_uncertainty(result.run)
-        if unc is not None and "not_computed" in unc:
-            out.print(f"uncertainty: not computed ({unc['not_computed']})", markup=False)
-        elif unc is not None:
-            est = unc["estimates"]
-            ok = sum(e["determined"] for e in est)
-            out.print(
-                f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals in "
-                f"{result.run / 'uncertainty.csv'}",
-                markup=False,
-                highlight=False,
-            )
-        out.print(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
+
+def say(line: str) -> None:
+    """One line of plain text on stdout (no markup: names and ranges printed verbatim)."""
+    out.print(line, markup=False, highlight=False)
 
 
 def main() -> None:

@@ -12,6 +12,7 @@ import html
 import json
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -19,11 +20,10 @@ import numpy as np
 
 from ..document import Figure, Section, Table
 from ..errors import InputError
-from ..identify import metrics
-from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
-from ..identify.cost import make_windows
-from ..identify.lsq import least_squares, nonlinear_genes
-from ..model.names import NEAR_BOUND, labeller, parameter_rows
+from ..identify import stages
+from ..identify.metrics import FreeRunMetrics
+from ..identify.stages import baselines, validation
+from ..model.names import NEAR_BOUND, parameter_rows
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
@@ -245,77 +245,6 @@ def _refinement_text(s) -> str:
     return f"Levenberg-Marquardt (optimistix), {s.cost} cost, horizons {horizons}"
 
 
-def uncertainty_section(record: RunRecord) -> Section | None:
-    """RUN/uncertainty.json: each free parameter with its standard error and 95 % interval,
-    or "not determined" and why (never a huge interval)."""
-    rec = record.uncertainty
-    if not rec:
-        return None
-    if "not_computed" in rec:
-        text = [f"Not computed: {rec['not_computed']}."]
-        return Section("Uncertainty", text=text, anchor="uncertainty")
-    rows = []
-    label = labeller(record.model.spec)
-    for e in rec.get("estimates", []):
-        name = e.get("label") or label(e["name"])
-        if e["determined"]:
-            rows.append((name, e["value"], e["std_error"], f"{e['low']:.6g} – {e['high']:.6g}", ""))
-        else:
-            rows.append((name, e["value"], "not determined", "not determined", e["note"]))
-    condition = rec.get("condition")
-    text = [
-        f"Gauss-Newton covariance at the optimum on the {rec['cost']} cost (horizon "
-        f"{rec['horizon']}): {rec['residuals']} residual coordinates, {rec['variables']} "
-        f"variables, rank {rec['rank']}, condition number "
-        f"{'infinite' if condition is None else f'{condition:.3g}'} (columns scaled), residual "
-        f"standard deviation {rec['sigma_mm'] if rec['sigma_mm'] is None else round(rec['sigma_mm'], 6)} mm per coordinate.",
-        "The intervals assume independent Gaussian marker noise and an output-error cost "
-        "(shooting or a free run); on the one-step cost with noisy markers the optimum itself "
-        "is biased and no interval describes that.",
-    ]
-    text += [f"Not determined: {d}." for d in rec.get("directions", [])]
-    table = Table(("parameter", "value", "standard error", "95 % interval", "note"), rows)
-    return Section("Uncertainty", text=text, tables=[table], anchor="uncertainty")
-
-
-def refinement_table(record: RunRecord) -> Table | None:
-    """One row per refinement stage (RUN/refine.json): its cost and horizon, the RMS of its
-    own residuals before and after, steps, time, and how it ended."""
-    rec = record.refinement
-    if not rec:
-        return None
-    rows = [
-        (
-            i,
-            st["cost"],
-            st["horizon"],
-            st["start_rms_mm"],
-            st["end_rms_mm"],
-            "—" if st.get("continuity_mm") is None else st["continuity_mm"],
-            st["steps"],
-            st["seconds"],
-            ("" if st["accepted"] else "rejected: ") + st["message"],
-        )
-        for i, st in enumerate(rec.get("stages", []), 1)
-    ]
-    return Table(
-        (
-            "stage",
-            "cost",
-            "horizon",
-            "start RMS (mm)",
-            "end RMS (mm)",
-            "windows join (mm)",
-            "steps",
-            "seconds",
-            "outcome",
-        ),
-        rows,
-        f"Refinement after generation {rec.get('from_generation')} of the ES: each stage "
-        "starts from the previous one's result; RMS of the stage's own position residuals.",
-    )
-
-
 def errors_table(pred: Prediction, caption: str = "RMS position error per particle (mm)") -> Table:
     cols = ["particle", "marker", "one-step (fit)", "free run (fit)"]
     if pred.extended:
@@ -329,87 +258,22 @@ def errors_table(pred: Prediction, caption: str = "RMS position error per partic
     return Table(columns=cols, rows=rows, caption=caption)
 
 
-def baselines_table(record: RunRecord, pred: Prediction) -> Table:
-    """The fit beside what judges it (RMS one-step error, mm): the zero-force
-    (constant-velocity) predictor on the same frames, the momentum floor of internal-force
-    models and the exact least-squares optimum of the linear parameters, where they apply."""
-    rows = baseline_rows(record, pred)
-    rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
-    return Table(
-        ("one-step RMS (mm)", "fitted frames", "frames beyond"),
-        rows,
-        "The fit beside its baselines. A model that does not beat the zero-force predictor on "
-        "frames it never saw has learnt nothing that generalises; no model of internal "
-        "forces can go below the momentum floor.",
-    )
-
-
-def baseline_rows(record: RunRecord, pred: Prediction) -> list[tuple]:
-    """(name, fitted-window RMS mm, beyond RMS mm or None) of the model and its baselines."""
-    rec, dt, fit = pred.recorded, pred.dt, pred.fit_frames
-    mask = np.isfinite(rec).all(axis=-1)
-    s = record.settings
-    beyond = pred.extended and pred.n_frames - fit >= 1
-
-    def window(lo, hi):
-        return np.where(mask[lo:hi, :, None], rec[lo:hi], np.nan), mask[lo:hi]
-
-    def zero(lo, hi):
-        return zero_force_rms_mm(*window(lo, hi), dt)
-
-    model_fit = float(np.sqrt(np.nanmean(pred.one_step_rms_mm**2)))
-    model_beyond = float(np.sqrt(np.nanmean(pred.one_step_rms_mm_beyond**2))) if beyond else None
-    rows = [
-        ("this model", model_fit, model_beyond),
-        (
-            "zero force (constant velocity)",
-            zero(0, fit),
-            zero(fit - 2, pred.n_frames) if beyond else None,
-        ),
-    ]
-    plain = s.es_horizon == 1 and s.substeps == 1 and s.integrator == "euler"
-    if plain:
-        floor = model_floor_rms_mm(record.model, *window(0, fit), dt)
-        rows.append(("momentum floor (internal forces)", floor, None))
-        try:
-            lsq = least_squares(record.model, make_windows(*window(0, fit), dt, 1))
-            if not nonlinear_genes(record.model):
-                rows.append(("exact least squares (this model's family)", lsq.rms_mm, None))
-        except InputError:
-            pass
-    return rows
-
-
-def free_run_table(record: RunRecord) -> Table:
+def free_run_table(record: RunRecord) -> Table | None:
     """One-step RMS, free-run RMS and frames within the threshold
     (:func:`activebonds.identify.metrics.free_run_metrics`) of the model and the zero-force
-    predictor on the fitted frames and, after ``fit --validate``, on the validation frames."""
+    predictor on the fitted frames and, after ``fit --validate``, on the validation frames,
+    as the baselines and validation stages recorded them."""
     s = record.settings
     start = s.frames[0]
-    found = metrics.window_metrics(record.model, record.window, s.substeps, s.integrator)
-    windows = [(f"fitted {start}:{start + record.window.n_frames}", found)]
-    note = ""
-    if record.validation is not None:
-        try:
-            frames, held = metrics.read_validation(record.validation)
-            windows.append((f"validation {frames[0]}:{frames[1]}", held))
-        except (KeyError, TypeError, ValueError, IndexError):
-            note = " validation.json could not be read."
-    threshold = found["model"].threshold_mm
-    rows = []
-    for frames, by_name in windows:
-        for name, label in (("model", "this model"), ("zero_force", "zero force")):
-            m = by_name[name]
-            rows.append(
-                (
-                    label,
-                    frames,
-                    m.one_step_rms_mm,
-                    m.free_run_rms_mm,
-                    m.frames_text(),
-                    len(m.starts),
-                )
-            )
+    fitted = record.records.get(baselines.NAME, {}).get("fitted")
+    if fitted is None:
+        return None
+    rows = baselines.free_run_rows(f"fitted {start}:{start + record.window.n_frames}", fitted)
+    held = record.records.get(validation.NAME)
+    if held is not None:
+        frames = held["frames"]
+        rows += baselines.free_run_rows(f"validation {frames[0]}:{frames[1]}", held)
+    threshold = FreeRunMetrics.from_dict(fitted["model"]).threshold_mm
     return Table(
         (
             "",
@@ -424,18 +288,37 @@ def free_run_table(record: RunRecord) -> Table:
         f"{threshold:g} mm: free runs from several start frames (spread over the window's "
         "first half), each counted until its worst marker is first off by more than "
         f"{threshold:g} mm; the median over starts, '>=' when runs reached the window's end "
-        "first (censored). Zero force: constant velocity from the two start frames." + note,
+        "first (censored). Zero force: constant velocity from the two start frames.",
     )
+
+
+@dataclass(frozen=True)
+class ReportView:
+    """What a post-fit stage's report section may use: the run and the report's predictions."""
+
+    run: RunRecord
+    prediction: Prediction
+
+
+def stage_sections(record: RunRecord, pred: Prediction) -> list[Section]:
+    """The sections of the post-fit stages that left a record, in the registry's order."""
+    view = ReportView(record, pred)
+    return [
+        section
+        for stage in stages.stages()
+        if stage.name in record.records
+        for section in stage.sections(record.records[stage.name], view)
+    ]
 
 
 def searched_model(record: RunRecord):
     """The model whose bounds the fit searched: the run's input model (a best model written
     without min/max derives new bounds around its values); the best model if it is gone."""
-    from ..identify import rundir
     from ..identify.problem import variant
+    from ..identify.rundir import RunDir
 
     try:
-        return variant(rundir.read_input_model(record.path), record.settings.bonds)
+        return variant(RunDir(record.path).input_model(), record.settings.bonds)
     except (InputError, ValueError):
         return None
 
@@ -513,7 +396,8 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     first = int(record.settings.frames[0])
     frame_at = {"first_frame": first, "start_time": float(record.window.start_time)}
     labels = plots.bond_labels(model)
-    refs = [(name, fitted) for name, fitted, _ in baseline_rows(record, pred)[1:]]
+    refs = baselines.references(record.records.get(baselines.NAME, {"zero_force_rms_mm": None}))
+    refs = [(name, value) for name, value in refs if value is not None]
     conv = plots.convergence(
         [plots.Series(record.label, [record.history])], fig_dir / "convergence", references=refs
     )
@@ -534,17 +418,16 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
         Section(
             "Summary",
             tables=[
-                summary_table(record, pred),
-                baselines_table(record, pred),
-                free_run_table(record),
-                errors_table(pred),
+                t
+                for t in (summary_table(record, pred), free_run_table(record), errors_table(pred))
+                if t is not None
             ],
             anchor="summary",
         ),
+        *stage_sections(record, pred),
         Section(
             "Convergence",
             figures=[Figure(conv[0], "Best and population-median cost as RMS position error.")],
-            tables=[t for t in (refinement_table(record),) if t is not None],
             anchor="convergence",
         ),
         Section(
@@ -600,9 +483,6 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
             anchor="parameters",
         ),
     ]
-    unc = uncertainty_section(record)
-    if unc is not None:
-        sections.append(unc)
     if pred.neural.any():
         heat = plots.weight_heatmap(model, fig_dir / "weights")
         act = plots.activations(pred, labels, fig_dir / "activations", **frame_at)

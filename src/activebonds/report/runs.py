@@ -6,15 +6,16 @@ checkpoint) is reported with the model file's starting values.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..data import Trajectory, read_trajectory
 from ..errors import InputError
-from ..identify import rundir
+from ..identify import stages
 from ..identify.problem import variant
+from ..identify.rundir import RunDir
 from ..identify.settings import FitSettings
 from ..model import Model
 
@@ -31,9 +32,7 @@ class RunRecord:
     model: Model  # best model (or the starting model if there is none)
     has_best: bool  # best_model.toml was found
     window: Trajectory  # the fitted window (data.npz)
-    validation: dict | None = None  # validation.json (fit --validate), if any
-    refinement: dict | None = None  # refine.json (fit --refine lm), if any
-    uncertainty: dict | None = None  # uncertainty.json, if any
+    records: dict[str, dict] = field(default_factory=dict)  # post-fit stages' records by name
 
     @property
     def label(self) -> str:
@@ -41,38 +40,38 @@ class RunRecord:
 
 
 def load_run(run: str | Path) -> RunRecord:
-    """Read RUN/ through :mod:`activebonds.identify.rundir` (raises :class:`InputError`, one
-    line, for a missing or invalid run)."""
-    run = Path(run)
-    if not run.is_dir():
-        raise InputError(run, "no such run directory")
-    meta = rundir.read_meta(run)
+    """Read RUN/ through :class:`~activebonds.identify.rundir.RunDir` (raises
+    :class:`InputError`, one line, for a missing or invalid run)."""
+    path = Path(run)
+    if not path.is_dir():
+        raise InputError(path, "no such run directory")
+    run = RunDir(path)
+    meta = run.meta()
     try:
         settings = FitSettings(**meta["settings"])
     except Exception as err:  # noqa: BLE001 - any bad settings as one line
-        raise InputError(run / "run.json", f"settings are not valid ({err})") from None
-    window = rundir.read_window(run)
-    model = rundir.read_best_model(run)
+        raise InputError(path / "run.json", f"settings are not valid ({err})") from None
+    window = run.window()
+    model = run.best_model()
     has_best = model is not None
     if model is None:
-        model = variant(rundir.read_input_model(run), settings.bonds)
+        model = variant(run.input_model(), settings.bonds)
     if window.n_markers != model.topology.n_particles:
         raise InputError(
-            run / "data.npz",
+            path / "data.npz",
             f"{window.n_markers} markers for a model of {model.topology.n_particles} particles",
         )
+    records = {name: rec for name in stages.names() if (rec := run.record(name)) is not None}
     return RunRecord(
-        path=run,
+        path=path,
         meta=meta,
-        status=rundir.read_status(run),
+        status=run.status(),
         settings=settings,
-        history=rundir.read_history(run, meta),
+        history=run.history(meta),
         model=model,
         has_best=has_best,
         window=window,
-        validation=rundir.read_validation(run),
-        refinement=rundir.read_refinement_record(run),
-        uncertainty=rundir.read_uncertainty(run),
+        records=records,
     )
 
 

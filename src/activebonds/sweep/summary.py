@@ -17,16 +17,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..atomic import write_text_atomic
+from ..document import Section, Table
 from ..errors import InputError
-from ..identify import rundir
-from ..identify.baselines import zero_force_rms_mm_of
-from ..identify.metrics import THRESHOLD_MM, censored_text, window_metrics
-from ..report.html import Section, Table, render
+from ..identify import stages
+from ..identify.metrics import THRESHOLD_MM, censored_text
+from ..report.html import render
 from ..report.runs import load_run
 from .manifest import Job
 from .outcome import Outcome
 
 FRAMES_WITHIN = f"frames_within_{THRESHOLD_MM:g}mm"
+NOT_MEASURES = ("status", "seed", "generations", "parameters")  # a row's other entries
 MEASURES = (  # (CSV column, HTML heading)
     ("rms_mm", "RMS error (mm)"),
     ("zero_force_rms_mm", "zero force RMS (mm)"),
@@ -37,9 +38,10 @@ MEASURES = (  # (CSV column, HTML heading)
 
 
 def row(run: Path) -> dict:
-    """The numbers of the run directory ``run``: status, seed, generations done, the
-    measures of :data:`MEASURES` and ``parameters`` (name -> identified value); what cannot
-    be measured (no run yet, no best model) is left out."""
+    """The numbers of the run directory ``run``: status, seed, generations done, the fit's
+    RMS error, the columns each post-fit stage tabulates of its record
+    (:mod:`activebonds.identify.stages`) and ``parameters`` (name -> identified value); what
+    cannot be measured (no run yet, no best model, a stage that did not run) is left out."""
     try:
         record = load_run(run)
     except InputError:
@@ -50,15 +52,12 @@ def row(run: Path) -> dict:
         "seed": s.seed,
         "generations": int(st.get("generation", len(record.history.get("generation", [])))),
         "rms_mm": st.get("best_rms_mm"),
-        "zero_force_rms_mm": zero_force_rms_mm_of(rundir.read_windows(run)),
     }
-    if not record.has_best:
-        return out
-    found = window_metrics(record.model, record.window, s.substeps, s.integrator)["model"]
-    out["free_run_rms_mm"] = found.free_run_rms_mm
-    out[FRAMES_WITHIN] = found.median_frames_within
-    out["frames_within_censored"] = found.median_censored
-    out["parameters"] = {g.name: float(g.value) for g in record.model.layout.genes}
+    for stage in stages.stages():
+        if stage.name in record.records:
+            out.update(stage.columns(record.records[stage.name]))
+    if record.has_best:
+        out["parameters"] = {g.name: float(g.value) for g in record.model.layout.genes}
     return out
 
 
@@ -77,7 +76,10 @@ def table(jobs: Sequence[Job], outcomes: Sequence[Outcome]) -> tuple[list[str], 
     params: dict[str, None] = {}
     for o in outcomes:
         params.update(dict.fromkeys(o.row.get("parameters", {})))
-    columns = ["name", "status", "seed", "generations", *varied, *(c for c, _ in MEASURES)]
+    measured: dict[str, None] = dict.fromkeys(c for c, _ in MEASURES)
+    for o in outcomes:
+        measured.update(dict.fromkeys(k for k in o.row if k not in NOT_MEASURES))
+    columns = ["name", "status", "seed", "generations", *varied, *measured]
     columns += [*params, "message"]
     rows = []
     for job in jobs:
@@ -92,7 +94,7 @@ def table(jobs: Sequence[Job], outcomes: Sequence[Outcome]) -> tuple[list[str], 
             "seed": job.settings.seed,
             "generations": found.get("generations"),
             **{k: _setting(job, k) for k in varied},
-            **{c: found.get(c) for c, _ in MEASURES},
+            **{c: found.get(c) for c in measured},
             **found.get("parameters", {}),
             "message": o.message if o is not None else "",
         }
