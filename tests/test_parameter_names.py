@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from activebonds.cli.main import app
 from activebonds.data import write_trajectory
+from activebonds.identify.stages import uncertainty as uncertainty_stage
 from activebonds.identify.uncertainty import describe, from_jacobian
 from activebonds.model import Gene, loads_model
 from activebonds.model.names import (
@@ -25,7 +26,7 @@ from activebonds.model.names import (
     parameter_rows,
 )
 from activebonds.report import load_run
-from activebonds.report.html import parameters_table, searched_model, uncertainty_section
+from activebonds.report.html import parameters_table, searched_model
 from activebonds.simulation import simulate
 
 SMALL = """
@@ -254,5 +255,5 @@ def test_fit_summary_and_report_flag_a_value_at_its_bound(tmp_path):
         found = list(csv.DictReader(f))
     assert [r["parameter"] for r in found] == [g.name for g in record.model.layout.genes]
     assert [r["label"] for r in found] == list(rows)
-    section = uncertainty_section(record)
+    section = uncertainty_stage.section(record.records["uncertainty"], record.model.spec)
     assert [row[0] for row in section.tables[0].rows] == list(rows)

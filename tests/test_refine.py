@@ -184,7 +184,7 @@ def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path
     with pytest.raises(KeyboardInterrupt):
         activebonds.fit(model_path, data, out=run, **options)
     assert rundir.read_status(run)["status"] == "refining"
-    assert len(rundir.read_refinement_record(run)["stages"]) == 1
+    assert len(rundir.read_record(run, "refine")["stages"]) == 1
     monkeypatch.undo()
     resumed = activebonds.resume(run)
     assert [s.horizon for s in resumed.refinement] == [2, 6]

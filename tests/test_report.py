@@ -427,11 +427,11 @@ def test_report_shows_the_fit_beside_its_baselines(neural_run):
     """The zero-force predictor and the momentum floor on the same frames, with their
     numbers recomputed independently here (the fit window is the horse's frames 0-9)."""
     from activebonds.identify.baselines import momentum_floor_rms_mm, zero_force_rms_mm
-    from activebonds.report.html import baselines_table
+    from activebonds.identify.stages import baselines
 
     result, report, _ = neural_run
     pred, record = predict_run(result.run, frames=20)
-    rows = {r[0]: r[1:] for r in baselines_table(record, pred).rows}
+    rows = {r[0]: r[1:] for r in baselines.table(record.records["baselines"], pred).rows}
     w = record.window
     assert rows["zero force (constant velocity)"][0] == pytest.approx(
         zero_force_rms_mm(w.positions, w.mask, w.dt), rel=1e-12

@@ -22,6 +22,7 @@ import typer  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from ..errors import InputError  # noqa: E402
+from ..identify.settings import FitSettings, frames_text  # noqa: E402
 from .app import app, fail, out, parse_option_frames  # noqa: E402
 
 
@@ -132,6 +133,10 @@ def simulate(
     out.print(f"wrote {n} frames to {out_path}")
 
 
+# the fit's defaults are the settings' own (one source for Python and the command line)
+DEFAULT = {name: f.default for name, f in FitSettings.model_fields.items()}
+
+
 @app.command()
 def fit(
     model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
@@ -146,11 +151,13 @@ def fit(
     markers: Annotated[
         str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
     ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
-    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = "model",
-    population: Annotated[int, typer.Option(help="Population size.")] = 100,
-    generations: Annotated[int, typer.Option(help="Generations.")] = 1000,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = frames_text(
+        DEFAULT["frames"]
+    ),
+    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = DEFAULT["bonds"],
+    population: Annotated[int, typer.Option(help="Population size.")] = DEFAULT["population"],
+    generations: Annotated[int, typer.Option(help="Generations.")] = DEFAULT["generations"],
+    seed: Annotated[int, typer.Option(help="Random seed.")] = DEFAULT["seed"],
     horizon: Annotated[
         str,
         typer.Option(
@@ -159,14 +166,14 @@ def fit(
             "the previous one's result (a curriculum, e.g. 1,5,20). As long as the window: "
             "a free run."
         ),
-    ] = "1",
+    ] = ",".join(map(str, DEFAULT["horizon"])),
     refine: Annotated[
         str,
         typer.Option(
             help="lm (the default): Levenberg-Marquardt (optimistix) polishes the ES's best "
             "on the residuals of --cost, one stage per --horizon entry; none: the ES only."
         ),
-    ] = "lm",
+    ] = DEFAULT["refine"],
     cost: Annotated[
         str,
         typer.Option(
@@ -174,41 +181,45 @@ def fit(
             "frames; 1: the paper's one-step cost) or shooting (multiple shooting: windows "
             "of horizon frames whose start states are fitted too; unbiased by noise)."
         ),
-    ] = "restart",
+    ] = DEFAULT["cost"],
     smooth: Annotated[
         int,
         typer.Option(
             help="Savitzky-Golay window (odd number of frames >= 5) applied to the restart "
             "states of the cost (not to the targets); 0: off. Reduces the noise bias."
         ),
-    ] = 0,
-    substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = 1,
-    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
-    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 5000,
+    ] = DEFAULT["smooth"],
+    substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = DEFAULT[
+        "substeps"
+    ],
+    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = DEFAULT["integrator"],
+    checkpoint_every: Annotated[
+        int, typer.Option(help="Generations between checkpoints.")
+    ] = DEFAULT["checkpoint_every"],
     precision: Annotated[
         str,
         typer.Option(
             help="float64, float32, or mixed (the ES's one-step cost in float32, the rest in "
             "float64: faster, see benchmarks/README.md)."
         ),
-    ] = "float64",
+    ] = DEFAULT["precision"],
     adapt_variants: Annotated[
         bool, typer.Option(help="Adapt the mutation-variant rates to their success.")
-    ] = False,
+    ] = DEFAULT["adapt_variants"],
     init: Annotated[
         str,
         typer.Option(
             help="uniform (within the bounds) or lsq (one individual at the exact "
             "least-squares optimum of the linear parameters, neural gains 0)."
         ),
-    ] = "uniform",
+    ] = DEFAULT["init"],
     optimizer: Annotated[
         str,
         typer.Option(
             help="es (the paper's evolution strategy), random (pure random search, a "
             "baseline) or cmaes (CMA-ES, evosax)."
         ),
-    ] = "es",
+    ] = DEFAULT["optimizer"],
     overwrite: Annotated[bool, typer.Option(help="Replace an existing run directory.")] = False,
     validate: Annotated[
         str | None,

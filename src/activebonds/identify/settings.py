@@ -6,8 +6,6 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from .es import ESSettings
-
 
 class FitSettings(BaseModel):
     """Everything that, with the model, the data and the software versions, decides a run."""
@@ -23,7 +21,7 @@ class FitSettings(BaseModel):
     # frames per prediction: the ES's cost uses the first; ``refine`` runs a stage per entry
     horizon: tuple[int, ...] = (1,)
     cost: Literal["restart", "shooting"] = "restart"  # the refinement's cost (ES: restart)
-    refine: Literal["none", "lm"] = "none"
+    refine: Literal["none", "lm"] = "lm"
     smooth: int = Field(0, ge=0, le=1001)  # Savitzky-Golay window of the restart states, 0: off
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["euler", "verlet"] = "euler"
@@ -98,7 +96,10 @@ class FitSettings(BaseModel):
             raise ValueError(f"unknown optimizer {v!r}; choose one of {', '.join(names())}")
         return v
 
-    def es(self) -> ESSettings:
+    def es(self):
+        """The paper's ES's own settings (:class:`~activebonds.identify.es.ESSettings`)."""
+        from .es import ESSettings
+
         return ESSettings(
             population=self.population,
             elite_fraction=self.elite_fraction,
@@ -126,3 +127,9 @@ def parse_frames(text: str) -> tuple[int, int | None]:
     except ValueError:
         raise ValueError(f"expected START:STOP with integers, got '{text}'") from None
     return start, stop
+
+
+def frames_text(frames: tuple[int, int | None]) -> str:
+    """(start, stop) -> 'START:STOP' (an open end left empty), as :func:`parse_frames` reads."""
+    start, stop = frames
+    return f"{start}:{'' if stop is None else stop}"
