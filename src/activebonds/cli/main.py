@@ -466,7 +466,7 @@ def _summary(result) -> None:
 
 def say(line: str) -> None:
     """One line of plain text on stdout (no markup: names and ranges printed verbatim)."""
-    out.print(line, markup=False, highlight=False)
+    out.print(line, markup=False, highlight=False, emoji=False)
 
 
 def main() -> None:
