@@ -32,13 +32,13 @@ def baselines(
     from ..identify.cost import make_windows
     from ..identify.lsq import least_squares
     from ..identify.problem import select_data, variant
-    from ..identify.settings import parse_frames
+    from ..identify.settings import parse_frames, parse_markers
     from ..model import load_model
     from .options import settings_from_options
 
     try:
         settings = settings_from_options(
-            markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
+            markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
             bonds=bonds,
         )

@@ -39,13 +39,13 @@ def evaluate(
     free run stays within 50 mm (as fit's summary and --validate), for the model and the
     zero-force (constant-velocity) predictor, overall and per particle (mm)."""
     from ..data import read_trajectory
-    from ..identify.settings import parse_frames
+    from ..identify.settings import parse_frames, parse_markers
     from ..model import load_model
     from ..report.evaluate import evaluate as run_evaluate
 
     try:
         window = parse_option_frames(frames, parse_frames)
-        chosen = tuple(m.strip() for m in markers.split(",")) if markers else None
+        chosen = parse_markers(markers)
         found = run_evaluate(
             load_model(model),
             read_trajectory(traj),

@@ -22,7 +22,12 @@ import typer  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from ..errors import InputError  # noqa: E402
-from ..identify.settings import FitSettings, frames_text  # noqa: E402
+from ..identify.settings import (  # noqa: E402
+    FitSettings,
+    frames_text,
+    parse_frames,
+    parse_markers,
+)
 from .app import app, fail, out, parse_option_frames  # noqa: E402
 
 
@@ -50,7 +55,7 @@ def info(
     axis guessed twice (lowest markers; acceleration in flight)."""
     from ..data import describe, read_trajectory
 
-    chosen = [m.strip() for m in markers.split(",")] if markers else None
+    chosen = list(parse_markers(markers) or ()) or None
     try:
         d = describe(read_trajectory(traj, strict=strict), chosen)
     except InputError as e:
@@ -241,14 +246,13 @@ def fit(
     from ..identify import fit as run_fit
     from ..identify.driver import compiling_text
     from ..identify.rundir import RunWriteError
-    from ..identify.settings import parse_frames
     from .options import settings_from_options
     from .preflight import check_output_folder, write_failure_line
 
     interrupts.expect_run(out_dir)
     try:
         settings = settings_from_options(
-            markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
+            markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
             bonds=bonds,
             population=population,
@@ -379,57 +383,14 @@ def _check_validation(model, traj, settings) -> None:
 
 
 def _check_predictions(model, trajs, settings) -> str:
-    """'gaps removed 17 of 144 predictions (12 %) in frames 0:50', counted like the ES's cost
-    (:func:`~activebonds.identify.cost.count_predictions`) before anything is compiled.
-
-    Too few left is an InputError naming the gap-free windows that would do: none, or fewer
-    predicted coordinates (predictions x dimension, the cost's residuals) than the model has
-    free parameters (genes), which the data could then not determine."""
+    """:func:`~activebonds.identify.problem.check_predictions` of the files, before anything
+    is compiled."""
     from ..data import read_trajectory
-    from ..data.coverage import longest, present_windows, window_text
-    from ..identify.cost import count_predictions
-    from ..identify.problem import select_recordings, variant
+    from ..identify.problem import check_predictions, variant
     from ..model import load_model
 
     spec = variant(load_model(model), settings.bonds)
-    recordings = [read_trajectory(p) for p in trajs]
-    data = select_recordings(spec, recordings, settings)
-    counts = [count_predictions(d.mask, settings.es_horizon) for d in data]
-    kept, possible = sum(k for k, _ in counts), sum(p for _, p in counts)
-    removed = possible - kept
-    frames = range(recordings[0].n_frames)[slice(*settings.frames)]
-    where = f"frames {frames.start}:{frames.stop}"
-    if len(data) > 1:
-        where += f" of {len(data)} recordings"
-    pct = 100 * removed / possible if possible else 0.0
-    share = f"{pct:.0f}" if pct >= 1 or pct == 0 else f"{pct:.1g}"
-    line = f"gaps removed {removed} of {possible} predictions ({share} %) in {where}"
-    genes, dim = spec.layout.n_genes, spec.dimension
-    if kept > 0 and kept * dim >= genes:
-        return line
-    # a window of L frames with every marker present holds (L - 2) x P predictions at any
-    # horizon (each frame from the third on is predicted once)
-    names = data[0].markers
-    need = 2 + max(1, -(-genes // (len(names) * dim)))
-    full = recordings[0].select(list(names))
-    windows = present_windows(full.mask)
-    good = longest([w for w in windows if w[1] - w[0] >= need], 3)
-    listed = ", ".join(window_text(w) for w in good)
-    source = f" of {full.source}" if len(data) > 1 and full.source else ""
-    if good:
-        hint = f"windows{source} where {', '.join(names)} are all present that would do: {listed}"
-    elif windows:
-        hint = (
-            f"no window{source} where {', '.join(names)} are all present holds {need} frames; "
-            f"the longest: {window_text(longest(windows, 1)[0])}"
-        )
-    else:
-        hint = f"{', '.join(names)} are never all present in one frame{source}"
-    raise InputError(
-        "--frames",
-        f"{line}: the {kept} left give {kept * dim} coordinates for the model's {genes} free "
-        f"parameters, too few (gap-free windows need {need} frames); {hint}",
-    )
+    return check_predictions(spec, [read_trajectory(p) for p in trajs], settings)
 
 
 def _summary(result) -> None:

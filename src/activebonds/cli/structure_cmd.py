@@ -34,11 +34,9 @@ def structure(
     exact one-step least squares. Writes every candidate with present = true or false and the
     linear parameters at their optimum; prints each decision with its evidence."""
     from ..data import read_trajectory
-    from ..data.smoothing import check_window, smooth_positions
-    from ..identify.cost import make_windows
-    from ..identify.problem import select_data
-    from ..identify.settings import parse_frames
-    from ..identify.structure import identify_structure
+    from ..data.smoothing import check_window
+    from ..identify.settings import parse_frames, parse_markers
+    from ..identify.structure import structure_of
     from ..model import load_model, save_model
     from .options import settings_from_options
 
@@ -51,17 +49,13 @@ def structure(
             except ValueError as e:
                 raise InputError("--smooth", str(e)) from None
         settings = settings_from_options(
-            markers=tuple(m.strip() for m in markers.split(",")) if markers else None,
+            markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
         )
-        m = load_model(model)
-        data = select_data(m, read_trajectory(traj), settings)
-        positions = data.positions
-        if smooth:
-            positions = smooth_positions(positions, data.mask, smooth)
-        windows = make_windows(positions, data.mask, data.dt, 1)
+        m = load_model(model)  # the model file's errors first
+        recording = read_trajectory(traj)
         try:
-            result = identify_structure(m, windows)
+            result = structure_of(m, recording, settings, smooth)
         except InputError as e:  # name the model file, not the model's name
             raise InputError(model, e.message) from None
         save_model(result.spec, out_file)

@@ -129,3 +129,53 @@ def identification(
         problem=problem,
         recordings=data if len(data) > 1 else (),
     )
+
+
+def check_predictions(spec: Model, recordings: Sequence[Trajectory], settings: FitSettings) -> str:
+    """'gaps removed 17 of 144 predictions (12 %) in frames 0:50', counted like the ES's cost
+    (:func:`~activebonds.identify.cost.count_predictions`), for ``spec`` (the bond variant
+    fitted) on ``recordings``.
+
+    Too few left is an InputError naming the gap-free windows that would do: none, or fewer
+    predicted coordinates (predictions x dimension, the cost's residuals) than the model has
+    free parameters (genes), which the data could then not determine."""
+    from ..data.coverage import longest, present_windows, window_text
+    from .cost import count_predictions
+
+    data = select_recordings(spec, recordings, settings)
+    counts = [count_predictions(d.mask, settings.es_horizon) for d in data]
+    kept, possible = sum(k for k, _ in counts), sum(p for _, p in counts)
+    removed = possible - kept
+    frames = range(recordings[0].n_frames)[slice(*settings.frames)]
+    where = f"frames {frames.start}:{frames.stop}"
+    if len(data) > 1:
+        where += f" of {len(data)} recordings"
+    pct = 100 * removed / possible if possible else 0.0
+    share = f"{pct:.0f}" if pct >= 1 or pct == 0 else f"{pct:.1g}"
+    line = f"gaps removed {removed} of {possible} predictions ({share} %) in {where}"
+    genes, dim = spec.layout.n_genes, spec.dimension
+    if kept > 0 and kept * dim >= genes:
+        return line
+    # a window of L frames with every marker present holds (L - 2) x P predictions at any
+    # horizon (each frame from the third on is predicted once)
+    names = data[0].markers
+    need = 2 + max(1, -(-genes // (len(names) * dim)))
+    full = recordings[0].select(list(names))
+    windows = present_windows(full.mask)
+    good = longest([w for w in windows if w[1] - w[0] >= need], 3)
+    listed = ", ".join(window_text(w) for w in good)
+    source = f" of {full.source}" if len(data) > 1 and full.source else ""
+    if good:
+        hint = f"windows{source} where {', '.join(names)} are all present that would do: {listed}"
+    elif windows:
+        hint = (
+            f"no window{source} where {', '.join(names)} are all present holds {need} frames; "
+            f"the longest: {window_text(longest(windows, 1)[0])}"
+        )
+    else:
+        hint = f"{', '.join(names)} are never all present in one frame{source}"
+    raise InputError(
+        "--frames",
+        f"{line}: the {kept} left give {kept * dim} coordinates for the model's {genes} free "
+        f"parameters, too few (gap-free windows need {need} frames); {hint}",
+    )

@@ -133,3 +133,8 @@ def frames_text(frames: tuple[int, int | None]) -> str:
     """(start, stop) -> 'START:STOP' (an open end left empty), as :func:`parse_frames` reads."""
     start, stop = frames
     return f"{start}:{'' if stop is None else stop}"
+
+
+def parse_markers(text: str | None) -> tuple[str, ...] | None:
+    """'A, B,C' -> ('A', 'B', 'C'); None or '' -> None (the model's own markers)."""
+    return tuple(m.strip() for m in text.split(",")) if text else None

@@ -182,3 +182,16 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
         bic=float(bic),
         removed=removed,
     )
+
+
+def structure_of(model: Model, recording, settings, smooth: int = 0) -> Structure:
+    """:func:`identify_structure` on the frames and markers of ``settings`` of ``recording``
+    (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
+    the pipeline of ``activebonds structure``."""
+    from ..data.smoothing import smooth_positions
+    from .cost import make_windows
+    from .problem import select_data
+
+    data = select_data(model, recording, settings)
+    positions = smooth_positions(data.positions, data.mask, smooth) if smooth else data.positions
+    return identify_structure(model, make_windows(positions, data.mask, data.dt, 1))

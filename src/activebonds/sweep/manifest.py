@@ -47,7 +47,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from ..data import Trajectory, read_trajectory
 from ..errors import InputError
 from ..identify.problem import identification
-from ..identify.settings import FitSettings, parse_frames
+from ..identify.settings import FitSettings, parse_frames, parse_markers
 from ..model import Model, load_model
 
 INPUT_KEYS = ("model", "data")
@@ -220,7 +220,7 @@ def _settings(path: Path, where: str, values: dict) -> FitSettings:
         if isinstance(options.get("frames"), str):
             options["frames"] = parse_frames(options["frames"])
         if isinstance(options.get("markers"), str):
-            options["markers"] = tuple(m.strip() for m in options["markers"].split(","))
+            options["markers"] = parse_markers(options["markers"])
     except ValueError as err:
         raise InputError(path, str(err), where=f"{where}, field frames") from None
     try:
