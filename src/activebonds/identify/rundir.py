@@ -9,14 +9,16 @@ Layout of RUN/::
     history.csv         one row per generation (deterministic: no wall-clock fields)
     status.json         state, generation, best RMS, wall times (not part of the result)
     best_model.toml     the best model so far, in the model-file format
-    validation.json     free-run metrics on frames not fitted (``fit --validate``), optional
-    refine.json         the refinement's stages (``fit --refine lm``), for people
-    refine.npz          the same record and the last shooting stage's frame states, for resume
+    held_out.npz        the validation frames (``fit --validate``), optional
     data-2.npz, ...     further recordings fitted at once (``fit MODEL A B ...``)
-    uncertainty.csv / .json         Gauss-Newton standard errors and 95 % intervals at the optimum
+    NAME.json           the record of each post-fit stage (identify/stages): refine.json,
+                        baselines.json, uncertainty.json, validation.json, ...
+    NAME.npz            a stage's record with its arrays, one atomic write (refine.npz: the
+                        last shooting stage's frame states, for resume)
+    NAME.csv            a stage's table for people (uncertainty.csv)
     checkpoints/gen-XXXXXXXXX.npz   loop state + history, written atomically; the two newest kept
 
-This module is the only one that writes or reads these files. A checkpoint stores the loop
+This module (:class:`RunDir`) is the only one that writes or reads these files. A checkpoint stores the loop
 state pytree by its paths (``state_generation``, ``state_failed_total``, then the strategy's
 state: ``state_genes``, ``state_sigma``, ... for the paper's ES) and the history by column
 (``history_best_cost``, ...), so any strategy's state round-trips. Nothing is ever unpickled:
