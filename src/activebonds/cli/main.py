@@ -307,7 +307,9 @@ def fit(
 def _interrupted_fit(out_dir: Path) -> str:
     """The true message of a fit interrupted (in-process: the command line's own process acts
     on interrupts only once its run exists, cli/interrupts.py)."""
-    if interrupts.active() or (out_dir / "run.json").is_file():
+    from ..identify.rundir import RunDir
+
+    if interrupts.active() or RunDir(out_dir).is_run():
         return interrupts.resume_advice(out_dir)
     return "interrupted before the run started; nothing was written"
 
@@ -422,7 +424,10 @@ def _summary(result) -> None:
     if (line := bounds_line(rows)) is not None:
         say(line)
     if result.run is not None:
-        say(f"run directory: {result.run}  (best model: {result.run / 'best_model.toml'})")
+        from ..identify.rundir import RunDir
+
+        best = RunDir(result.run).best_model_path
+        say(f"run directory: {result.run}  (best model: {best})")
 
 
 def say(line: str) -> None:

@@ -193,10 +193,7 @@ def resume(
     """
     run = RunDir(run)
     meta = run.meta()
-    try:
-        settings = FitSettings(**meta["settings"])
-    except Exception as err:  # noqa: BLE001 - report any bad settings as one line
-        raise InputError(run.path / "run.json", f"settings are not valid ({err})") from None
+    settings = run.settings(meta)
     if not force:
         run.check_unchanged(meta)
     if generations is not None:

@@ -668,6 +668,25 @@ class RunDir:
     def best_model_path(self) -> Path:
         return self.path / "best_model.toml"
 
+    def is_run(self) -> bool:
+        """Whether the folder holds a run (its run.json)."""
+        return (self.path / "run.json").is_file()
+
+    def settings(self, meta: dict | None = None):
+        """The run's :class:`~activebonds.identify.settings.FitSettings` (one line,
+        :class:`InputError`, if they are not valid)."""
+        from .settings import FitSettings
+
+        meta = self.meta() if meta is None else meta
+        try:
+            return FitSettings(**meta["settings"])
+        except Exception as err:  # noqa: BLE001 - any bad settings as one line
+            raise InputError(self.path / "run.json", f"settings are not valid ({err})") from None
+
+    def window_error(self, message: str) -> InputError:
+        """An error about the run's copy of the fitted window."""
+        return InputError(self.path / data_name(0), message)
+
     def meta(self) -> dict:
         return read_meta(self.path)
 

@@ -47,18 +47,14 @@ def load_run(run: str | Path) -> RunRecord:
         raise InputError(path, "no such run directory")
     run = RunDir(path)
     meta = run.meta()
-    try:
-        settings = FitSettings(**meta["settings"])
-    except Exception as err:  # noqa: BLE001 - any bad settings as one line
-        raise InputError(path / "run.json", f"settings are not valid ({err})") from None
+    settings = run.settings(meta)
     window = run.window()
     model = run.best_model()
     has_best = model is not None
     if model is None:
         model = variant(run.input_model(), settings.bonds)
     if window.n_markers != model.topology.n_particles:
-        raise InputError(
-            path / "data.npz",
+        raise run.window_error(
             f"{window.n_markers} markers for a model of {model.topology.n_particles} particles",
         )
     records = {name: rec for name in stages.names() if (rec := run.record(name)) is not None}

@@ -21,7 +21,8 @@ import warnings
 from pathlib import Path
 
 from ..errors import InputError
-from ..identify import FitSettings, fit, resume, rundir
+from ..identify import fit, resume, rundir
+from ..identify.rundir import RunDir
 from .manifest import Job
 from .outcome import Done, Outcome
 from .summary import row
@@ -61,7 +62,7 @@ def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outc
 
 def _advance(job: Job, run: Path, command: list[str] | None) -> str:
     planned = job.settings.generations
-    if (run / "run.json").is_file():
+    if RunDir(run).is_run():
         st = rundir.read_status(run)
         # failed: not one finite candidate to start from, which more generations do not change
         if st.get("status") == "failed" or (
@@ -100,7 +101,7 @@ def check_out(jobs: list[Job], out: str | Path) -> None:
         run = out / job.name
         if not run.exists():
             continue
-        if not (run / "run.json").is_file():
+        if not RunDir(run).is_run():
             raise InputError(
                 run, "exists and is not a run directory; move it away or choose another --out"
             )
@@ -108,10 +109,7 @@ def check_out(jobs: list[Job], out: str | Path) -> None:
 
 
 def _check_run(job: Job, run: Path, meta: dict) -> None:
-    try:
-        recorded = FitSettings(**meta["settings"])
-    except Exception as err:  # noqa: BLE001 - any bad settings as one line
-        raise InputError(run / "run.json", f"settings are not valid ({err})") from None
+    recorded = RunDir(run).settings(meta)
     then, now = recorded.job(), job.settings.job()
     changed = sorted(k for k in then if then[k] != now.get(k))
     if changed:
