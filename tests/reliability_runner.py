@@ -98,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
                 frames=parse_frames(a.frames),
                 horizon=a.horizon,
                 optimizer=a.optimizer,
+                refine="none",  # the ES alone: the kill/resume problem is the evolution's
             )
             result = fit(a.model, a.data, settings, out=a.out, progress=progress)
     except InputError as e:

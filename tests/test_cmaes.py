@@ -105,7 +105,7 @@ def triangle():
 
 def test_cmaes_recovers_the_triangle_and_beats_the_es_at_equal_evaluations(triangle):
     truth, traj = triangle
-    budget = {"population": 16, "generations": 300, "seed": 0}
+    budget = {"population": 16, "generations": 300, "seed": 0, "refine": "none"}  # search alone
     cma = fit(truth, traj, optimizer="cmaes", **budget)
     es = fit(truth, traj, optimizer="es", **budget)
     assert cma.status == "completed" and cma.settings.optimizer == "cmaes"
