@@ -57,6 +57,7 @@ def _one(model, options, generations, seed, precision):
         seed=seed,
         precision=precision,
         progress=progress,
+        refine="none",  # the ES's speed and quality: no refinement after it
         **options,
     )
     # steady speed: the median over chunks after the first (a chunk that compiled a new

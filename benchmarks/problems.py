@@ -78,7 +78,7 @@ def horse_trajectory() -> Trajectory:
 
 
 def _bench(name, model, traj, description, **options) -> Bench:
-    settings = FitSettings(**options)
+    settings = FitSettings(**{"refine": "none", **options})  # the search alone
     return Bench(name, identification(model, traj, settings), settings, description)
 
 

@@ -301,6 +301,8 @@ def main(spec: dict) -> dict:
         options["chunk"] = spec["chunk"]
     if spec.get("precision"):
         options["precision"] = spec["precision"]
+    if "refine" in FitSettings.model_fields:  # the ES alone, in every version
+        options.setdefault("refine", "none")
     settings = FitSettings(**options)
     info["settings"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
 

@@ -180,7 +180,7 @@ def main(argv=None) -> int:
             data = Trajectory(positions=x, mask=clean.mask, markers=clean.markers, rate=200.0)
             res = fit(
                 to_fit, data, population=args.population, generations=args.generations,
-                seed=seed, smooth=args.smooth,
+                seed=seed, smooth=args.smooth, refine="none",
             )  # fmt: skip
             err = errors(identified(res.model), TRUTH)
             rows.append({"noise_mm": noise, "seed": seed, "rms_mm": res.rms_mm, "errors": err})

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
         "held_out_frames_within_50mm": zf.median_frames_within,
     }
     runs = {
-        "one-step": {},
+        "one-step": {"refine": "none"},
         "refined": dict(refine="lm", cost="shooting", horizon=horizons),
     }
     out["models"] = {}

@@ -149,6 +149,7 @@ def run_gait(gait: str, args) -> dict:
             population=args.population,
             generations=args.generations,
             seed=args.seed,
+            refine="none",  # the ES's one-step fit, as documented
         )
         total, each = per_marker_rms(res.model, held)
         free = free_run_metrics(res.model, held, offset=TEST[0] - FIT[0])

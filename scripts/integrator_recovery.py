@@ -36,7 +36,7 @@ def main() -> None:
     start = time.time()
     result = fit(
         truth, data, population=population, generations=generations, seed=seed, substeps=substeps,
-        integrator=method,
+        integrator=method, refine="none",
     )  # fmt: skip
     names = [g.name for g in truth.layout.genes]
     rel = (

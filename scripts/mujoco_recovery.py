@@ -139,8 +139,9 @@ def one(seed: int, noise_mm: float, args) -> dict:
     trajs = [noisy(t.trajectory(), noise_mm, seed + 7919 * i) for i, t in enumerate(truths)]
     traj = trajs[0] if len(trajs) == 1 else trajs  # several recordings are fitted at once
     base = dict(init="lsq", generations=args.generations, population=args.population, seed=seed)
+    plain_only = dict(refine="none")  # the one-step optimum, no refinement
     t = time.time()
-    plain = activebonds.fit(model, traj, **base)
+    plain = activebonds.fit(model, traj, **base, **plain_only)
     t_plain = time.time() - t
     t = time.time()
     shot = activebonds.fit(
