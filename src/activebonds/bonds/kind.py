@@ -2,8 +2,8 @@
 
 A kind is one :class:`BondKind` value, usually in a module of its own (``unary.py``,
 ``binary.py``, ``ternary.py``) and registered in :mod:`activebonds.bonds.registry`. The model
-file's schema, the genome layout, the physics, the least squares and the report read these
-declarations; none of them names a kind.
+file's schema, the genome layout, the physics, the least squares, the report and the MuJoCo
+export read these declarations; none of them names a kind.
 
 Array conventions: a kind with N bonds in a model of P particles in D dimensions has
 ``topology["particles"]`` [N, arity] (int32) and one [N] bool array per flag (e.g.
