@@ -1,7 +1,8 @@
 """The package's import graph, from its source (every ``import`` and ``from ... import``,
 relative or absolute, at module level or inside functions): no import cycle between modules,
 no arrow from a layer of the architecture up to a higher one, and no bond kind named in the
-code of ``identify/`` (the kinds are found through the registry)."""
+code of any module outside ``bonds/`` (the kinds are found through the registry, and each
+declares what the rest of the package needs to know of it)."""
 
 from __future__ import annotations
 
@@ -158,8 +159,9 @@ def test_the_layering_check_sees_an_arrow_up():
 
 
 def kind_names_in_code(path: Path, kinds: set[str]) -> list[tuple[int, str]]:
-    """(line, text) of every string constant of ``path`` that is a bond kind's name, other than
-    docstrings (comments are not in the syntax tree)."""
+    """(line, text) of every string constant of ``path`` that is a bond kind's name or holds
+    one in quotes (``'kind = "binary"'``, a model file's text), other than docstrings
+    (comments are not in the syntax tree)."""
     tree = ast.parse(path.read_text(), str(path))
     docstrings = set()
     for node in ast.walk(tree):
@@ -173,20 +175,54 @@ def kind_names_in_code(path: Path, kinds: set[str]) -> list[tuple[int, str]]:
         if isinstance(node, ast.Constant)
         and isinstance(node.value, str)
         and id(node) not in docstrings
-        and node.value.strip() in kinds
+        and (
+            node.value.strip() in kinds
+            or any(f"{q}{k}{q}" in node.value for k in kinds for q in "\"'")
+        )
     ]
 
 
+def outside_bonds() -> list[Path]:
+    """Every module of the package but those of ``bonds/``."""
+    return [
+        path
+        for name, path in module_files().items()
+        if not name.startswith(f"{PACKAGE}.bonds.") and name != f"{PACKAGE}.bonds"
+    ]
+
+
+def test_every_module_outside_bonds_is_checked_for_kind_names():
+    checked = {path.relative_to(SRC / PACKAGE).as_posix() for path in outside_bonds()}
+    assert {"model/names.py", "model/variants.py", "export/mjcf.py"} <= checked
+    assert {
+        "experiments/springs.py",
+        "identify/cost.py",
+        "cli/__init__.py",
+        "__init__.py",
+    } <= checked
+    assert not any(p.startswith("bonds/") for p in checked)
+
+
 @pytest.mark.parametrize(
-    "path", sorted((SRC / PACKAGE / "identify").rglob("*.py")), ids=lambda p: p.name
+    "path", outside_bonds(), ids=lambda p: p.relative_to(SRC / PACKAGE).as_posix()
 )
-def test_identify_names_no_bond_kind_in_its_code(path):
+def test_no_module_outside_bonds_names_a_bond_kind_in_its_code(path):
     assert {"unary", "binary", "ternary", "contact"} <= set(bonds.names())
     found = kind_names_in_code(path, set(bonds.names()))
-    assert not found, f"{path.name} names bond kinds (use the registry): {found}"
+    where = path.relative_to(SRC / PACKAGE).as_posix()
+    assert not found, f"{where} names bond kinds (use the registry): {found}"
 
 
 def test_the_kind_check_sees_a_name_in_code_and_not_in_a_docstring(tmp_path):
     path = tmp_path / "m.py"
     path.write_text('"""binary"""\n\n\ndef f(k):\n    """binary"""\n    return k == "binary"\n')
     assert kind_names_in_code(path, {"binary"}) == [(6, "binary")]
+
+
+def test_the_kind_check_sees_a_kind_quoted_in_a_model_file_text(tmp_path):
+    path = tmp_path / "m.py"
+    path.write_text("LINES = ['kind = \"binary\"', \"kind = 'unary'\", 'binary springs']\n")
+    assert kind_names_in_code(path, {"binary", "unary"}) == [
+        (1, 'kind = "binary"'),
+        (1, "kind = 'unary'"),
+    ]

@@ -22,7 +22,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .accumulate import accumulate, gather_table, spread_form
-from .kind import NON_NEGATIVE, POSITIVE, BondKind, LinearPart, Parameter, PopulationForm, spread
+from .kind import (
+    NON_NEGATIVE,
+    POSITIVE,
+    BondKind,
+    LinearPart,
+    MujocoForm,
+    Parameter,
+    PopulationForm,
+    spread,
+)
 
 
 def kinematics(topology, x, v):
@@ -213,6 +222,13 @@ def _population_forces(params, prepared, t0, n_p: int, dim: int):
 
 
 _NEURAL = "neural"
+
+
+def _mujoco_refusal(bond) -> str | None:
+    """A neuron's tension depends on every other bond's state: no MJCF element."""
+    return "neural bonds" if getattr(bond, _NEURAL, False) else None
+
+
 KIND = BondKind(
     off=("stiffness", "damping"),
     name="binary",
@@ -268,7 +284,9 @@ KIND = BondKind(
     timed=True,
     flags=(_NEURAL,),
     what="binary bonds",
+    noun="spring",
     activity=activity,
     linear=LinearPart(frozenset({"stiffness", "rest_length", "damping"}), _switch_off, _columns),
     population=PopulationForm(_population_prepare, _population_forces),
+    mujoco=MujocoForm("tendon", _mujoco_refusal),
 )

@@ -53,7 +53,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from .accumulate import accumulate
-from .kind import NON_NEGATIVE, BondKind, Parameter, spread
+from .kind import NON_NEGATIVE, BondKind, MujocoForm, Parameter, spread
 
 FRICTION_EPS = 1e-3  # m/s: the tangential speed below which Coulomb friction is smoothed
 
@@ -91,4 +91,6 @@ KIND = BondKind(
     forces=forces,
     internal=False,
     what="contacts",
+    noun="contact",
+    mujoco=MujocoForm(why="MuJoCo's contacts are solver constraints, not this penalty law"),
 )

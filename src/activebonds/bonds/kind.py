@@ -2,8 +2,8 @@
 
 A kind is one :class:`BondKind` value, usually in a module of its own (``unary.py``,
 ``binary.py``, ``ternary.py``) and registered in :mod:`activebonds.bonds.registry`. The model
-file's schema, the genome layout, the physics, the least squares and the report read these
-declarations; none of them names a kind.
+file's schema, the genome layout, the physics, the least squares, the report and the MuJoCo
+export read these declarations; none of them names a kind.
 
 Array conventions: a kind with N bonds in a model of P particles in D dimensions has
 ``topology["particles"]`` [N, arity] (int32) and one [N] bool array per flag (e.g.
@@ -106,6 +106,23 @@ class PopulationForm:
     forces: Callable
 
 
+@dataclass(frozen=True)
+class MujocoForm:
+    """How the MuJoCo export (:mod:`activebonds.export.mjcf`) writes a kind's bonds.
+
+    ``element``: ``"tendon"`` (a spatial tendon between the bond's two particles, from its
+    ``stiffness``, ``damping`` and ``rest_length``), ``"anchor"`` (springs of the particle's
+    slide joints to a fixed ``anchor``, from its ``stiffness``, ``damping`` and ``anchor``) or
+    None (MuJoCo cannot express the kind: its bonds are refused as '<kind> bonds', ``why``
+    added to the message). ``refuse(bond)`` names, in words, a bond of the model file (a
+    ``[[bond]]`` entry) that MuJoCo cannot express although its kind maps (``"neural
+    bonds"``), or returns None."""
+
+    element: Literal["tendon", "anchor"] | None = None
+    refuse: Callable[[object], str | None] = lambda bond: None
+    why: str = ""
+
+
 def _timeless(forces: Callable) -> Callable:
     def timed(params, topology, x, v, t):
         return forces(params, topology, x, v)
@@ -130,6 +147,8 @@ class BondKind:
     flags: tuple[str, ...] = ()  # boolean keys of the bond table, one [N] array each
     internal: bool = True  # forces sum to zero without torque (momentum floor applies)
     what: str = ""  # its parameters in words, for messages ("flexion springs")
+    noun: str = ""  # a bond of the kind in words, for parameter labels ("flexion spring");
+    # its name when not given
     activity: Callable | None = None  # (params, topology, x, v[, t]) -> [N] neuron activations
     linear: LinearPart | None = None
     population: PopulationForm | None = None  # else vmapped over the population
@@ -137,8 +156,11 @@ class BondKind:
     shared: tuple[Parameter, ...] = ()  # model-level parameters ("drive.frequency")
     off: tuple[str, ...] = ()  # fields that, all at 0, remove every force of a bond: a kind
     # with them can be optional (``optional = true``); an absent bond has them at 0, no genes
+    mujoco: MujocoForm | None = None  # how MuJoCo expresses it; None: it cannot
 
     def __post_init__(self):
+        if not self.noun:
+            object.__setattr__(self, "noun", self.name)
         if not self.timed:
             object.__setattr__(self, "forces", _timeless(self.forces))
 

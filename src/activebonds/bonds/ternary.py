@@ -46,4 +46,5 @@ KIND = BondKind(
     ),
     forces=forces,
     what="flexion springs",
+    noun="flexion spring",
 )

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .accumulate import accumulate
-from .kind import NON_NEGATIVE, BondKind, LinearPart, Parameter, spread
+from .kind import NON_NEGATIVE, BondKind, LinearPart, MujocoForm, Parameter, spread
 
 
 def forces(params, topology, x, v, t):
@@ -67,6 +67,17 @@ def _columns(values, index, topology, x, v, unknowns):
             known[:, p] -= c * (v[:, p] - u)
 
 
+def _mujoco_refusal(bond) -> str | None:
+    """A moving anchor: a slide joint's spring reference is fixed."""
+    velocity = bond.anchor_velocity
+    if velocity is None:
+        return None
+    values = velocity if isinstance(velocity, list) else velocity.value
+    if not any(float(v) != 0.0 for v in values):
+        return None
+    return "unary bonds with a moving anchor (anchor_velocity)"
+
+
 KIND = BondKind(
     off=("stiffness", "damping"),
     name="unary",
@@ -83,5 +94,7 @@ KIND = BondKind(
     timed=True,
     internal=False,
     what="unary springs",
+    noun="unary spring",
     linear=LinearPart(frozenset({"stiffness", "damping", "anchor"}), _switch_off, _columns),
+    mujoco=MujocoForm("anchor", _mujoco_refusal),
 )

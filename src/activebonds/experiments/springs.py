@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..bonds import binary
+
 FRAME_DT = 0.1  # seconds between saved frames (SAMPLE_FREQ fine steps of STEP)
 BOX = 5.0  # walls at +-BOX on each axis
 STRENGTH = 0.1  # spring stiffness (NRI's interaction_strength), unit masses
@@ -144,7 +146,7 @@ def candidate_model_toml(n_balls: int = 5) -> str:
             lines += [
                 "",
                 "[[bond]]",
-                'kind = "binary"',
+                f'kind = "{binary.KIND.name}"',
                 f'particles = ["p{i}", "p{j}"]',
                 f'type = "k{i}_{j}"',
                 "optional = true",

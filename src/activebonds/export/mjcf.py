@@ -31,6 +31,9 @@ and a friction cone, not the penalty spring-damper ``max(0, k d - c n.v)`` with 
 Coulomb friction: it cannot reproduce them faithfully), unary bonds with a moving anchor
 (``anchor_velocity`` != 0) and any other kind. Optional bonds identified as absent and bonds
 of disabled kinds exert no force and are left out.
+
+Each kind declares its MuJoCo form (:class:`~activebonds.bonds.kind.MujocoForm`: a tendon, a
+fixed anchor or none, and which of its bonds are refused); this module names no kind.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import bonds
 from ..atomic import write_text_atomic
 from ..errors import InputError
 
@@ -62,34 +66,31 @@ def _pad3(xs) -> list[float]:
     return [float(x) for x in xs] + [0.0] * (3 - len(xs))
 
 
-_WHY = {"contact bonds": "MuJoCo's contacts are solver constraints, not this penalty law"}
+def _form(kind: str) -> bonds.MujocoForm:
+    """The kind's MuJoCo form (an empty one, refusing every bond, when it declares none)."""
+    return bonds.get(kind).mujoco or bonds.MujocoForm()
 
 
 def _refusals(model) -> list[str]:
     """What MuJoCo cannot express, in words with the bonds' indices (empty: all of it can)."""
     found: dict[str, list[int]] = {}
+    whys: dict[str, str] = {}
     for i, b in enumerate(model.spec.bond):
         if b.absent or b.kind in model.disabled:
             continue
-        if b.kind == "binary" and getattr(b, "neural", False):
-            what = "neural bonds"
-        elif b.kind == "binary":
-            continue
-        elif b.kind == "unary":
-            velocity = b.anchor_velocity
-            if velocity is None:
-                continue
-            values = velocity if isinstance(velocity, list) else velocity.value
-            if not any(float(v) != 0.0 for v in values):
-                continue
-            what = "unary bonds with a moving anchor (anchor_velocity)"
-        else:  # ternary, contact, any other kind
+        form = _form(b.kind)
+        if form.element is None:  # the kind: MuJoCo has no element for it
             what = f"{b.kind} bonds"
+            whys[what] = form.why
+        else:  # this bond of a kind that maps
+            what = form.refuse(b)
+            if what is None:
+                continue
         found.setdefault(what, []).append(i)
     out = []
     for what, ids in found.items():
         listed = ", ".join(f"bond[{i}]" for i in ids[:4]) + (", ..." if len(ids) > 4 else "")
-        why = f"; {_WHY[what]}" if what in _WHY else ""
+        why = f"; {whys[what]}" if whys.get(what) else ""
         what = what.replace("bonds", "bond", 1) if len(ids) == 1 else what
         out.append(f"{len(ids)} {what} ({listed}{why})")
     return out
@@ -156,7 +157,8 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
         if b.absent or b.kind in model.disabled:
             continue
         values = params.bonds[b.kind]
-        if b.kind == "unary":
+        element = _form(b.kind).element
+        if element == "anchor":
             p = names[b.particles[0]]
             k = float(values["stiffness"][pos])
             anchor = np.asarray(values["anchor"][pos], np.float64)
@@ -164,7 +166,7 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
             ka_sum[p] += k * anchor
             c_sum[p] += float(values["damping"][pos])
             anchors.append((i, _pad3(anchor)))
-        elif b.kind == "binary":
+        elif element == "tendon":
             tendons.append(
                 (
                     i,

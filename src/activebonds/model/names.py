@@ -13,7 +13,8 @@ particles (or its type) instead of its index in the model file::
     mass:Head.weight             ->  particle Head mass weight (under total_mass)
     drive.frequency              ->  drive frequency
 
-A bond's kind word is ``neural`` for a mechanical-neural bond, ``spring`` for any other binary
+A bond's kind word is ``neural`` for a mechanical-neural bond, else its kind's noun
+(:attr:`~activebonds.bonds.kind.BondKind.noun`): ``spring`` for any other binary
 (viscoelastic) bond, ``unary spring``, ``flexion spring`` or ``contact``; two bonds with the
 same word and particles add their index, ``#i``, to tell them apart.
 
@@ -43,12 +44,6 @@ from .schema import ModelSpec
 
 NEAR_BOUND = 0.01  # share of the search range (log range for log genes) that is "near"
 AXES = "xyz"
-KIND_WORDS = {
-    "binary": "spring",
-    "unary": "unary spring",
-    "ternary": "flexion spring",
-    "contact": "contact",
-}
 
 
 # ----------------------------------------------------------------------------- names
@@ -57,7 +52,7 @@ KIND_WORDS = {
 def _word(bond) -> str:
     if getattr(bond, "neural", False):
         return "neural"
-    return KIND_WORDS.get(bond.kind, bond.kind)
+    return bonds.get(bond.kind).noun if bond.kind in bonds.names() else bond.kind
 
 
 def bond_label(spec: ModelSpec, i: int) -> str:

@@ -1,17 +1,27 @@
-"""Standard vs mechanical-neural variants of a model (the paper's Series 1 and Series 2)."""
+"""Standard vs mechanical-neural variants of a model (the paper's Series 1 and Series 2).
+
+The bonds switched are those of the kinds whose bonds may carry a neuron (a kind declaring an
+``activity``: the binary bonds).
+"""
 
 from __future__ import annotations
 
+from .. import bonds
 from .model import Model, build
 from .values import Param, Weights
+
+
+def _may_be_neural(bond) -> bool:
+    """Whether the bond's kind declares a neuron (:attr:`~activebonds.bonds.kind.BondKind.activity`)."""
+    return bonds.get(bond.kind).activity is not None
 
 
 def as_standard(model: Model) -> Model:
     """Every binary bond a plain viscoelastic bond: neurons (and their drive) removed."""
     off = {"neural": False, "gain": None, "weights": None, "threshold": None}
     off |= {"drive_weight": None, "drive_phase": None}
-    bonds = [b.model_copy(update=off) if b.kind == "binary" else b for b in model.spec.bond]
-    return build(model.spec.model_copy(update={"bond": bonds}), disable=model.disabled)
+    changed = [b.model_copy(update=off) if _may_be_neural(b) else b for b in model.spec.bond]
+    return build(model.spec.model_copy(update={"bond": changed}), disable=model.disabled)
 
 
 def as_neural(model: Model, *, gain: Param | None = None) -> Model:
@@ -21,9 +31,9 @@ def as_neural(model: Model, *, gain: Param | None = None) -> Model:
     gain in [0, 100] N, threshold in [-5, 5], weights in [-10, 10].
     """
     gain = gain or Param(value=1.0, min=0.0, max=100.0)
-    bonds = []
+    changed = []
     for b in model.spec.bond:
-        if b.kind == "binary":
+        if _may_be_neural(b):
             b = b.model_copy(
                 update={
                     "neural": True,
@@ -34,5 +44,5 @@ def as_neural(model: Model, *, gain: Param | None = None) -> Model:
                     "weights": b.weights if b.weights is not None else Weights(),
                 }
             )
-        bonds.append(b)
-    return build(model.spec.model_copy(update={"bond": bonds}), disable=model.disabled)
+        changed.append(b)
+    return build(model.spec.model_copy(update={"bond": changed}), disable=model.disabled)
