@@ -235,8 +235,9 @@ def test_zero_force_baseline_is_the_force_free_prediction(horse):
 
 def test_init_lsq_puts_the_optimum_in_the_first_population(tetra):
     model, data, _ = tetra
-    uniform = fit(model, data, population=20, generations=1, seed=0)
-    lsq = fit(model, data, population=20, generations=1, seed=0, init="lsq")
+    search = {"population": 20, "generations": 1, "seed": 0, "refine": "none"}  # the start alone
+    uniform = fit(model, data, **search)
+    lsq = fit(model, data, **search, init="lsq")
     assert lsq.rms_mm < 1e-9 < uniform.rms_mm
     assert linear_problem(model, make_windows(data.positions, data.mask, data.dt, 1)).pairs
 
