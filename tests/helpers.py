@@ -126,3 +126,21 @@ def bowl_problem(n_genes: int = 3):
         gene_group=np.arange(n_genes, dtype=np.int32),
         group_slots=np.arange(n_genes, dtype=np.int32)[:, None],
     )
+
+
+def figure_texts(svg: Path) -> list[str]:
+    """Every text a report figure's SVG shows (titles, tick labels, legend, annotations): the
+    figures are saved with ``svg.fonttype = none``, so each is a ``<text>`` element."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(svg).getroot()
+    return ["".join(t.itertext()) for t in root.iter("{http://www.w3.org/2000/svg}text")]
+
+
+def figure_size_px(svg: Path, dpi: float) -> tuple[float, float]:
+    """The pixel size at ``dpi`` of the figure an SVG holds (its width and height in points)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(svg).getroot()
+    w, h = (float(root.attrib[k].removesuffix("pt")) for k in ("width", "height"))
+    return w / 72 * dpi, h / 72 * dpi
