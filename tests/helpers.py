@@ -33,6 +33,20 @@ def cli(*args, cwd: Path | None = None, timeout: float = 300) -> subprocess.Comp
     )
 
 
+def cli_in_process(*args) -> subprocess.CompletedProcess:
+    """Run ``activebonds ARGS`` in this process (Typer's CliRunner), for tests of what a
+    command does rather than of its process; the same fields as :func:`cli`'s result."""
+    from typer.testing import CliRunner
+
+    from activebonds.cli.main import app
+
+    argv = list(map(str, args))
+    res = CliRunner().invoke(app, argv, env={"COLUMNS": "200", "NO_COLOR": "1"})
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    return subprocess.CompletedProcess(argv, res.exit_code, res.stdout, res.stderr)
+
+
 def cli_popen(*args, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
     """Start ``activebonds ARGS`` in the background (output to ``log`` or discarded)."""
     env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
