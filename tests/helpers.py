@@ -33,6 +33,20 @@ def cli(*args, cwd: Path | None = None, timeout: float = 300) -> subprocess.Comp
     )
 
 
+def cli_in_process(*args) -> subprocess.CompletedProcess:
+    """Run ``activebonds ARGS`` in this process (Typer's CliRunner), for tests of what a
+    command does rather than of its process; the same fields as :func:`cli`'s result."""
+    from typer.testing import CliRunner
+
+    from activebonds.cli.main import app
+
+    argv = list(map(str, args))
+    res = CliRunner().invoke(app, argv, env={"COLUMNS": "200", "NO_COLOR": "1"})
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    return subprocess.CompletedProcess(argv, res.exit_code, res.stdout, res.stderr)
+
+
 def cli_popen(*args, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
     """Start ``activebonds ARGS`` in the background (output to ``log`` or discarded)."""
     env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
@@ -126,3 +140,21 @@ def bowl_problem(n_genes: int = 3):
         gene_group=np.arange(n_genes, dtype=np.int32),
         group_slots=np.arange(n_genes, dtype=np.int32)[:, None],
     )
+
+
+def figure_texts(svg: Path) -> list[str]:
+    """Every text a report figure's SVG shows (titles, tick labels, legend, annotations): the
+    figures are saved with ``svg.fonttype = none``, so each is a ``<text>`` element."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(svg).getroot()
+    return ["".join(t.itertext()) for t in root.iter("{http://www.w3.org/2000/svg}text")]
+
+
+def figure_size_px(svg: Path, dpi: float) -> tuple[float, float]:
+    """The pixel size at ``dpi`` of the figure an SVG holds (its width and height in points)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(svg).getroot()
+    w, h = (float(root.attrib[k].removesuffix("pt")) for k in ("width", "height"))
+    return w / 72 * dpi, h / 72 * dpi

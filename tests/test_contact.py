@@ -210,7 +210,23 @@ surface_velocity = [0.2, 0.0, 0.0]
     np.testing.assert_array_equal(leaving, 0.0)
 
 
-def test_contact_gradients_are_finite_at_the_switch_and_at_rest():
+def _central_differences(f, args, h):
+    """The gradient of scalar ``f`` by central differences in each entry of each argument."""
+    out = []
+    for k, a in enumerate(args):
+        a = np.asarray(a, np.float64)
+        g = np.zeros_like(a)
+        for i in np.ndindex(a.shape):
+            step = np.zeros_like(a)
+            step[i] = h
+            plus = [*args[:k], a + step, *args[k + 1 :]]
+            minus = [*args[:k], a - step, *args[k + 1 :]]
+            g[i] = (float(f(*plus)) - float(f(*minus))) / (2 * h)
+        out.append(g)
+    return out
+
+
+def test_contact_gradients_are_finite_at_the_switch_and_match_differences_away_from_it():
     model = loads_model(one_particle(mu=0.8, surface="[0.3, 0.0, 0.0]"))
     genes = jnp.asarray(model.layout.initial())
 
@@ -218,12 +234,26 @@ def test_contact_gradients_are_finite_at_the_switch_and_at_rest():
         return jnp.sum(total_force(model.layout.decode(genes), model.topology, x, v) ** 2)
 
     jac = jax.jit(jax.grad(force_sum, argnums=(0, 1)))
+    value = jax.jit(force_sum)
+    loaded = 0
     for z in (0.0, -1e-3, 1e-3):  # exactly on the plane, below, above
         for vx in (0.3, 0.0):  # at rest relative to the belt, and at rest
             x = jnp.array([[0.0, 0.0, z]])
             v = jnp.array([[vx, 0.0, 0.0]])
-            gx, gv = jac(x, v)
-            assert np.isfinite(np.asarray(gx)).all() and np.isfinite(np.asarray(gv)).all()
+            gx, gv = (np.asarray(g) for g in jac(x, v))
+            assert np.isfinite(gx).all() and np.isfinite(gv).all()
+            if z == 0.0:  # the switch itself: the force has a kink, no derivative to compare
+                continue
+            # 1 mm from the plane and pushing (k d = 10 N against c n.v = 0), steps of 1e-7
+            # stay on one side of the switch; the friction's smoothing scale is 1e-3 m/s
+            nx, nv = _central_differences(value, (x, v), 1e-7)
+            scale = max(np.abs(nx).max(), np.abs(nv).max(), 1.0)
+            np.testing.assert_allclose(gx, nx, rtol=1e-6, atol=1e-7 * scale)
+            np.testing.assert_allclose(gv, nv, rtol=1e-6, atol=1e-7 * scale)
+            loaded += z < 0
+            if z < 0:  # below the plane the force depends on the state: the test has teeth
+                assert np.abs(gx).max() > 1e3 and np.abs(gv).max() > 1.0
+    assert loaded == 2
 
 
 def test_the_normal_is_a_constant_normalised_when_loaded_and_written_back_as_given():

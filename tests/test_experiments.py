@@ -4,18 +4,22 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
+from collections import Counter
 
 import numpy as np
 import pytest
+from PIL import Image
+from typer.testing import CliRunner
 
+from activebonds.cli.main import app
 from activebonds.data import Trajectory
 from activebonds.experiments.paper import EXPERIMENTS
 from activebonds.identify.baselines import momentum_floor_rms_mm
 from activebonds.model import load_model
+from activebonds.report import plots
+from activebonds.report.predict import neural_weights
 from activebonds.simulation import simulate
-from helpers import EXAMPLES
+from helpers import EXAMPLES, figure_size_px, figure_texts
 
 
 def test_floor_is_zero_on_data_made_by_internal_forces():
@@ -49,28 +53,46 @@ def test_floor_of_a_uniformly_accelerated_system_is_its_acceleration_step():
 @pytest.mark.parametrize("name", ["synthetic", "horse"])
 def test_reproduce_tiny_writes_both_series_curves_and_figures(name, tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "activebonds.cli", "reproduce", name, "--scale", "tiny"]
-    proc = subprocess.run(
-        cmd + ["--seeds", "2", "--out", str(out)], capture_output=True, text=True, timeout=600
-    )
-    assert proc.returncode == 0, proc.stderr
+    args = ["reproduce", name, "--scale", "tiny", "--seeds", "2", "--out", str(out)]
+    res = CliRunner().invoke(app, args, env={"COLUMNS": "200", "NO_COLOR": "1"})
+    assert res.exit_code == 0, (res.output, res.exception)
     config = EXPERIMENTS[name].scales["tiny"][0]
     folder = out / name / config.name
     with open(folder / "curves.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert {r["series"] for r in rows} == {"standard", "neural"}
     assert len(rows) == 2 * config.generations
+    finals = {}
     for series in ("standard", "neural"):
         best = [float(r["best_rms_mm_median"]) for r in rows if r["series"] == series]
         assert np.all(np.diff(best) <= 1e-12)  # elitism, seed by seed and so in the median
         assert np.isfinite(best[-1])
+        finals[series] = best[-1]
     summary = json.loads((out / name / "summary.json").read_text())
     result = summary["configs"][config.name]["series"]
     assert np.isfinite(result["neural"]["fit_rms_mm_median"])
     assert result["standard"]["seeds"] == [0, 1]
     assert 0.0 <= result["neural"]["saturated_share_median"] <= 1.0
+    # the figures, read back: each series' final median error is written on the convergence
+    # plot, every weight of the best neural model on the heatmap, every frame in the GIF
+    figs = folder / "figures"
     for fig in ("convergence.png", "convergence.svg", "neural_weights.png", "animation.gif"):
-        assert (folder / "figures" / fig).stat().st_size > 1000
+        assert (figs / fig).stat().st_size > 1000
+    for stem in ("convergence", "neural_weights"):
+        with Image.open(figs / f"{stem}.png") as png:
+            size = figure_size_px(figs / f"{stem}.svg", plots.DPI)
+            assert np.abs(np.subtract(png.size, size)).max() < 1, stem
+    conv = figure_texts(figs / "convergence.svg")
+    for series, final in finals.items():
+        assert f"{final:.3g} mm" in conv, (series, final, conv)
+        assert any(t.startswith(f"{series}: best (median of 2") for t in conv), conv
+    w_len, w_rate, _ = neural_weights(load_model(folder / "best_neural.toml"))
+    weights = np.concatenate([w_len, w_rate], axis=1)
+    shown = Counter(f"{w:.2g}" for w in weights[np.isfinite(weights)])
+    assert shown.total() > 0 and not shown - Counter(figure_texts(figs / "neural_weights.svg"))
+    test_frames = result["standard"]["test_frames"]
+    with Image.open(figs / "animation.gif") as gif:
+        assert gif.n_frames == test_frames[1]  # the recording up to the end of the test frames
     html = (out / "report.html").read_text()
     assert "standard" in html and "neural" in html and "http://" not in html
     assert "zero force" in html

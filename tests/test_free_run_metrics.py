@@ -26,7 +26,7 @@ from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model, loads_model
 from activebonds.report import predict, write_report
 from activebonds.simulation import simulate
-from helpers import TRIANGLE, cli
+from helpers import TRIANGLE, cli_in_process
 
 
 def _drift(errors_mm, n_markers=2):
@@ -195,14 +195,14 @@ def test_fit_validate_end_to_end(tmp_path, triangle):
         "--generations", "20", "--seed", "3",
     )  # fmt: skip
 
-    refused = cli(*common, "--out", run, "--validate", "90:200")
+    refused = cli_in_process(*common, "--out", run, "--validate", "90:200")
     assert refused.returncode == 2
     assert refused.stderr.strip().count("\n") == 0 and "overlap" in refused.stderr
     assert not run.exists()
-    short = cli(*common, "--out", run, "--validate", "100:104")
+    short = cli_in_process(*common, "--out", run, "--validate", "100:104")
     assert short.returncode == 2 and "at least 10" in short.stderr and not run.exists()
 
-    proc = cli(*common, "--out", run, "--validate", "100:200")
+    proc = cli_in_process(*common, "--out", run, "--validate", "100:200")
     assert proc.returncode == 0, proc.stderr
     stored = json.loads((run / "validation.json").read_text())
     assert stored["frames"] == [100, 200] and stored["time_offset_frames"] == 100

@@ -4,9 +4,9 @@ Every ``activebonds`` line of the README's Commands block names a command that e
 that command has, and input files that exist in a clone (or are written by an earlier line);
 the lines up to ``evaluate`` (bundled data, info, simulate, export, fit, baselines, evaluate,
 structure) are run in order, from a folder holding only the repository's ``examples``, the fit
-shortened to 3 generations of 8, and must exit 0. The Python API example's files exist. (The
-other long jobs, the report, sweep, paper experiments and demo, have tests of their own and are
-checked here for their options only.)
+shortened to 3 generations of 8; each must exit 0 and print (or write) what it should. The
+Python API example's files exist. (The other long jobs, the report, sweep, paper experiments
+and demo, have tests of their own and are checked here for their options only.)
 """
 
 from __future__ import annotations
@@ -97,6 +97,49 @@ def test_every_readme_command_has_its_options_and_inputs():
     assert {"fit", "resume", "report", "evaluate", "export", "datasets"} <= {c[0] for c in commands}
 
 
+def _check_output(args: list[str], out: str) -> None:
+    """One output of each command run, checked against what it must say or write (the horse
+    trot's frames 0:10 have the audit's baselines: zero force 5.6205 mm, momentum floor
+    4.1066 mm, exact least squares 4.2026 mm)."""
+    from activebonds.data import read_trajectory
+    from activebonds.model import load_model
+
+    command = args[0]
+    if command == "datasets" and len(args) == 2:
+        assert out.strip() == str(dataset(args[1]).path)
+    elif command == "datasets":
+        assert all(name in out for name in DATASETS) and "example files" in out
+    elif command == "info":
+        assert re.search(r"frames\s+│\s+600\b", out) and "Head,Withers,HFL present" in out
+    elif command == "simulate":
+        n = int(args[args.index("--frames") + 1])
+        path = args[args.index("--out") + 1]
+        assert f"wrote {n} frames to {path}" in out
+        assert read_trajectory(path).n_frames == n
+    elif command == "export":
+        assert "3 point masses" in out
+        assert (
+            Path(args[args.index("--out") + 1]).read_text().startswith('<mujoco model="triangle">')
+        )
+    elif command == "fit":
+        assert "zero-force baseline on the same frames 5.621 mm" in out
+        best = float(re.search(r"completed: best RMS error ([\d.]+) mm", out).group(1))
+        assert 4.1066 - 1e-3 <= best  # no internal-force model beats the momentum floor
+        assert load_model(Path(args[args.index("--out") + 1]) / "best_model.toml").dimension == 3
+    elif command == "baselines":
+        assert re.search(r"zero force \(constant velocity\)\s+│\s+5\.6205 ", out)
+        assert re.search(r"momentum floor \(internal forces\)\s+│\s+4\.1066", out)
+        assert re.search(r"exact least squares \(linear parameters\)\s+│\s+4\.2026", out)
+    elif command == "evaluate":
+        assert f"frames {args[args.index('--frames') + 1]}" in out
+        assert re.search(r"one-step RMS \(mm\)\s+│\s+[\d.]+\s+│\s+6\.34115 ", out)
+    elif command == "structure":
+        assert "3 of 6 present" in out
+        assert load_model(args[args.index("--out") + 1]).topology.count("binary") == 3
+    else:  # pragma: no cover - RUN names the commands above
+        raise AssertionError(f"no output check for {command}")
+
+
 def test_the_cheap_readme_commands_run_as_written(tmp_path, monkeypatch):
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     monkeypatch.chdir(tmp_path)
@@ -110,6 +153,7 @@ def test_the_cheap_readme_commands_run_as_written(tmp_path, monkeypatch):
         ]
         res = CliRunner().invoke(app, args, env={"COLUMNS": "300"})
         assert res.exit_code == 0, (args, res.output)
+        _check_output(args, res.stdout)
         ran.append(args[0])
     assert set(ran) == set(RUN), ran
 

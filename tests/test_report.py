@@ -8,6 +8,7 @@ import dataclasses
 import json
 import re
 import shutil
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from activebonds.report import (
 )
 from activebonds.report.predict import near_zero_share, saturation_share
 from activebonds.simulation import simulate
+from helpers import figure_size_px, figure_texts
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE = ROOT / "examples" / "triangle.toml"
@@ -252,19 +254,62 @@ def _report_data(text: str) -> dict:
     return json.loads(m.group(1))
 
 
-def test_report_of_a_tiny_fit(neural_run):
+def test_report_writes_every_figure_and_leaves_no_staging_folder(neural_run):
     result, report, _ = neural_run
     run = result.run
     assert report == run / "report.html" and report.is_file()
     figs = run / "figures"
     for name in FIGURES:
-        assert (figs / f"{name}.png").stat().st_size > 1000
-        assert (figs / f"{name}.svg").read_text(encoding="utf-8").lstrip().startswith("<?xml")
+        svg = figs / f"{name}.svg"
+        assert svg.read_text(encoding="utf-8").lstrip().startswith("<?xml")
+        with Image.open(figs / f"{name}.png") as png:  # the same figure, drawn at the DPI
+            assert np.abs(np.subtract(png.size, figure_size_px(svg, plots.DPI))).max() < 1, name
+            assert len(png.getcolors(maxcolors=1 << 16) or range(1 << 16)) > 20, name
     with Image.open(figs / "animation.gif") as gif:
         assert gif.n_frames == 20  # fitted window (10) + as many frames beyond
     assert not list(run.glob(".figures*")) and not list(run.glob(".tmp-*"))
 
-    text = _html(report)
+
+def test_report_figures_show_the_runs_numbers(neural_run):
+    """The figures' texts read back from their SVGs: the final error, every parameter's
+    value, every weight, the saturation share and the labels of the panels."""
+    from activebonds.identify.operators import VARIANTS
+    from activebonds.model.names import parameter_rows
+    from activebonds.report.predict import neural_weights
+    from activebonds.report.runs import history_rms_mm
+
+    result, _, _ = neural_run
+    figs = result.run / "figures"
+    record = load_run(result.run)
+    text = {name: figure_texts(figs / f"{name}.svg") for name in FIGURES}
+
+    best = history_rms_mm(record.history)["best"]
+    final = best[np.isfinite(best) & (best > 0)][-1]
+    assert f"{final:.3g} mm" in text["convergence"]
+
+    rows = parameter_rows(record.model)
+    values = [t.split("  [")[0] for t in text["parameters"] if "  [" in t]
+    assert values == [f"{r.value:.4g}" for r in rows] and len(rows) == record.model.layout.n_genes
+
+    w_len, w_rate, _ = neural_weights(record.model)
+    weights = np.concatenate([w_len, w_rate], axis=1)  # every bond is neural: every row shown
+    shown = Counter(f"{w:.2g}" for w in weights[np.isfinite(weights)])
+    assert shown.total() == 3 * 4 and not shown - Counter(text["weights"])  # each one written
+
+    pred, _ = predict_run(record, frames=20)
+    assert f"({100 * pred.saturated_share:.0f} % of samples saturated)" in " ".join(
+        text["activations"]
+    )
+    labels = plots.bond_labels(record.model)
+    assert {f"neuron {lab}" for lab in labels} <= set(text["activations"])
+
+    assert {"X (mm)", "Y (mm)", "Z (mm)", *pred.names} <= set(text["trajectories"])
+    assert len(pred.names) == 3
+    assert {v.label for v in VARIANTS} <= set(text["variants"])
+
+
+def test_report_embeds_the_animation_and_its_player(neural_run):
+    text = _html(neural_run[1])
     data = _report_data(text)
     anim = data["animations"][0]
     assert len(anim["recorded"]) == 20 and anim["fit_frames"] == 10
@@ -272,11 +317,19 @@ def test_report_of_a_tiny_fit(neural_run):
     assert [m["label"] for m in anim["models"]] == ["run"]
     for ident in ('id="play"', 'id="frame"', 'type="range"', "<canvas", 'id="mode"'):
         assert ident in text
-    # every figure is embedded, byte for byte
+
+
+def test_report_embeds_every_figure_byte_for_byte(neural_run):
+    result, report, _ = neural_run
+    text = _html(report)
     for name in FIGURES:
-        encoded = base64.b64encode((figs / f"{name}.png").read_bytes()).decode()
+        encoded = base64.b64encode((result.run / "figures" / f"{name}.png").read_bytes()).decode()
         assert f'src="data:image/png;base64,{encoded}"' in text
-    # the summary shows the fit's numbers
+
+
+def test_report_summary_shows_the_fits_numbers(neural_run):
+    result, report, _ = neural_run
+    text = _html(report)
     assert f"{result.rms_mm:.4g} mm" in text
     assert "neural" in text and "Head" in text and "failed evaluations" in text
 

@@ -17,7 +17,7 @@ from activebonds.identify.structure import identify_structure
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force
 from helpers import TRIANGLE as TRIANGLE_FILE
-from helpers import cli
+from helpers import cli_in_process
 
 # examples/triangle.toml's name, dimension and particles, with two bonds of this file's own
 TRIANGLE = (
@@ -115,7 +115,7 @@ stiffness = 1e4
     )
     path = tmp_path / "m.toml"
     path.write_text(text)
-    r = cli("structure", path, tmp_path / "none.csv", "--out", tmp_path / "o.toml")
+    r = cli_in_process("structure", path, tmp_path / "none.csv", "--out", tmp_path / "o.toml")
     assert r.returncode == 2
     assert "optional: a contact bond cannot be optional" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
@@ -177,7 +177,7 @@ def test_structure_errors_name_the_model_file(tmp_path):
     _springs_file(tmp_path / "s.npz")
     model = tmp_path / "plain.toml"
     model.write_text(candidate_model_toml().replace("optional = true\n", ""))
-    r = cli("structure", model, tmp_path / "s.npz", "--out", tmp_path / "o.toml")
+    r = cli_in_process("structure", model, tmp_path / "s.npz", "--out", tmp_path / "o.toml")
     assert r.returncode == 2
     assert (
         r.stderr.strip()
@@ -196,24 +196,24 @@ def test_structure_command(tmp_path):
     edges = _springs_file(tmp_path / "s.npz")
     (tmp_path / "m.toml").write_text(candidate_model_toml())
     out = tmp_path / "found.toml"
-    r = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
+    r = cli_in_process("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
     assert r.returncode == 0, r.stderr
     found = loads_model(out.read_text())
     for b in found.spec.bond:
         i, j = (int(p[1:]) for p in b.particles)
         assert b.present == bool(edges[i, j])
-    again = cli("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
+    again = cli_in_process("structure", tmp_path / "m.toml", tmp_path / "s.npz", "--out", out)
     assert again.returncode == 2 and "exists" in again.stderr
     # fit takes the identified model (absent bonds carry no genes) and, on the undecided
     # candidates, says they were fitted as present
-    run = cli("fit", out, tmp_path / "s.npz", "--population", "8", "--generations", "2",
+    run = cli_in_process("fit", out, tmp_path / "s.npz", "--population", "8", "--generations", "2",
               "--refine", "none", "--out", tmp_path / "run")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "optional bond" not in run.stdout
     genes = sum(bool(edges[i, j]) for i in range(5) for j in range(i + 1, 5))
     rows = (tmp_path / "run" / "uncertainty.csv").read_text().strip().splitlines()
     assert len(rows) == 1 + genes
-    run = cli("fit", tmp_path / "m.toml", tmp_path / "s.npz", "--population", "8",
+    run = cli_in_process("fit", tmp_path / "m.toml", tmp_path / "s.npz", "--population", "8",
               "--generations", "2", "--refine", "none", "--out", tmp_path / "run2")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "note: 10 optional bond(s) without a decision were fitted as present" in run.stdout

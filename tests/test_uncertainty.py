@@ -11,7 +11,7 @@ import pytest
 from activebonds.experiments.coverage import coverage, trial
 from activebonds.identify.uncertainty import Z95, describe, from_jacobian
 from activebonds.model import load_model
-from helpers import TRIANGLE, cli
+from helpers import TRIANGLE, cli_in_process
 
 
 def test_linear_regression_matches_the_textbook_covariance():
@@ -89,10 +89,15 @@ def test_fit_writes_uncertainty_csv(tmp_path):
     """A fit of the noiseless triangle: every parameter determined, intervals tiny around it."""
     data = tmp_path / "tri.csv"
     assert (
-        cli("simulate", TRIANGLE, "--frames", "120", "--rate", "100", "--out", data).returncode == 0
+        cli_in_process(
+            "simulate", TRIANGLE, "--frames", "120", "--rate", "100", "--out", data
+        ).returncode
+        == 0
     )
     run = tmp_path / "run"
-    r = cli("fit", TRIANGLE, data, "--population", "30", "--generations", "100", "--out", run)
+    r = cli_in_process(
+        "fit", TRIANGLE, data, "--population", "30", "--generations", "100", "--out", run
+    )
     assert r.returncode == 0, r.stderr
     rows = list(csv.DictReader((run / "uncertainty.csv").read_text().splitlines()))
     model = load_model(TRIANGLE)
@@ -105,7 +110,7 @@ def test_fit_writes_uncertainty_csv(tmp_path):
     record = json.loads((run / "uncertainty.json").read_text())
     assert record["rank"] == len(rows) and record["directions"] == []
     report = tmp_path / "r.html"
-    assert cli("report", run, "--out", report).returncode == 0
+    assert cli_in_process("report", run, "--out", report).returncode == 0
     assert "Uncertainty" in report.read_text()
 
 
@@ -123,7 +128,10 @@ def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
     uncertainty.csv and report say 'not determined' for it, and give the others."""
     data = tmp_path / "tri.csv"
     assert (
-        cli("simulate", TRIANGLE, "--frames", "80", "--rate", "100", "--out", data).returncode == 0
+        cli_in_process(
+            "simulate", TRIANGLE, "--frames", "80", "--rate", "100", "--out", data
+        ).returncode
+        == 0
     )
     model = tmp_path / "m.toml"
     model.write_text(
@@ -132,7 +140,9 @@ def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
         + "anchor = { value = [0.0, 0.0, 0.0], min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }\n"
     )
     run = tmp_path / "run"
-    r = cli("fit", model, data, "--population", "20", "--generations", "30", "--out", run)
+    r = cli_in_process(
+        "fit", model, data, "--population", "20", "--generations", "30", "--out", run
+    )
     assert r.returncode == 0, r.stderr
     rows = {
         row["parameter"]: row
@@ -147,7 +157,7 @@ def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
     assert all(rows[n]["determined"] == "yes" for n in rows if n not in anchors)
     assert "uncertainty: 9 of 12 parameters determined" in r.stdout
     report = tmp_path / "r.html"
-    assert cli("report", run, "--out", report).returncode == 0
+    assert cli_in_process("report", run, "--out", report).returncode == 0
     assert "not determined" in report.read_text()
 
 
