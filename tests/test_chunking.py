@@ -71,7 +71,7 @@ def _evolve(problem, settings, seconds: float, stop: int, every=None):
 
 def test_results_do_not_depend_on_the_chunk_lengths():
     model, traj = _triangle()
-    settings = FitSettings(population=16, generations=40, seed=3)
+    settings = FitSettings(population=16, generations=40, seed=3, refine="none")
     with jax.enable_x64(True):
         problem = identification(model, traj, settings).problem
     tiny = _evolve(problem, settings, 1e-9, 40)  # chunks of one generation
@@ -87,7 +87,7 @@ def test_results_do_not_depend_on_the_chunk_lengths():
 
 def test_a_short_fit_compiles_one_chunk_and_checkpoints_at_multiples(tmp_path):
     model, traj = _triangle()
-    settings = FitSettings(population=24, generations=10, seed=1)
+    settings = FitSettings(population=24, generations=10, seed=1, refine="none")
     with jax.enable_x64(True):
         problem = identification(model, traj, settings).problem
     _, history, lengths, loop = _evolve(problem, settings, 1.0, 10)
@@ -95,6 +95,11 @@ def test_a_short_fit_compiles_one_chunk_and_checkpoints_at_multiples(tmp_path):
     assert history["generation"].tolist() == list(range(1, 11))
     # a fit checkpoints exactly every checkpoint_every generations, whatever the chunk length
     run = tmp_path / "run"
-    fit(TRIANGLE, traj, FitSettings(population=24, generations=50, checkpoint_every=15), run)
+    fit(
+        TRIANGLE,
+        traj,
+        FitSettings(population=24, generations=50, checkpoint_every=15, refine="none"),
+        run,
+    )
     saved = sorted(int(p.stem.split("-")[-1]) for p in (run / "checkpoints").glob("gen-*.npz"))
     assert saved == [45, 50], saved  # the two newest are kept

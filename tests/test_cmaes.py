@@ -123,7 +123,7 @@ def test_cmaes_recovers_the_triangle_and_beats_the_es_at_equal_evaluations(trian
 
 def test_fit_stopped_half_way_and_resumed_equals_one_fit(triangle, tmp_path):
     truth, traj = triangle
-    opts = {"optimizer": "cmaes", "population": 12, "seed": 3, "chunk": 20}
+    opts = {"optimizer": "cmaes", "population": 12, "seed": 3, "chunk": 20, "refine": "none"}
     whole = fit(truth, traj, out=tmp_path / "whole", generations=80, **opts)
     fit(truth, traj, out=tmp_path / "run", generations=40, **opts)
     seen: list[int] = []

@@ -449,7 +449,14 @@ def test_contact_parameters_are_recovered_by_fit(integrator):
     assert ((z < 0).sum(axis=0) > 20).all() and ((z > 0.05).sum(axis=0) > 20).all()  # hops
     start = loads_model(hopper(1000.0, 20.0, 1.0, 0.0))
     result = fit(
-        start, data, population=40, generations=300, seed=0, init="uniform", integrator=integrator
+        start,
+        data,
+        population=40,
+        generations=300,
+        seed=0,
+        init="uniform",
+        integrator=integrator,
+        refine="none",
     )
     found = result.model.params.bonds["contact"]
     got = {

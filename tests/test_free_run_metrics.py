@@ -229,7 +229,7 @@ def test_a_report_without_validation_has_the_fitted_rows(tmp_path):
     from activebonds.identify import fit
 
     data = simulate(model, 40, 60.0)
-    fit(model, data, out=tmp_path / "r", population=8, generations=2)
+    fit(model, data, out=tmp_path / "r", population=8, generations=2, refine="none")
     html = write_report(tmp_path / "r").read_text()
     assert (
         "<caption>Free run." in html

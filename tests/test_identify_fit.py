@@ -42,7 +42,9 @@ def triangle_fit():
     always a damping); 200 x 3000 reached 0.73 %, too close to the 1 % bar."""
     model = load_model(TRIANGLE)
     data = simulate(model, n_frames=60, rate=60.0)
-    result = fit(model, data, bonds="standard", population=200, generations=6000, seed=0)
+    result = fit(
+        model, data, bonds="standard", population=200, generations=6000, seed=0, refine="none"
+    )
     return model, result
 
 
@@ -50,7 +52,9 @@ def triangle_fit():
 def neural_fit():
     model = loads_model(NEURAL_TRIANGLE)
     data = simulate(model, n_frames=60, rate=60.0)
-    result = fit(model, data, bonds="neural", population=100, generations=800, seed=0)
+    result = fit(
+        model, data, bonds="neural", population=100, generations=800, seed=0, refine="none"
+    )
     return model, result
 
 
@@ -168,6 +172,7 @@ def test_fit_survives_diverging_candidates(tmp_path):
         horizon=10,
         substeps=1,
         chunk=50,
+        refine="none",
     )
     assert result.status == "completed"
     assert np.isfinite(result.cost) and np.isfinite(result.rms_mm)

@@ -78,6 +78,7 @@ def _recovery(truth, method, substeps, population=300, generations=4000):
         seed=0,
         substeps=substeps,
         integrator=method,
+        refine="none",
     )
     got = result.model.layout.natural(result.genome)
     want = truth.layout.natural(truth.layout.initial())

@@ -32,7 +32,7 @@ def one_step_and_shooting(model, traj, horizon: int):
     """The exact one-step optimum, and the same followed by the recommended refinement:
     multiple shooting with windows of ``horizon`` frames, 5 Verlet substeps."""
     base = dict(init="lsq", generations=1, population=8, seed=0)
-    one_step = activebonds.fit(model, traj, **base)
+    one_step = activebonds.fit(model, traj, **base, refine="none")
     shot = activebonds.fit(
         model,
         traj,

@@ -224,7 +224,7 @@ def test_noise_does_not_bias_the_shooting_fit_as_it_biases_the_one_step_fit(tria
     rng = np.random.default_rng(3)
     pos = traj.positions + rng.normal(0, 0.0005, traj.positions.shape)
     noisy = Trajectory(positions=pos, mask=traj.mask, markers=traj.markers, rate=traj.rate)
-    one_step = activebonds.fit(model, noisy, init="lsq", **FAST)
+    one_step = activebonds.fit(model, noisy, init="lsq", refine="none", **FAST)
     shot = activebonds.fit(
         model, noisy, init="lsq", refine="lm", cost="shooting", horizon=(20,), **FAST
     )

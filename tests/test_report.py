@@ -77,6 +77,7 @@ def tiny_run(base: Path):
             bonds="neural",
             population=20,
             generations=30,
+            refine="none",
         )
         cli = CliRunner().invoke(report_app(), [str(run)])
         assert cli.exit_code == 0, cli.output

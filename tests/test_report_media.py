@@ -36,7 +36,7 @@ def run(tmp_path_factory):
     model = load_model(TRIANGLE)
     data = write_trajectory(simulate(model, 90, 60.0), base / "triangle.csv")
     out = base / "run"
-    fit(TRIANGLE, data, out=out, frames=(START, STOP), population=8, generations=4)
+    fit(TRIANGLE, data, out=out, frames=(START, STOP), population=8, generations=4, refine="none")
     return out, write_report(out)
 
 

@@ -90,7 +90,7 @@ def test_random_search_through_fit_writes_its_own_history(tmp_path):
     run = tmp_path / "run"
     res = fit(
         EXAMPLES / "triangle.toml", data, out=run, optimizer="random", population=30,
-        generations=40, seed=2,
+        generations=40, seed=2, refine="none",
     )  # fmt: skip
     meta = json.loads((run / "run.json").read_text())
     assert meta["strategy"] == "random"
@@ -110,7 +110,9 @@ def test_random_search_through_fit_writes_its_own_history(tmp_path):
         rtol=1e-12,
     )
     # the ES on the same problem and budget does better than blind search
-    es_res = fit(EXAMPLES / "triangle.toml", data, population=30, generations=40, seed=2)
+    es_res = fit(
+        EXAMPLES / "triangle.toml", data, population=30, generations=40, seed=2, refine="none"
+    )
     assert es_res.rms_mm < res.rms_mm
     report = write_report(run)
     assert report.is_file() and "random search (random)" in report.read_text(encoding="utf-8")
@@ -252,7 +254,7 @@ def test_a_format_1_run_is_reported_and_resumed_as_if_new(tmp_path):
 
     data = tmp_path / "triangle.csv"
     write_trajectory(simulate(load_model(EXAMPLES / "triangle.toml"), 30, 60.0), data)
-    opts = {"population": 20, "seed": 4, "chunk": 25, "checkpoint_every": 25}
+    opts = {"population": 20, "seed": 4, "chunk": 25, "checkpoint_every": 25, "refine": "none"}
     model = EXAMPLES / "triangle.toml"
     whole = fit(model, data, out=tmp_path / "whole", generations=100, **opts)
     run = tmp_path / "old"

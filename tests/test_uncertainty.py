@@ -220,7 +220,12 @@ def test_a_jacobian_too_large_is_skipped_in_one_line(tmp_path, monkeypatch):
     monkeypatch.setattr(unc, "MAX_JACOBIAN_BYTES", 1)
     model = load_model(TRIANGLE)
     result = fit(
-        model, simulate(model, 40, 100.0), population=8, generations=3, out=tmp_path / "run"
+        model,
+        simulate(model, 40, 100.0),
+        population=8,
+        generations=3,
+        out=tmp_path / "run",
+        refine="none",
     )
     assert result.status == "completed"
     record = json.loads((tmp_path / "run" / "uncertainty.json").read_text())
