@@ -36,7 +36,8 @@ from pathlib import Path
 
 import pytest
 
-from activebonds.identify import driver, rundir
+from activebonds.identify import rundir
+from activebonds.identify.rundir import RunDir
 from reliability_runner import ACTIVEBONDS, complete_checkpoints, env, workspace
 
 pytestmark = pytest.mark.timeout(600)
@@ -184,7 +185,7 @@ def resume_refusals(run: Path) -> list[str]:
         return ["no run directory"]
     try:
         meta = rundir.read_meta(run)
-        driver._check_unchanged(run, meta)
+        RunDir(run).check_unchanged(meta)
         rundir.read_windows(run)
         rundir.read_input_model(run)
     except Exception as err:  # noqa: BLE001 - any refusal is the finding

@@ -148,8 +148,8 @@ def test_a_mixed_precision_fit_recovers_the_triangle():
 
     model = load_model(TRIANGLE)
     data = simulate(model, 60, 60.0)
-    options = dict(bonds="standard", population=100, generations=1500, seed=0, refine="none")
-    es = fit(model, data, precision="mixed", **options)
+    options = dict(bonds="standard", population=100, generations=1500, seed=0)
+    es = fit(model, data, precision="mixed", refine="none", **options)
     refined = fit(model, data, precision="mixed", refine="lm", **options)
     truth = model.params.bonds["binary"]
     for result, rtol in ((es, 0.05), (refined, 1e-3)):

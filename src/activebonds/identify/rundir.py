@@ -240,7 +240,9 @@ def _upgrade_meta(run: Path, meta: dict) -> dict:
         raise InputError(run / "run.json", f"cannot read this format-1 run ({err})") from None
     display = Display(n_terms)
     columns = history_columns(PaperES, display)
-    meta = {**meta, "format": FORMAT, "strategy": "es", "upgraded_from": 1}
+    # format 1 had no refinement: its settings are the ES alone (FitSettings' default is lm)
+    settings = {"refine": "none", **meta.get("settings", {})}
+    meta = {**meta, "settings": settings, "format": FORMAT, "strategy": "es", "upgraded_from": 1}
     meta["history"] = {
         "columns": [c.name for c in columns],
         "integer": [c.name for c in columns if c.integer],

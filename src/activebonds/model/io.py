@@ -12,17 +12,11 @@ from pydantic import ValidationError
 from .. import bonds
 from ..atomic import write_text_atomic
 from ..errors import InputError
-from .forms import PARAMETER_EXPECTED
+from .forms import PARAMETER_EXPECTED, form_of
 from .model import Model, build
 from .schema import ModelSpec
 
 _NOISE = {"float_type", "float_parsing", "list_type", "model_type", "dict_type", "is_instance_of"}
-_EXPECTED = {
-    "scalar": PARAMETER_EXPECTED,
-    "vector": "expected a list of numbers or a table { value = [..], min = .., max = .. }",
-    "weights": "expected a table { length = .., rate = .., min = .., max = .. }",
-    "constant": "expected a list of numbers (a fixed vector, never searched)",
-}
 _EXPECTED = {
     "length": "expected a number or a list of numbers (one per bond of the kind)",
     "rate": "expected a number or a list of numbers (one per bond of the kind)",
@@ -41,7 +35,7 @@ def _expected(key: str, otherwise: str) -> str:
     for kind in bonds.kinds():
         for p in kind.parameters:
             if p.key == key:
-                return _EXPECTED[p.form]
+                return form_of(p).expected
     return _EXPECTED.get(key, otherwise)
 
 
