@@ -19,7 +19,13 @@ ROOT = "__init__"  # the package's own __init__.py: its public face, imported la
 
 # Bottom to top: a module may import modules of its own layer and of the layers below.
 LAYERS = (
-    ("errors", "atomic", "runtime", "document"),  # foundation: no module of the package below them
+    (
+        "errors",
+        "atomic",
+        "runtime",
+        "document",
+        "lazy",
+    ),  # foundation: no module of the package below them
     ("bonds",),  # the force laws, one module per bond kind, and their registry
     ("model",),  # model files, topology, parameters, genome layout
     ("physics", "data"),  # forces summed and integrated; recordings read and written

@@ -8,6 +8,8 @@ Importing it changes nothing in the process (``XLA_FLAGS``, JAX's x64 mode, matp
 backend stay as they were): entry points make such choices (:mod:`activebonds.runtime`).
 """
 
+from .lazy import exports
+
 __version__ = "0.3.0"
 
 # The public face, imported on first use (importing the package stays light): everything else
@@ -28,15 +30,4 @@ _PUBLIC = {
 __all__ = sorted(_PUBLIC)
 
 
-def __getattr__(name: str):
-    if name in _PUBLIC:
-        import importlib
-
-        value = getattr(importlib.import_module(_PUBLIC[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'activebonds' has no attribute '{name}'")
-
-
-def __dir__():
-    return sorted([*globals(), *_PUBLIC])
+__getattr__, __dir__ = exports(__name__, _PUBLIC)
