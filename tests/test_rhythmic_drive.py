@@ -434,7 +434,7 @@ def test_fit_recovers_the_drive_with_both_neural_bonds_free():
     data = simulate(truth, n_frames=180, rate=60.0)
     start = start_model(triangle(**EVERY_NEURAL))
     assert start.layout.n_genes == 15
-    result = fit(start, data, population=100, generations=4000, seed=0, refine="none")
+    result = fit(start, data, population=100, generations=4000, seed=0)  # ES, then LM
     assert_drive_recovered(result.model)
     binary = result.model.params.bonds["binary"]
     for field, true in (("stiffness", [40, 60]), ("rest_length", [0.5, 0.6]), ("gain", [3, 4])):
