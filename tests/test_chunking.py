@@ -69,6 +69,7 @@ def _evolve(problem, settings, seconds: float, stop: int, every=None):
         return np.asarray(state.strategy.genes), history, lengths, loop
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_results_do_not_depend_on_the_chunk_lengths():
     model, traj = _triangle()
     settings = FitSettings(population=16, generations=40, seed=3, refine="none")
@@ -85,6 +86,7 @@ def test_results_do_not_depend_on_the_chunk_lengths():
             np.testing.assert_array_equal(tiny[1][k], other[1][k])
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_short_fit_compiles_one_chunk_and_checkpoints_at_multiples(tmp_path):
     model, traj = _triangle()
     settings = FitSettings(population=24, generations=10, seed=1, refine="none")

@@ -17,6 +17,7 @@ from activebonds.model import load_model
 from helpers import HORSE_LIMB, HORSE_TROT, cli
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_fit_horse_limb_on_the_trot_tiny(tmp_path):
     run = tmp_path / "RUN"
     proc = cli(

@@ -50,6 +50,7 @@ def test_floor_of_a_uniformly_accelerated_system_is_its_acceleration_step():
     assert floor == pytest.approx(unequal, rel=1e-9)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 @pytest.mark.parametrize("name", ["synthetic", "horse"])
 def test_reproduce_tiny_writes_both_series_curves_and_figures(name, tmp_path):
     out = tmp_path / "out"

@@ -185,6 +185,7 @@ def test_validation_windows_are_checked(triangle):
 # ----------------------------------------------------------------------------- --validate
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_fit_validate_end_to_end(tmp_path, triangle):
     model, traj = triangle
     data = tmp_path / "triangle.csv"

@@ -194,35 +194,47 @@ FIT_ARGS = ("--population", "40", "--generations", "3000", "--checkpoint-every",
 SEED = "7"
 
 
-@pytest.fixture(scope="module")
-def cli_ref(tmp_path_factory):
-    """A model copy, a recorded (simulated) CSV, and three runs in fresh processes, started
-    together (2 cores): the reference, the same seed again, and another seed."""
-    base = tmp_path_factory.mktemp("cli")
-    model = base / "triangle.toml"
-    shutil.copyfile(TRIANGLE, model)
-    data = base / "triangle.csv"
-    write_trajectory(simulate(load_model(TRIANGLE), n_frames=60, rate=60.0), data)
-    seeds = {"ref": SEED, "same": SEED, "other": "8"}
+def _cli_runs(base, model, data, seeds: dict) -> None:
+    """Runs in fresh processes, started together (2 cores), one per {name: seed}."""
     procs = {}
     for name, seed in seeds.items():
         args = ("fit", model, data, "--out", base / name, "--seed", seed, *FIT_ARGS)
         procs[name] = cli_popen(*args, log=base / f"{name}.log")
     for name, proc in procs.items():
         assert proc.wait(timeout=600) == 0, (base / f"{name}.log").read_text()
-    return {"base": base, "model": model, "data": data, **{k: base / k for k in seeds}}
+
+
+@pytest.fixture(scope="module")
+def cli_ref(tmp_path_factory):
+    """A model copy, a recorded (simulated) CSV, and the reference run in a fresh process."""
+    base = tmp_path_factory.mktemp("cli")
+    model = base / "triangle.toml"
+    shutil.copyfile(TRIANGLE, model)
+    data = base / "triangle.csv"
+    write_trajectory(simulate(load_model(TRIANGLE), n_frames=60, rate=60.0), data)
+    _cli_runs(base, model, data, {"ref": SEED})
+    return {"base": base, "model": model, "data": data, "ref": base / "ref"}
+
+
+@pytest.fixture(scope="module")
+def cli_seeds(cli_ref):
+    """The reference's inputs run twice more in fresh processes: the same seed, another."""
+    base = cli_ref["base"]
+    _cli_runs(base, cli_ref["model"], cli_ref["data"], {"same": SEED, "other": "8"})
+    return {**cli_ref, "same": base / "same", "other": base / "other"}
 
 
 def result_bytes(run):
     return (run / "history.csv").read_bytes(), (run / "best_model.toml").read_bytes()
 
 
-def test_same_seed_fresh_processes_identical_different_seed_differs(cli_ref):
-    ref_history, ref_best = result_bytes(cli_ref["ref"])
-    same_history, same_best = result_bytes(cli_ref["same"])
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
+def test_same_seed_fresh_processes_identical_different_seed_differs(cli_seeds):
+    ref_history, ref_best = result_bytes(cli_seeds["ref"])
+    same_history, same_best = result_bytes(cli_seeds["same"])
     assert same_history == ref_history
     assert same_best == ref_best
-    other_history, other_best = result_bytes(cli_ref["other"])
+    other_history, other_best = result_bytes(cli_seeds["other"])
     assert other_history != ref_history
     assert other_best != ref_best
     assert len(other_history.splitlines()) == len(ref_history.splitlines()) == 3001
@@ -238,6 +250,7 @@ def snapshot(folder):
     )
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_kill_and_resume_gives_the_uninterrupted_result(cli_ref, tmp_path):
     model = tmp_path / "triangle.toml"  # own copy: this test edits it at the end
     shutil.copyfile(cli_ref["model"], model)

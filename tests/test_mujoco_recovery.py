@@ -46,6 +46,7 @@ def one_step_and_shooting(model, traj, horizon: int):
     return one_step, shot
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_multiple_shooting_recovers_mujoco_tendons_within_1_percent():
     truth = mujoco_truth.tendon_system(n_particles=3, rate=100.0, seconds=1.0, seed=0)
     model = loads_model(truth.model_toml("start"), "mujoco")
@@ -62,7 +63,10 @@ def test_multiple_shooting_recovers_mujoco_tendons_within_1_percent():
 
 @pytest.mark.parametrize(
     "n_particles",
-    [2, pytest.param(4, marks=pytest.mark.slow, id="4-slow")],  # 4: about 4 minutes
+    [
+        pytest.param(2, marks=pytest.mark.slow, id="2"),
+        pytest.param(4, marks=pytest.mark.slow, id="4-slow"),  # about 4 minutes
+    ],
 )
 def test_with_half_a_millimetre_of_noise_shooting_is_unbiased_and_one_step_is_not(n_particles):
     """0.5 mm of marker noise on MuJoCo's tendons (one bond, or a tetrahedron: 200 Hz, 1 s,

@@ -161,6 +161,7 @@ def test_the_cli_says_a_divergent_stage_in_one_line(triangle, tmp_path, monkeypa
     )
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path, monkeypatch):
     model, traj, _ = triangle
     data = tmp_path / "tri.npz"

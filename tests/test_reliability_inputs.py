@@ -290,7 +290,7 @@ def _cli_sample(fuzzed, tmp_path, n: int):
 
 
 def test_cli_refuses_fuzzed_model_files(fuzzed, tmp_path):
-    _cli_sample(fuzzed, tmp_path, 8)
+    _cli_sample(fuzzed, tmp_path, 4)
 
 
 @pytest.mark.slow
@@ -347,6 +347,7 @@ def _c3d(path: Path) -> None:
             w.write(fh)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_info_json_same_gaps_for_every_missing_marker_convention(tmp_path):
     files = {
         "blank.csv": _csv(""),

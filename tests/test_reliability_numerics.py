@@ -157,6 +157,7 @@ def _check_generation(old, new, row, real_cost, children) -> None:
 kinds = st.lists(st.sampled_from([0.0, 1.0]), min_size=4, max_size=4).filter(lambda w: sum(w) > 0)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 @settings(
     max_examples=30,
     deadline=None,
@@ -212,6 +213,7 @@ def _unstable_model(tmp: Path) -> Path:
     return path
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_all_failed_fit_and_diverging_simulation(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     model = _unstable_model(tmp_path)

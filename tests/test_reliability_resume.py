@@ -209,9 +209,9 @@ def _campaign(tmp_path, tmp_path_factory, n_fits: int, problems: list[str], max_
 
 
 def test_kill_at_random_moments_then_resume(tmp_path, tmp_path_factory, record_property):
-    """4 fits of the triangle, one SIGKILL each (mid-checkpoint, in the evolution, during
-    start-up/compilation), resumed with the command line."""
-    stats = _campaign(tmp_path, tmp_path_factory, 4, ["triangle"], max_kills=1)
+    """2 fits of the triangle, one SIGKILL each (at two of the moments: mid-checkpoint, in
+    the evolution, during start-up/compilation), resumed with the command line."""
+    stats = _campaign(tmp_path, tmp_path_factory, 2, ["triangle"], max_kills=1)
     record_property("kill_stats", {k: int(v) for k, v in stats.items()})
 
 
@@ -264,6 +264,7 @@ def _damage_and_load(run, newest_name, older_name, newest, good, shapes, rng, tr
     outcomes[f"{kind}: {'skipped' if name == older_name else 'intact, loaded'}"] += 1
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_torn_or_truncated_checkpoints_are_never_loaded(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     ws = workspace(tmp_path_factory)
@@ -417,6 +418,7 @@ def _check_forced(cases, names, ref, cache) -> None:
 ON_THE_COMMAND_LINE = ["model-changed", "data-changed", "seed-changed", "jax-version"]
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_resume_refuses_a_changed_job_unless_forced(tmp_path, tmp_path_factory):
     """Seven changes, each refused with one line naming it and nothing written: four through
     ``activebonds resume`` (exit 2, one stderr line), three through the API (InputError);
@@ -461,6 +463,7 @@ def test_refusal_names_the_changed_setting(tmp_path, tmp_path_factory):
 
 
 # ============================================================================ determinism
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_same_seed_fresh_processes_are_byte_identical(tmp_path, tmp_path_factory):
     """A fresh process without the compilation cache repeats the reference run exactly
     (history, best model, every checkpoint array, the stored inputs); the command line with

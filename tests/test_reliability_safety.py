@@ -78,6 +78,7 @@ def _shapes(arrays: dict) -> dict:
     return {k: arrays[f"state_{k}"].shape for k in ("genes", "sigma", "cost", "local")}
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_planted_pickles_are_never_unpickled(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     older = f"gen-{FIT['generations'] - FIT['checkpoint_every']:09d}.npz"
@@ -123,6 +124,7 @@ def test_planted_pickles_are_never_unpickled(tmp_path, tmp_path_factory):
     assert not marker.exists()
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_foreign_checkpoint_files_do_not_evict_real_ones(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -183,6 +185,7 @@ def _bad_data(tmp_path: Path) -> dict[str, Path]:
     return out
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_fit_with_bad_data_leaves_no_run_directory(tmp_path, tmp_path_factory):
     files = _bad_data(tmp_path)
     model = tmp_path / "triangle.toml"
@@ -226,6 +229,7 @@ def _tree(folder: Path) -> list:
     )
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_an_existing_run_is_only_replaced_with_overwrite(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     run = copy_run(reference(tmp_path_factory), tmp_path / "RUN")

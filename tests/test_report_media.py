@@ -70,6 +70,7 @@ def _read_mp4(path: Path, monkeypatch) -> tuple[dict, int]:
 # ----------------------------------------------------------------------------- MP4
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_the_mp4_beside_the_gif_has_the_gifs_frames(run, monkeypatch):
     run_dir, report = run
     figs = run_dir / "figures"

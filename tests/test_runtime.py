@@ -8,6 +8,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from helpers import HORSE_LIMB, HORSE_TROT, TRIANGLE
 
 SCRIPT = r"""
@@ -35,6 +37,7 @@ print(json.dumps({"before": before, "imported": imported, "called": called,
 """
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_import_and_calls_leave_the_process_as_it_was(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_ENABLE_X64")}
     env["MPLBACKEND"] = "svg"  # any backend but Agg: switching to Agg would show

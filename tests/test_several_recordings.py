@@ -76,6 +76,7 @@ def test_recordings_at_different_rates_are_refused(trials):
         identification(model, [a, faster], FitSettings(**FAST))
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_the_run_keeps_every_recording_and_resume_checks_them(trials, tmp_path):
     _, a, b, _ = trials
     pa, pb = tmp_path / "a.csv", tmp_path / "b.csv"

@@ -118,6 +118,7 @@ def test_random_search_through_fit_writes_its_own_history(tmp_path):
     assert report.is_file() and "random search (random)" in report.read_text(encoding="utf-8")
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_killed_random_search_resumes_byte_identical(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     extra = ["--optimizer", "random"]
@@ -243,6 +244,7 @@ def _as_format_1(run) -> None:
         np.savez(path, **old)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_format_1_run_is_reported_and_resumed_as_if_new(tmp_path):
     """Runs written by activebonds 0.2 (format 1) are read through the migration: the report
     shows the same curves, and a resume continues them to the same result as one fit."""

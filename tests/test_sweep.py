@@ -222,6 +222,7 @@ def test_a_bad_manifest_is_refused_in_one_line_before_anything_runs(tmp_path, ca
     assert not out.exists()
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_folder_of_other_runs_is_refused_before_anything_runs(without_ray, inputs, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(without_ray / "short-seed1", out / "short-seed1")
@@ -260,6 +261,7 @@ def on_ray(inputs, tmp_path_factory) -> dict:
     return {"out": out, "text": text, "killed": pid, "workers": workers}
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_twelve_fits_on_ray_match_the_fits_without_ray_bit_for_bit(on_ray, without_ray):
     out = on_ray["out"]
     assert "12 fits on a local Ray cluster of 2 workers" in on_ray["text"]
@@ -283,6 +285,7 @@ def test_twelve_fits_on_ray_match_the_fits_without_ray_bit_for_bit(on_ray, witho
     assert not (out / ".running").exists()
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_killed_worker_is_retried_and_its_fit_ends_as_if_uninterrupted(on_ray, without_ray):
     assert on_ray["killed"] in on_ray["workers"]  # a process of the sweep's Ray cluster
     assert not psutil.pid_exists(on_ray["killed"])
@@ -293,6 +296,7 @@ def test_a_killed_worker_is_retried_and_its_fit_ends_as_if_uninterrupted(on_ray,
     assert len(list((run / "checkpoints").glob("gen-*.npz"))) == 2
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_every_run_records_the_sweeps_command_line_not_its_workers(on_ray, inputs):
     out = on_ray["out"]
     expected = f"activebonds sweep {inputs / 'sweep.toml'} --out {out} --workers 2"
@@ -314,6 +318,7 @@ def test_a_killed_create_leaves_staging_folders_that_remove_partial_removes(tmp_
     assert all(folder.is_dir() for folder in others)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_the_same_command_again_skips_every_finished_fit(inputs, without_ray, tmp_path):
     files = [p for p in without_ray.rglob("*") if p.is_file() and p.parent != without_ray]
     stamps = {p: p.stat().st_mtime_ns for p in files}

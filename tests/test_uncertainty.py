@@ -123,6 +123,7 @@ def test_pipeline_coverage_on_50_noisy_datasets():
     assert 0.90 <= coverage(trials) <= 0.98, coverage(trials)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
     """A unary anchor whose spring and damper are fixed at 0 moves nothing: the fit's
     uncertainty.csv and report say 'not determined' for it, and give the others."""
