@@ -26,8 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.flatten_util import ravel_pytree
 
 from .cost import join_windows, make_residuals, make_windows, rms_mm
+from .lm import levenberg_marquardt
 from .problem import Identification
 from .settings import FitSettings
 from .shooting import (
@@ -38,6 +40,7 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
+from .shooting_normal import damped_step, make_normal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
@@ -86,8 +89,9 @@ def _sum_squares(tree) -> float:
     return float(sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(tree)))
 
 
-def _solve(residual, y0, max_steps: int):
-    """Levenberg-Marquardt from y0: (y, number of steps, optimistix's result message)."""
+def _solve_dense(residual, y0, max_steps: int):
+    """Levenberg-Marquardt from y0 on the dense Jacobian: (y, number of steps, optimistix's
+    result message)."""
     solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
     sol = optx.least_squares(lambda y, _: residual(y), solver, y0, max_steps=max_steps, throw=False)
     steps = int(sol.stats["num_steps"])
@@ -100,12 +104,57 @@ def _solve(residual, y0, max_steps: int):
     return sol.value, steps, message
 
 
+@jax.jit
+def _dense_step(system, damping):
+    jtj, grad = system
+    return jnp.linalg.solve(jtj + damping * jnp.eye(jtj.shape[0]), -grad)
+
+
+def _solve(residual, y0, max_steps: int):
+    """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
+    accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`."""
+    jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
+    flat = jax.jit(lambda y: ravel_pytree(residual(y))[0])
+
+    def linearize(y):
+        j, r = jacobian(y), flat(y)
+        grad = j.T @ r
+        return (j.T @ j, grad), grad
+
+    return levenberg_marquardt(flat, linearize, _dense_step, y0, max_steps, RTOL, ATOL)
+
+
+def _solve_shooting(residual, normal, y0, max_steps: int):
+    """Levenberg-Marquardt on a shooting stage's structured normal equations
+    (:mod:`.shooting_normal`): as :func:`_solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
+    u0, x0, v0 = y0
+    k, shape = x0.shape[0], x0.shape
+
+    def split(z):
+        u, states = z
+        half = states.shape[1] // 2
+        return u, states[:, :half].reshape(shape), states[:, half:].reshape(shape)
+
+    flat = jax.jit(lambda z: ravel_pytree(residual(split(z)))[0])
+
+    def linearize(z):
+        system = normal(*z)
+        return system, (system.grad_u, system.grad_s)
+
+    z0 = (u0, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
+    z, steps, message = levenberg_marquardt(flat, linearize, damped_step, z0, max_steps, RTOL, ATOL)
+    return split(z), steps, message
+
+
 class Refinement:
     """The stages of one identification's refinement, run one at a time."""
 
-    def __init__(self, ident: Identification, settings: FitSettings):
+    def __init__(self, ident: Identification, settings: FitSettings, solver: str = "structured"):
+        """``solver``: "structured" (normal equations by block, the states of a shooting
+        stage eliminated) or "dense" (optimistix on the whole Jacobian, for comparison)."""
         self.ident = ident
         self.settings = settings
+        self.solver = solver
         self.bounded = Bounded(ident.problem.lower, ident.problem.upper)
         self.recordings = ident.all_data
         self.states = None  # per recording, per-frame states of the last shooting stage
@@ -133,7 +182,8 @@ class Refinement:
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
         start = _sum_squares(residual(u0))
-        u, steps, message = _solve(residual, u0, max_steps)
+        solve = _solve_dense if self.solver == "dense" else _solve
+        u, steps, message = solve(residual, u0, max_steps)
         end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
 
@@ -168,7 +218,11 @@ class Refinement:
 
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
         start_tree = residual(y0)
-        y, steps, message = _solve(residual, y0, max_steps)
+        if self.solver == "dense":
+            y, steps, message = _solve_dense(residual, y0, max_steps)
+        else:
+            normal = jax.jit(make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome))
+            y, steps, message = _solve_shooting(residual, normal, y0, max_steps)
         end_tree = residual(y)
         result = np.asarray(to_genome(y[0]), np.float64)
 

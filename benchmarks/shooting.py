@@ -1,0 +1,165 @@
+"""Multiple shooting: the dense path (optimistix on the whole Jacobian) against the structured
+path (normal equations by window, states eliminated), side by side in one run.
+
+    python benchmarks/shooting.py [--cases tetra,horse7,body151,body300,body600]
+                                  [--paths dense,structured] [--json out.json]
+
+Each (case, path) runs in its own process, one after another, so its peak memory (RSS) is
+its own. One shooting stage from the same start (the one-step optimum, solved exactly) on
+the same data; per path: the stage's seconds (the warm start on the restart cost, then the
+shooting solve, compilation included), its Levenberg-Marquardt steps, peak RSS, the final
+objective and RMS; per case: the largest relative difference of a parameter between paths.
+A path that would need more memory than ``--max-gb`` (its dense Jacobian, estimated) is not
+run: the record says what it would need.
+
+Cases: ``tetra``, MuJoCo's tendon tetrahedron (4 particles, 6 tendons, 18 genes; RK4 at
+1e-4 s) at 100 Hz for 8 s (801 frames), 0.5 mm noise, H = 20, 5 Verlet substeps (the design
+of docs/EXPERIMENTS.md); ``horse7``, a 7-marker spring model of the bundled horse at trot
+(600 frames); ``bodyN``, a 41-marker spring network of the bundled human walk's markers
+(``body_model``), simulated by our own integrator at 10 substeps for N frames, 0.5 mm noise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent
+sys.path.insert(0, str(ROOT.parent / "tests"))
+sys.path.insert(0, str(ROOT))
+
+NOISE_MM = 0.5
+
+
+def _noisy(traj, seed: int):
+    from activebonds.data import Trajectory
+
+    rng = np.random.default_rng(seed)
+    pos = traj.positions + rng.normal(0.0, NOISE_MM / 1000.0, traj.positions.shape)
+    return Trajectory(
+        positions=pos, markers=traj.markers, rate=traj.rate, mask=traj.mask, source=traj.source
+    )
+
+
+def case(name: str):
+    """(model, trajectory, horizon, substeps) of a case."""
+    from activebonds.model import loads_model
+
+    if name == "tetra":
+        import mujoco_truth
+
+        truth = mujoco_truth.tendon_system(n_particles=4, rate=100.0, seconds=8.0, seed=0)
+        model = loads_model(truth.model_toml("start"), "mujoco")
+        return model, _noisy(truth.trajectory(), 1000), 20, 5
+    if name == "horse7":
+        from body_model import horse_case
+
+        model, traj = horse_case(600)
+        return model, traj, 10, 5
+    if name.startswith("body"):
+        from body_model import body_case
+
+        model, traj = body_case(int(name[4:]))
+        return model, _noisy(traj, 1001), 10, 5
+    raise SystemExit(f"unknown case {name!r}")
+
+
+def dense_bytes(model, traj, horizon: int) -> float:
+    """The dense path's Jacobian (float64): residuals x (parameters + window states)."""
+    n = traj.n_frames
+    coords = traj.positions.shape[1] * traj.positions.shape[2]
+    windows = max(1, -(-(n - 1) // horizon))
+    unknowns = model.layout.n_genes + windows * 2 * coords
+    residuals = n * coords + windows * 2 * coords
+    return 8.0 * unknowns * residuals
+
+
+def child(name: str, path: str) -> dict:
+    import jax
+
+    from activebonds.identify.lsq import least_squares
+    from activebonds.identify.cost import make_windows
+    from activebonds.identify.problem import identification
+    from activebonds.identify.refine import Refinement
+    from activebonds.identify.settings import FitSettings
+
+    jax.config.update("jax_enable_x64", True)
+    model, traj, horizon, substeps = case(name)
+    settings = FitSettings(
+        horizon=(horizon,), cost="shooting", refine="lm", substeps=substeps, integrator="verlet"
+    )
+    ident = identification(model, traj, settings)
+    start = least_squares(ident.model, make_windows(traj.positions, traj.mask, traj.dt, 1))
+    t = time.perf_counter()
+    stage = Refinement(ident, settings, solver=path).stage(horizon, start.genome)
+    seconds = time.perf_counter() - t
+    return {
+        "seconds": round(seconds, 2),
+        "steps": stage.steps,
+        "accepted": stage.accepted,
+        "message": stage.message,
+        "end_rms_mm": stage.end_rms_mm,
+        "continuity_mm": stage.continuity_mm,
+        "genome": stage.genome,
+        "peak_rss_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 3),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", default="tetra")
+    parser.add_argument("--paths", default="dense,structured")
+    parser.add_argument("--max-gb", type=float, default=8.0)
+    parser.add_argument("--json", type=Path)
+    parser.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print("RESULT " + json.dumps(child(*args.child)))
+        return
+    record = {"noise_mm": NOISE_MM, "cases": {}}
+    for name in args.cases.split(","):
+        model, traj, horizon, _ = case(name)
+        row = {
+            "frames": traj.n_frames,
+            "markers": traj.positions.shape[1],
+            "genes": model.layout.n_genes,
+            "horizon": horizon,
+        }
+        for path in args.paths.split(","):
+            need = dense_bytes(model, traj, horizon) / 2**30
+            if path == "dense" and need > args.max_gb:
+                row[path] = {"skipped": f"its Jacobian alone needs {need:.1f} GB"}
+                print(f"{name} {path}: skipped ({need:.1f} GB Jacobian)", flush=True)
+                continue
+            out = subprocess.run(
+                [sys.executable, __file__, "--child", name, path],
+                capture_output=True,
+                text=True,
+            )
+            line = [ln for ln in out.stdout.splitlines() if ln.startswith("RESULT ")]
+            if not line:
+                row[path] = {"failed": out.stderr.strip().splitlines()[-1:]}
+            else:
+                row[path] = json.loads(line[0][7:])
+            shown = {k: v for k, v in row[path].items() if k != "genome"}
+            print(f"{name} {path}: {shown}", flush=True)
+        a, b = row.get("dense", {}), row.get("structured", {})
+        if "genome" in a and "genome" in b:
+            ga, gb = np.asarray(a["genome"]), np.asarray(b["genome"])
+            row["max_rel_param_diff"] = float(np.max(np.abs(ga - gb) / np.abs(ga)))
+            row["speedup"] = round(a["seconds"] / b["seconds"], 2)
+            print(f"{name}: {row['speedup']}x, max rel diff {row['max_rel_param_diff']:.2e}")
+        record["cases"][name] = row
+    if args.json:
+        args.json.write_text(json.dumps(record, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,88 @@
+"""Levenberg-Marquardt over a structured linear system: the outer loop, with optimistix's rules.
+
+optimistix's ``LevenbergMarquardt`` solves each damped step from the dense Jacobian (QR of
+``[J; sqrt(lambda) I]``). Where the Jacobian has a structure to exploit (multiple shooting:
+:mod:`.shooting_normal`), the step is solved from the normal equations built by blocks, and
+this loop drives it with the same rules, so the two paths take the same steps up to
+rounding:
+
+* the damping is ``lambda = 1 / step_size``, the step solves ``(J^T J + lambda I) d = -J^T r``;
+* a step is accepted when the loss ``|r|^2 / 2`` falls by at least 1 % of the Gauss-Newton
+  model's prediction; the step size grows 3.5 times when it falls by 99 % of it, shrinks 4
+  times on a rejection (optimistix's ``ClassicalTrustRegion``);
+* it stops after an accepted step that moved every variable by less than
+  ``atol + rtol |y|`` and every residual by less than ``atol + rtol |r|`` (Cauchy
+  termination, max norm), or at ``max_steps`` evaluations (the first being the start's).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+LOW, HIGH = 0.01, 0.99  # share of the predicted reduction: accept / grow
+GROW, SHRINK = 3.5, 0.25
+
+
+def _dot(a, b) -> float:
+    return float(sum(jnp.vdot(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b))))
+
+
+def _small(diff, ref, rtol: float, atol: float) -> bool:
+    return all(
+        bool(jnp.all(jnp.abs(d) < atol + rtol * jnp.abs(r)))
+        for d, r in zip(jax.tree.leaves(diff), jax.tree.leaves(ref), strict=True)
+    )
+
+
+def levenberg_marquardt(
+    residual: Callable,
+    linearize: Callable,
+    step: Callable,
+    y0,
+    max_steps: int,
+    rtol: float,
+    atol: float,
+    on_step: Callable[[int, float], None] | None = None,
+):
+    """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y) -> (system,
+    gradient J^T r)``, ``step(system, damping) -> d``. Returns (y, steps, message) as
+    :func:`.refine._solve` does; ``on_step(steps, loss)`` after every evaluation."""
+    y = y0
+    r = residual(y)
+    loss = 0.5 * _dot(r, r)
+    system, grad = linearize(y)
+    step_size = 1.0
+    steps = 1
+    if on_step:
+        on_step(steps, loss)
+    while steps < max_steps:
+        damping = 1.0 / step_size
+        d = step(system, damping)
+        y_new = jax.tree.map(jnp.add, y, d)
+        r_new = residual(y_new)
+        loss_new = 0.5 * _dot(r_new, r_new)
+        steps += 1
+        if on_step:
+            on_step(steps, loss_new)
+        g_d = _dot(grad, d)
+        predicted = 0.5 * g_d - 0.5 * damping * _dot(d, d)  # g.d + d^T J^T J d / 2
+        change = loss_new - loss if np.isfinite(loss_new) else np.inf
+        accept = change <= LOW * predicted
+        good = accept and predicted < 0 and change < HIGH * predicted
+        step_size *= GROW if good else (1.0 if accept else SHRINK)
+        if not accept:
+            if step_size < 1e-300:
+                return y, steps, "stopped: the damping grew without bound (no step lowers the cost)"
+            continue
+        done = _small(d, y_new, rtol, atol) and _small(
+            jax.tree.map(jnp.subtract, r_new, r), r_new, rtol, atol
+        )
+        y, r, loss = y_new, r_new, loss_new
+        if done:
+            return y, steps, "converged"
+        system, grad = linearize(y)
+    return y, steps, f"stopped at the step limit ({max_steps}) before converging"
