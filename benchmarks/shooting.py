@@ -82,6 +82,9 @@ def dense_bytes(model, traj, horizon: int) -> float:
 
 
 def child(name: str, path: str) -> dict:
+    from activebonds.runtime import fast_cpu_flags
+
+    fast_cpu_flags()  # as the command line does, before JAX's first computation
     import jax
 
     from activebonds.identify.lsq import least_squares

@@ -27,15 +27,27 @@ LOW, HIGH = 0.01, 0.99  # share of the predicted reduction: accept / grow
 GROW, SHRINK = 3.5, 0.25
 
 
-def _dot(a, b) -> float:
-    return float(sum(jnp.vdot(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b))))
+def _dot(a, b):
+    return sum(jnp.vdot(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True))
 
 
-def _small(diff, ref, rtol: float, atol: float) -> bool:
-    return all(
-        bool(jnp.all(jnp.abs(d) < atol + rtol * jnp.abs(r)))
-        for d, r in zip(jax.tree.leaves(diff), jax.tree.leaves(ref), strict=True)
+def _small(diff, ref, rtol, atol):
+    return jnp.all(
+        jnp.stack(
+            [
+                jnp.all(jnp.abs(d) < atol + rtol * jnp.abs(r))
+                for d, r in zip(jax.tree.leaves(diff), jax.tree.leaves(ref), strict=True)
+            ]
+        )
     )
+
+
+@jax.jit
+def _measures(grad, d, y_new, r, r_new, rtol, atol):
+    """(the new loss, g . d, d . d, whether the step and the residuals' change are small)."""
+    change = jax.tree.map(jnp.subtract, r_new, r)
+    small = _small(d, y_new, rtol, atol) & _small(change, r_new, rtol, atol)
+    return 0.5 * _dot(r_new, r_new), _dot(grad, d), _dot(d, d), small
 
 
 def levenberg_marquardt(
@@ -53,7 +65,7 @@ def levenberg_marquardt(
     :func:`.refine._solve` does; ``on_step(steps, loss)`` after every evaluation."""
     y = y0
     r = residual(y)
-    loss = 0.5 * _dot(r, r)
+    loss = 0.5 * float(_dot(r, r))
     system, grad = linearize(y)
     step_size = 1.0
     steps = 1
@@ -64,12 +76,13 @@ def levenberg_marquardt(
         d = step(system, damping)
         y_new = jax.tree.map(jnp.add, y, d)
         r_new = residual(y_new)
-        loss_new = 0.5 * _dot(r_new, r_new)
+        loss_new, g_d, d_d, done = (
+            float(x) for x in _measures(grad, d, y_new, r, r_new, rtol, atol)
+        )
         steps += 1
         if on_step:
             on_step(steps, loss_new)
-        g_d = _dot(grad, d)
-        predicted = 0.5 * g_d - 0.5 * damping * _dot(d, d)  # g.d + d^T J^T J d / 2
+        predicted = 0.5 * g_d - 0.5 * damping * d_d  # g.d + d^T J^T J d / 2
         change = loss_new - loss if np.isfinite(loss_new) else np.inf
         accept = change <= LOW * predicted
         good = accept and predicted < 0 and change < HIGH * predicted
@@ -78,9 +91,6 @@ def levenberg_marquardt(
             if step_size < 1e-300:
                 return y, steps, "stopped: the damping grew without bound (no step lowers the cost)"
             continue
-        done = _small(d, y_new, rtol, atol) and _small(
-            jax.tree.map(jnp.subtract, r_new, r), r_new, rtol, atol
-        )
         y, r, loss = y_new, r_new, loss_new
         if done:
             return y, steps, "converged"

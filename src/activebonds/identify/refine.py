@@ -114,7 +114,9 @@ def _solve(residual, y0, max_steps: int):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
     accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`."""
     jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
-    flat = jax.jit(lambda y: ravel_pytree(residual(y))[0])
+
+    def flat(y):
+        return ravel_pytree(residual(y))[0]
 
     def linearize(y):
         j, r = jacobian(y), flat(y)
@@ -135,7 +137,8 @@ def _solve_shooting(residual, normal, y0, max_steps: int):
         half = states.shape[1] // 2
         return u, states[:, :half].reshape(shape), states[:, half:].reshape(shape)
 
-    flat = jax.jit(lambda z: ravel_pytree(residual(split(z)))[0])
+    def flat(z):
+        return ravel_pytree(residual(split(z)))[0]
 
     def linearize(z):
         system = normal(*z)
@@ -176,14 +179,15 @@ class Refinement:
         )
         residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
         to_genome = self.bounded.to_genome
-
-        def residual(u):
-            return residuals(to_genome(u))
+        residual = jax.jit(lambda u: residuals(to_genome(u)))  # compiled once per stage
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
         start = _sum_squares(residual(u0))
-        solve = _solve_dense if self.solver == "dense" else _solve
-        u, steps, message = solve(residual, u0, max_steps)
+        if not np.isfinite(start):  # no step can be judged from a non-finite cost
+            u, steps, message = u0, 1, "not started"
+        else:
+            solve = _solve_dense if self.solver == "dense" else _solve
+            u, steps, message = solve(residual, u0, max_steps)
         end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
 
@@ -212,6 +216,7 @@ class Refinement:
         x0, v0 = start_states(windows, self.states)
         to_genome = self.bounded.to_genome
 
+        @jax.jit  # compiled once per stage
         def residual(y):
             u, xs, vs = y
             return residuals(to_genome(u), (xs, vs))
@@ -221,7 +226,9 @@ class Refinement:
         if self.solver == "dense":
             y, steps, message = _solve_dense(residual, y0, max_steps)
         else:
-            normal = jax.jit(make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome))
+            normal = jax.jit(
+                make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome)
+            )
             y, steps, message = _solve_shooting(residual, normal, y0, max_steps)
         end_tree = residual(y)
         result = np.asarray(to_genome(y[0]), np.float64)
@@ -250,7 +257,9 @@ class Refinement:
         the start and the end, for people."""
         start, end = objective
         why = None
-        if not np.all(np.isfinite(result)) or not np.isfinite(end):
+        if not np.isfinite(start):
+            why = "its start's cost is not finite (a prediction diverged)"
+        elif not np.all(np.isfinite(result)) or not np.isfinite(end):
             why = "the refinement diverged (non-finite cost)"
         elif not self.bounded.inside(result):
             why = "the refinement stepped out of the bounds"

@@ -96,9 +96,7 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         batch = max(1, min(n_windows, BATCH_BYTES // (8 * rows * (n + p) * 2)))
         nxt = jnp.concatenate([states[1:], jnp.zeros((1, n))])
         us = jnp.broadcast_to(u, (n_windows, p))
-        out = jax.lax.map(
-            blocks, (us, states, nxt, t0, target, weight, c), batch_size=batch
-        )
+        out = jax.lax.map(blocks, (us, states, nxt, t0, target, weight, c), batch_size=batch)
         tkk, tk1, ykk, yk1, pkk, gkk, gk1, guk, dk1 = out
 
         def shift(a):  # window k's contribution to window k + 1
@@ -145,12 +143,14 @@ def block_tridiagonal_solve(diag, off, rhs):
     return x
 
 
-def eliminate(normal: Normal, damping):
+def eliminate(normal: Normal, damping, state_damping=None):
     """The Schur complement of the states and its right-hand side: (S + damping I, b, Z)
     with ``Z = T_damped^-1 [Y, g_s]``, so that ``(S + damping I) du = b`` and
-    ``ds = -Z_g - Z_Y du``."""
+    ``ds = -Z_g - Z_Y du``; ``state_damping`` (default ``damping``) is added to T's
+    diagonal."""
     n, p = normal.diag.shape[1], normal.params.shape[0]
-    t = normal.diag + damping * jnp.eye(n)
+    state_damping = damping if state_damping is None else state_damping
+    t = normal.diag + state_damping * jnp.eye(n)
     z = block_tridiagonal_solve(
         t, normal.off, jnp.concatenate([normal.cross, normal.grad_s[..., None]], axis=-1)
     )
@@ -173,5 +173,6 @@ def marginal_information(normal: Normal):
     """The parameters' information with the states eliminated (the Schur complement at no
     damping): its inverse is their Gauss-Newton covariance, the states being nuisance."""
     scale = jnp.max(jnp.abs(jnp.diagonal(normal.diag, axis1=1, axis2=2)))
-    reduced, _, _ = eliminate(normal, 1e-14 * scale)  # keeps T's Cholesky defined
+    # a jitter of T alone keeps its Cholesky defined where a state is unseen
+    reduced, _, _ = eliminate(normal, 0.0, 1e-16 * scale)
     return 0.5 * (reduced + reduced.T)

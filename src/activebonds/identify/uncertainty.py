@@ -39,6 +39,7 @@ from .cost import join_windows, make_residuals, make_windows
 from .problem import Identification
 from .settings import FitSettings
 from .shooting import join_shooting, make_shooting, shooting_windows, start_states
+from .shooting_normal import make_normal, marginal_information
 
 RANK_RTOL = 1e-8  # singular values below this share of the largest: not determined
 Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
@@ -281,6 +282,33 @@ def _residual_function(
     return flat, np.zeros(0), 0, observed, 0
 
 
+def _marginal_system(ident, settings, horizon, states, theta, fn, y):
+    """(R [p, p] with R^T R the parameters' information with every window state eliminated
+    (:func:`.shooting_normal.marginal_information`, built window by window: no dense
+    Jacobian), the residuals at the optimum). R stands for the Jacobian: its covariance
+    ``s^2 (R^T R)^-1`` is the parameters' block of the full one's."""
+    model, data = ident.model, ident.all_data
+    log = jnp.asarray(model.layout.log)
+    windows = join_shooting([shooting_windows(d.positions, d.mask, d.dt, horizon) for d in data])
+    x0, v0 = start_states(windows, states)
+    k = x0.shape[0]
+    with jax.enable_x64(True):
+        normal = make_normal(
+            model,
+            windows,
+            settings.substeps,
+            settings.integrator,
+            lambda t: jnp.where(log, jnp.log(t), t),
+        )
+        s = jnp.concatenate([jnp.reshape(x0, (k, -1)), jnp.reshape(v0, (k, -1))], axis=1)
+        info = np.asarray(marginal_information(jax.jit(normal)(jnp.asarray(theta), s)))
+        resid = np.asarray(jax.jit(fn)(jnp.asarray(y, jnp.float64)), np.float64)
+    if not np.all(np.isfinite(info)):
+        return np.full(info.shape, np.nan), resid
+    w, v = np.linalg.eigh(info)
+    return np.sqrt(np.maximum(w, 0.0))[:, None] * v.T, resid
+
+
 def estimate(
     ident: Identification,
     settings: FitSettings,
@@ -300,18 +328,21 @@ def estimate(
         ident, settings, horizon, cost, states
     )
     y = np.concatenate([theta, extra])
-    size = float(observed) * 1.3 * len(y) * 8  # bytes of the dense Jacobian (with links)
-    if size > MAX_JACOBIAN_BYTES:
-        raise MemoryError(
-            f"the Jacobian would take {size / 2**30:.1f} GiB ({len(y)} variables); "
-            f"the limit is {MAX_JACOBIAN_BYTES / 2**30:.1f} GiB"
-        )
-    with jax.enable_x64(True):  # scoped, as the least squares
-        yj = jnp.asarray(y, jnp.float64)
-        resid = np.asarray(jax.jit(fn)(yj), np.float64)
-        jac = np.asarray(jax.jit(jax.jacfwd(fn))(yj), np.float64)
-    keep = np.any(jac != 0, axis=1) | (resid != 0)  # rows of masked-out terms are all zero
-    jac, resid = jac[keep], resid[keep]
+    if cost == "shooting":  # the states eliminated: the parameters' marginal information
+        jac, resid = _marginal_system(ident, settings, horizon, states, theta, fn, y)
+    else:
+        size = float(observed) * len(y) * 8  # bytes of the dense Jacobian
+        if size > MAX_JACOBIAN_BYTES:
+            raise MemoryError(
+                f"the Jacobian would take {size / 2**30:.1f} GiB ({len(y)} variables); "
+                f"the limit is {MAX_JACOBIAN_BYTES / 2**30:.1f} GiB"
+            )
+        with jax.enable_x64(True):  # scoped, as the least squares
+            yj = jnp.asarray(y, jnp.float64)
+            resid = np.asarray(jax.jit(fn)(yj), np.float64)
+            jac = np.asarray(jax.jit(jax.jacfwd(fn))(yj), np.float64)
+        keep = np.any(jac != 0, axis=1) | (resid != 0)  # rows of masked-out terms are all 0
+        jac, resid = jac[keep], resid[keep]
     names = [g.name for g in layout.genes]
     spans = np.array([g.upper - g.lower for g in layout.genes], np.float64)
     masses = {i for i, g in enumerate(layout.genes) if g.owner == "mass"}
