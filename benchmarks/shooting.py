@@ -87,8 +87,8 @@ def child(name: str, path: str) -> dict:
     fast_cpu_flags()  # as the command line does, before JAX's first computation
     import jax
 
-    from activebonds.identify.lsq import least_squares
     from activebonds.identify.cost import make_windows
+    from activebonds.identify.lsq import least_squares
     from activebonds.identify.problem import identification
     from activebonds.identify.refine import Refinement
     from activebonds.identify.settings import FitSettings
