@@ -235,3 +235,28 @@ def test_noise_does_not_bias_the_shooting_fit_as_it_biases_the_one_step_fit(tria
         return np.abs(model.layout.natural(genome) - truth)[damping] / truth[damping]
 
     assert np.median(err(shot.genome)) < 0.5 * np.median(err(one_step.genome))
+
+
+def test_a_shooting_fit_from_the_exact_start_searches_on_the_one_step_cost(triangle):
+    """With --init lsq and --cost shooting the search evolves on the one-step Euler cost
+    (whatever --substeps the shooting uses), whose optimum the least squares is: the search's
+    best is that optimum exactly, its RMS the least squares' own, and the shooting at 4 Verlet
+    substeps then recovers the truth, the fit saying which cost each stage used."""
+    from activebonds.identify.cost import make_windows
+    from activebonds.identify.lsq import least_squares
+
+    model, _, truth = triangle
+    traj = activebonds.simulate(model, 60, 60.0, substeps=4, integrator="verlet")
+    settings = dict(init="lsq", cost="shooting", horizon=(10,), refine="lm", substeps=4)
+    result = activebonds.fit(model, traj, integrator="verlet", **settings, **FAST)
+    exact = least_squares(
+        result.identification.model, make_windows(traj.positions, traj.mask, traj.dt, 1)
+    )
+    np.testing.assert_allclose(result.es_genome, exact.genome, rtol=1e-12, atol=1e-12)
+    baselines = result.records["baselines"]
+    assert result.history["best_rms_mm"][0] == pytest.approx(
+        baselines["least_squares_rms_mm"], rel=1e-9
+    )
+    assert rel_error(model, result.genome, truth) < 1e-6
+    line = result.records["refine"]["costs"]
+    assert "one-step cost (1 Euler substep" in line and "multiple shooting (4 verlet" in line

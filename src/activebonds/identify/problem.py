@@ -99,7 +99,7 @@ def identification(
         raise InputError(
             recordings[0].source, "no frame of the window can be predicted (gaps everywhere)"
         )
-    cost = make_cost(model, windows, settings.substeps, settings.integrator)
+    cost = make_cost(model, windows, settings.es_substeps, settings.es_integrator)
     layout = model.layout
     start = None
     if settings.init == "lsq":
@@ -112,8 +112,8 @@ def identification(
         evaluate_population=make_population_cost(
             model,
             windows,
-            settings.substeps,
-            settings.integrator,
+            settings.es_substeps,
+            settings.es_integrator,
             jnp.float32 if settings.precision == "mixed" else None,
         ),
         lower=layout.lower,

@@ -77,6 +77,24 @@ class FitSettings(BaseModel):
         the refinement shoots, as a shooting state cannot be evolved."""
         return 1 if self.cost == "shooting" else self.horizon[0]
 
+    @property
+    def es_exact(self) -> bool:
+        """The ES evolves on the plain one-step cost (one Euler substep) whose optimum
+        ``--init lsq`` solves exactly: when the refinement shoots from it, the ES's cost is
+        only the shooting's start, and at the shooting's substeps it would cost them times
+        more for a start no better than the exact one."""
+        return self.cost == "shooting" and self.init == "lsq"
+
+    @property
+    def es_substeps(self) -> int:
+        """Substeps of the ES's cost (``substeps`` unless :attr:`es_exact`)."""
+        return 1 if self.es_exact else self.substeps
+
+    @property
+    def es_integrator(self) -> str:
+        """Integrator of the ES's cost (``integrator`` unless :attr:`es_exact`)."""
+        return "euler" if self.es_exact else self.integrator
+
     @field_validator("frames", "validation")
     @classmethod
     def _frames(cls, v):

@@ -223,7 +223,7 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("seed", s.seed),
         (
             "cost",
-            f"horizon {s.es_horizon}, {s.integrator} with {s.substeps} substep(s), {s.precision}",
+            f"horizon {s.es_horizon}, {s.es_integrator} with {s.es_substeps} substep(s), {s.precision}",
         ),
         ("refinement", _refinement_text(s)),
         ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),

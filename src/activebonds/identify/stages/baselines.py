@@ -38,7 +38,7 @@ class BaselinesStage:
         data = ident.data
         record: dict = {"zero_force_rms_mm": zero_force_rms_mm_of(ident.all_data)}
         model = fit.model
-        if s.es_horizon == 1 and s.substeps == 1 and s.integrator == "euler":
+        if s.es_horizon == 1 and s.es_substeps == 1 and s.es_integrator == "euler":
             record["momentum_floor_rms_mm"] = model_floor_rms_mm(
                 model, data.positions, data.mask, data.dt
             )

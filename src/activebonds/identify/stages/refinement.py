@@ -14,6 +14,25 @@ from .base import Fit, Outcome
 NAME = "refine"
 
 
+def costs_line(settings) -> str:
+    """Which cost the search and the refinement used, and why, in one line."""
+    s = settings
+    search = (
+        "the search on the one-step cost (1 Euler substep, whose optimum --init lsq solves exactly)"
+        if s.es_exact
+        else f"the search on the restart cost (horizon {s.es_horizon}, {s.substeps} "
+        f"{s.integrator} substep(s))"
+    )
+    if s.cost == "shooting":
+        refine = (
+            f"the refinement on multiple shooting ({s.substeps} {s.integrator} substep(s)), "
+            "which marker noise does not bias"
+        )
+    else:
+        refine = "the refinement on the same restart cost (--cost shooting: unbiased by noise)"
+    return f"costs: {search}; {refine}"
+
+
 class RefinementStage:
     name = NAME
     state = "refining"
@@ -54,6 +73,7 @@ class RefinementStage:
             "from_genome": start,
             "cost": fit.settings.cost,
             "horizons": list(fit.settings.horizon),
+            "costs": costs_line(fit.settings),
             "stages": [s.record() for s in stages],
         }
         arrays = {}
@@ -65,7 +85,7 @@ class RefinementStage:
     def lines(self, record: dict) -> list[str]:
         """One line per stage: its cost, horizon, RMS before and after, steps."""
         stages = record.get("stages", [])
-        out = []
+        out = [record["costs"]] if record.get("costs") else []
         for i, st in enumerate(stages, 1):
             joined = (
                 ""
