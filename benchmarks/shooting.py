@@ -1,7 +1,7 @@
 """Multiple shooting: the dense path (optimistix on the whole Jacobian) against the structured
 path (normal equations by window, states eliminated), side by side in one run.
 
-    python benchmarks/shooting.py [--cases tetra,horse7,body151,body300,body600]
+    python benchmarks/shooting.py [--cases tetra,horse7,walk,body300,body600]
                                   [--paths dense,structured] [--json out.json]
 
 Each (case, path) runs in its own process, one after another, so its peak memory (RSS) is
@@ -9,14 +9,17 @@ its own. One shooting stage from the same start (the one-step optimum, solved ex
 the same data; per path: the stage's seconds (the warm start on the restart cost, then the
 shooting solve, compilation included), its Levenberg-Marquardt steps, peak RSS, the final
 objective and RMS; per case: the largest relative difference of a parameter between paths.
-A path that would need more memory than ``--max-gb`` (its dense Jacobian, estimated) is not
-run: the record says what it would need.
+A dense path whose Jacobian alone would need more than ``--max-gb`` is not run: the record
+says what it would need (forming it takes one forward pass per unknown over the whole
+recording, QR-factored at every step).
 
 Cases: ``tetra``, MuJoCo's tendon tetrahedron (4 particles, 6 tendons, 18 genes; RK4 at
 1e-4 s) at 100 Hz for 8 s (801 frames), 0.5 mm noise, H = 20, 5 Verlet substeps (the design
 of docs/EXPERIMENTS.md); ``horse7``, a 7-marker spring model of the bundled horse at trot
 (600 frames); ``bodyN``, a 41-marker spring network of the bundled human walk's markers
-(``body_model``), simulated by our own integrator at 10 substeps for N frames, 0.5 mm noise.
+(``body_model``: at least 100 bonds), simulated by our own integrator for N frames, 0.5 mm
+noise; ``walk``, that model on the bundled human walk itself (151 frames, 60 Hz). The body
+cases are fitted with 2 Verlet substeps (its stiffest spring at 60 Hz: omega h = 0.6).
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ def _noisy(traj, seed: int):
 
 
 def case(name: str):
-    """(model, trajectory, horizon, substeps) of a case."""
+    """(model, trajectory, horizon, substeps, integrator) of a case."""
     from activebonds.model import loads_model
 
     if name == "tetra":
@@ -57,17 +60,22 @@ def case(name: str):
 
         truth = mujoco_truth.tendon_system(n_particles=4, rate=100.0, seconds=8.0, seed=0)
         model = loads_model(truth.model_toml("start"), "mujoco")
-        return model, _noisy(truth.trajectory(), 1000), 20, 5
+        return model, _noisy(truth.trajectory(), 1000), 20, 5, "verlet"
     if name == "horse7":
         from body_model import horse_case
 
         model, traj = horse_case(600)
-        return model, traj, 10, 5
+        return model, traj, 10, 5, "verlet"
+    if name == "walk":
+        from body_model import body_model_toml, walk
+
+        traj = walk()
+        return loads_model(body_model_toml(traj), "body"), traj, 10, 2, "verlet"
     if name.startswith("body"):
         from body_model import body_case
 
         model, traj = body_case(int(name[4:]))
-        return model, _noisy(traj, 1001), 10, 5
+        return model, _noisy(traj, 1001), 10, 2, "verlet"
     raise SystemExit(f"unknown case {name!r}")
 
 
@@ -94,9 +102,9 @@ def child(name: str, path: str) -> dict:
     from activebonds.identify.settings import FitSettings
 
     jax.config.update("jax_enable_x64", True)
-    model, traj, horizon, substeps = case(name)
+    model, traj, horizon, substeps, integrator = case(name)
     settings = FitSettings(
-        horizon=(horizon,), cost="shooting", refine="lm", substeps=substeps, integrator="verlet"
+        horizon=(horizon,), cost="shooting", refine="lm", substeps=substeps, integrator=integrator
     )
     ident = identification(model, traj, settings)
     start = least_squares(ident.model, make_windows(traj.positions, traj.mask, traj.dt, 1))
@@ -119,7 +127,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="tetra")
     parser.add_argument("--paths", default="dense,structured")
-    parser.add_argument("--max-gb", type=float, default=8.0)
+    parser.add_argument("--max-gb", type=float, default=0.5, help="largest dense Jacobian run")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -128,12 +136,14 @@ def main() -> None:
         return
     record = {"noise_mm": NOISE_MM, "cases": {}}
     for name in args.cases.split(","):
-        model, traj, horizon, _ = case(name)
+        model, traj, horizon, substeps, integrator = case(name)
         row = {
             "frames": traj.n_frames,
             "markers": traj.positions.shape[1],
             "genes": model.layout.n_genes,
             "horizon": horizon,
+            "substeps": substeps,
+            "integrator": integrator,
         }
         for path in args.paths.split(","):
             need = dense_bytes(model, traj, horizon) / 2**30

@@ -172,7 +172,7 @@ class MujocoTruth:
                 "",
                 "[[bond]]",
                 'kind = "binary"',
-                f'type = "b{i}{j}"',
+                f'type = "{bond_type(i, j, len(self.markers))}"',
                 f'particles = ["{a}", "{c}"]',
             ]
             for key, (truth, start, lo, hi) in params.items():
@@ -184,6 +184,11 @@ class MujocoTruth:
                 else:
                     lines.append(f"{key} = {_num(value)}")
         return "\n".join(lines) + "\n"
+
+
+def bond_type(i: int, j: int, n_particles: int) -> str:
+    """A tendon's bond type name: "b01" (fewer than 11 particles) or "b3_12"."""
+    return f"b{i}{j}" if n_particles <= 10 else f"b{i}_{j}"
 
 
 def _num(x: float) -> str:
@@ -216,6 +221,19 @@ def _rest_shape(rng: np.random.Generator, n: int) -> np.ndarray:
         if n == 2 or np.linalg.svd(x - x.mean(0), compute_uv=False)[need - 1] > 0.08:
             return x
     raise ValueError(f"found no rest shape of {n} particles with bonds in {REST_LENGTH_RANGE}")
+
+
+def _cloud(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n points in a ball, no two closer than REST_LENGTH_RANGE's low end (a sparse
+    network's rest shape: its bonds join near neighbours)."""
+    lo = REST_LENGTH_RANGE[0]
+    radius = lo * (n / 0.4) ** (1 / 3) / 2  # a random close packing's density, roughly
+    points: list[np.ndarray] = []
+    while len(points) < n:
+        x = rng.uniform(-radius, radius, 3)
+        if np.linalg.norm(x) <= radius and all(np.linalg.norm(x - q) >= lo for q in points):
+            points.append(x)
+    return np.array(points)
 
 
 def _mjcf(masses, rest, bonds, timestep: float) -> str:
@@ -260,9 +278,12 @@ def tendon_system(
     damping_scale: float = 1.0,
     trial: int = 0,
     excitation: float = 1.0,
+    neighbours: int | None = None,
 ) -> MujocoTruth:
     """Free point masses, every pair joined by a spring-damper tendon (2: one bond, 3: a
     triangle, 4: a tetrahedron; more: the complete graph), simulated by MuJoCo.
+    ``neighbours``: instead, each mass joined to its that many nearest in the rest shape (a
+    sparse network, each pair once).
 
     Deterministic from ``seed``: masses spread over [0.5, 2] kg, stiffnesses over [20, 200]
     N/m, dampings over [0.05, 1] N s/m (times ``damping_scale``; 0 for an undamped system);
@@ -283,7 +304,17 @@ def tendon_system(
     rng = np.random.default_rng(seed)
     pairs = list(itertools.combinations(range(n_particles), 2))
     masses = _spread(rng, *MASS_RANGE, n_particles)
-    rest = _rest_shape(rng, n_particles)
+    rest = _rest_shape(rng, n_particles) if neighbours is None else _cloud(rng, n_particles)
+    if neighbours is not None:
+        gaps = np.linalg.norm(rest[:, None] - rest[None], axis=-1) + np.diag(
+            np.full(n_particles, np.inf)
+        )
+        near = {
+            tuple(sorted((i, int(j))))
+            for i in range(n_particles)
+            for j in np.argsort(gaps[i])[:neighbours]
+        }
+        pairs = sorted(near)
     rest = rest - masses @ rest / masses.sum()
     stiffness = _spread(rng, *STIFFNESS_RANGE, len(pairs))
     damping = _spread(rng, *DAMPING_RANGE, len(pairs)) * damping_scale
