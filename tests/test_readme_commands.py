@@ -15,6 +15,7 @@ import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -172,3 +173,18 @@ def test_every_bundled_name_resolves_to_a_file(name):
     assert dataset(name).path.is_file()
     if name in DATASETS:  # the licence travels with the data
         assert (dataset(name).path.parent / Path(DATASETS[name].licence).name).is_file()
+
+
+def test_the_bundled_human_walk_resolves_and_reads_41_markers_151_frames_at_60_hz():
+    res = CliRunner().invoke(app, ["datasets", "human-walk"], env={"COLUMNS": "300"})
+    assert res.exit_code == 0, res.output
+    path = Path(res.stdout.strip())
+    assert path == dataset("human-walk").path and path.name == "subject01_walk1.trc"
+    assert (path.parent / "PROVENANCE.txt").is_file()
+    from activebonds.data import read_trajectory
+
+    walk = read_trajectory(path)
+    assert walk.positions.shape == (151, 41, 3) and walk.mask.all()
+    assert walk.rate == 60.0 and walk.markers[0] == "R.ASIS" and walk.markers[-1] == "Top.Head"
+    # read from mm: the first marker's first frame in metres
+    np.testing.assert_allclose(walk.positions[0, 0], [0.61724762, 1.05527502, 0.17078198])

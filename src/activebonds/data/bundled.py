@@ -2,7 +2,8 @@
 point at real data without knowing where pip put it (``activebonds datasets NAME``).
 
 The horse recordings are the Vienna Horse Data Collection's (CC BY-SA 4.0): their licence and
-provenance sit beside them in ``datasets/horse_vhdc/``.
+provenance sit beside them in ``datasets/horse_vhdc/``. The human walk is OpenSim's
+``subject01_walk1`` (Apache-2.0), licence and provenance beside it in ``datasets/human_opensim/``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class Bundled:
 
 
 _VHDC = "datasets/horse_vhdc/"
+_OPENSIM = "datasets/human_opensim/"
 DATASETS: dict[str, Bundled] = {
     d.name: d
     for d in (
@@ -44,6 +46,13 @@ DATASETS: dict[str, Bundled] = {
             _VHDC + "Horse1_M1_walk1_kinematics.csv",
             "VHDC Horse1 at walk: the same 7 markers, 600 frames, 60 Hz",
             _VHDC + "LICENSE_VHDC_CC-BY-SA-4.0.txt",
+        ),
+        Bundled(
+            "human-walk",
+            _OPENSIM + "subject01_walk1.trc",
+            "OpenSim subject01 walk: 41 markers (pelvis, legs, feet, trunk, arms, head), "
+            "151 frames, 60 Hz, mm",
+            _OPENSIM + "LICENSE_opensim-core_Apache-2.0.txt",
         ),
     )
 }
