@@ -27,7 +27,8 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.optimize import LinearConstraint, lsq_linear, minimize
+from scipy.linalg import solve_triangular
+from scipy.optimize import LinearConstraint, lsq_linear, minimize, nnls
 
 from .. import bonds
 from ..errors import InputError
@@ -242,32 +243,50 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     )
 
 
+def compress(a: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, c)`` with ``|r t - c|^2 = |a t - rhs|^2`` for every ``t``, at most K + 1 rows: the
+    triangular factor of the QR decomposition of ``[a | rhs]`` (its last row holds the part of
+    ``rhs`` no combination of the columns reaches). One O(R K^2) factorisation; every solve
+    after it works on the small system, and a subset of the unknowns on a subset of its
+    columns (the columns of ``a`` are ``Q r``)."""
+    if a.shape[0] <= a.shape[1] + 1:
+        return a, rhs
+    factor = np.linalg.qr(np.column_stack([a, rhs]), mode="r")
+    return factor[:, :-1], factor[:, -1]
+
+
 def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, bool]:
     """The least-squares unknowns (natural units) and whether the optimum is exact.
 
-    The box problem (product bounds relaxed to their corners) is solved first; if its
-    solution breaks a product constraint, the constrained convex problem is solved by SLSQP
-    from there. Either point then fixes the active set (unknowns at a bound, products at
-    ``k lo`` or ``k hi``), on which the equality-constrained problem is solved directly:
-    the optimum to machine precision, kept if feasible and no worse."""
+    The system is compressed first (:func:`compress`, the same cost in K + 1 rows). The box
+    problem (product bounds relaxed to their corners) is solved first (BVLS); if its solution
+    breaks a product constraint, the linearly constrained problem is solved as a least
+    distance problem (Lawson & Hanson, ch. 23: NNLS on the constraints, exact for a full-rank
+    system; SLSQP where the system is rank-deficient). Either point then fixes the active set
+    (unknowns at a bound, products at ``k lo`` or ``k hi``), on which the
+    equality-constrained problem is solved directly: the optimum to machine precision, kept
+    if feasible and no worse."""
     a = problem.columns
     rhs = problem.target - problem.offset
     if a.shape[1] == 0:
         return np.zeros(0), True
     norm = np.linalg.norm(a, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
-    a_s = a / norm
+    a_s, c = compress(a / norm, rhs)  # scaled columns, compressed
     if not bounded:
-        theta, *_ = np.linalg.lstsq(a_s, rhs, rcond=None)
+        theta, *_ = np.linalg.lstsq(a_s, c, rcond=None)
         return theta / norm, True
     lo, hi = problem.lower * norm, problem.upper * norm
-    box = lsq_linear(a_s, rhs, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
+    box = lsq_linear(a_s, c, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
     theta = box.x / norm
     if _violation(problem, theta) > 1e-12:
-        theta = _constrained(problem, a_s, rhs, norm, theta)
-    polished = _polish(problem, a, rhs, theta)
+        theta = _constrained(problem, a_s, c, norm, theta)
+    polished = _polish(problem, a_s * norm, c, theta)  # the compressed system, natural units
+    # on noiseless data both costs are rounding (|residual| ~ 1e-15 |rhs|): within that, the
+    # polished point, the optimum of its active set, is kept
     cost = lambda t: float(np.sum((a @ t - rhs) ** 2))  # noqa: E731
-    if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12):
+    rounding = (1e-13 * np.linalg.norm(rhs)) ** 2
+    if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12) + rounding:
         return polished, True
     return theta, False
 
@@ -281,7 +300,57 @@ def _violation(problem: LinearProblem, t: np.ndarray) -> float:
     return worst
 
 
+def _constraints(problem: LinearProblem, norm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``g z >= h`` in the scaled unknowns ``z = theta * norm``: the finite bounds and, for
+    each product, ``p - k lo >= 0`` and ``k hi - p >= 0``."""
+    n = len(norm)
+    lo, hi = problem.lower * norm, problem.upper * norm
+    eye = np.eye(n)
+    rows = [eye[np.isfinite(lo)], -eye[np.isfinite(hi)]]
+    h = [lo[np.isfinite(lo)], -hi[np.isfinite(hi)]]
+    for k, p, xlo, xhi in problem.pairs:
+        r1, r2 = np.zeros(n), np.zeros(n)
+        r1[p], r1[k] = 1.0 / norm[p], -xlo / norm[k]
+        r2[p], r2[k] = -1.0 / norm[p], xhi / norm[k]
+        rows.append(np.stack([r1, r2]))
+        h.append(np.zeros(2))
+    return np.concatenate(rows), np.concatenate(h)
+
+
 def _constrained(problem, a_s, rhs, norm, theta):
+    """The linearly constrained optimum (scaled system ``a_s``, compressed): a least distance
+    problem solved by NNLS when ``a_s`` has full column rank, else SLSQP."""
+    n = len(norm)
+    if a_s.shape[0] >= n:
+        e, f = a_s[:n], rhs[:n]  # upper triangular: the rows after n do not depend on z
+        diag = np.abs(np.diag(e))
+        if diag.min() > 1e-10 * diag.max():
+            z = _least_distance(e, f, *_constraints(problem, norm))
+            if z is not None:
+                return z / norm
+    return _slsqp(problem, a_s, rhs, norm, theta)
+
+
+def _least_distance(e, f, g, h):
+    """min |e z - f| subject to g z >= h, ``e`` square upper triangular and invertible
+    (Lawson & Hanson, Solving Least Squares Problems, ch. 23): with ``y = e z - f`` it is
+    min |y| subject to ``g e^-1 y >= h - g e^-1 f``, whose solution is the residual of an NNLS
+    problem on the constraints. None if infeasible."""
+    ginv = solve_triangular(e, g.T, trans="T").T  # g e^-1
+    b = h - ginv @ f
+    m = ginv.shape[1]
+    design = np.vstack([ginv.T, b[None, :]])  # [(m + 1), constraints]
+    target = np.zeros(m + 1)
+    target[m] = 1.0
+    u, _ = nnls(design, target, maxiter=50 * design.shape[1])
+    resid = design @ u - target
+    if not np.isfinite(resid).all() or abs(resid[m]) < 1e-12:
+        return None
+    y = -resid[:m] / resid[m]
+    return solve_triangular(e, y + f)
+
+
+def _slsqp(problem, a_s, rhs, norm, theta):
     lo, hi = problem.lower * norm, problem.upper * norm
     rows = []
     for k, p, xlo, xhi in problem.pairs:
