@@ -298,7 +298,7 @@ def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, boo
     if not inside or _violation(problem, theta) > 1e-12:
         z = _least_distance(problem, a_s, c, norm) if problem.pairs else None
         if z is not None:
-            theta = z / norm
+            theta = _feasible(problem, z / norm)
         else:
             if not inside:  # BVLS returns the unconstrained optimum when it is inside
                 box = lsq_linear(a_s, c, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
@@ -313,6 +313,15 @@ def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, boo
     if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12) + rounding:
         return polished, True
     return theta, False
+
+
+def _feasible(problem: LinearProblem, t: np.ndarray) -> np.ndarray:
+    """``t`` moved onto its bounds and product constraints where rounding left it outside
+    (the least distance solution holds its active constraints to ~1e-13, not exactly)."""
+    t = np.clip(t, problem.lower, problem.upper)
+    for k, p, xlo, xhi in problem.pairs:
+        t[p] = min(max(t[p], t[k] * xlo), t[k] * xhi)
+    return t
 
 
 def _violation(problem: LinearProblem, t: np.ndarray) -> float:
