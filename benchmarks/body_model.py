@@ -3,7 +3,7 @@ spring horse, built through the package's own API (no package code imports this 
 
 * :func:`body_model_toml` - OpenSim's walk (``activebonds datasets human-walk``): each of the
   41 markers a particle of mass 1 (fixed), joined by a spring-damper (binary) bond to each of
-  its ``n_bonds_per_marker`` nearest markers at frame 0, pairs deduplicated (159 bonds, 477
+  its ``n_bonds_per_marker`` nearest markers at frame 0, pairs deduplicated (138 bonds, 414
   genes at the default 6); every bond its own stiffness, rest length and damping, free within
   bounds.
 * :func:`body_case` - ``n_frames`` of the body at the walk's rate (60 Hz) SIMULATED by
