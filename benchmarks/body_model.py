@@ -3,7 +3,7 @@ spring horse, built through the package's own API (no package code imports this 
 
 * :func:`body_model_toml` - OpenSim's walk (``activebonds datasets human-walk``): each of the
   41 markers a particle of mass 1 (fixed), joined by a spring-damper (binary) bond to each of
-  its ``n_bonds_per_marker`` nearest markers at frame 0, pairs deduplicated (159 bonds, 477
+  its ``n_bonds_per_marker`` nearest markers at frame 0, pairs deduplicated (138 bonds, 414
   genes at the default 6); every bond its own stiffness, rest length and damping, free within
   bounds.
 * :func:`body_case` - ``n_frames`` of the body at the walk's rate (60 Hz) SIMULATED by
@@ -93,13 +93,17 @@ def body_model_toml(
     n_bonds_per_marker: int = 6,
     values: str = "start",
     optional: bool = False,
+    rest_bounds: tuple[float, float] = REST_LENGTH_BOUNDS,
 ) -> str:
     """The 41-marker spring body of ``traj`` (default: the bundled walk) as a model file.
 
     ``values="start"``: stiffness and damping at the geometric mean of their bounds, rest
     lengths 1.2x the frame-0 distance; ``"truth"``: the values :func:`body_case` simulates.
     Particles start at frame 0 with the finite-difference velocity ``(x1 - x0) rate``.
-    ``optional=True`` marks every bond a candidate (``activebonds structure``)."""
+    ``optional=True`` marks every bond a candidate (``activebonds structure``);
+    ``rest_bounds`` the rest lengths' bounds relative to the frame-0 distance (narrower than
+    the truth's +-10 %, e.g. (0.97, 1.03), some rest lengths are held at a bound: the
+    product constraints ``k lo <= k l0 <= k hi`` of the exact least squares become active)."""
     if values not in ("start", "truth"):
         raise ValueError(f"values must be 'start' or 'truth', got {values!r}")
     traj = traj or walk()
@@ -129,8 +133,8 @@ def body_model_toml(
         if values == "truth":
             k, c, rest = (truth[f][b] for f in ("stiffness", "damping", "rest_length"))
         else:
-            k, c, rest = geo["k"], geo["c"], REST_LENGTH_START * d0
-        lo, hi = (r * d0 for r in REST_LENGTH_BOUNDS)
+            k, c, rest = geo["k"], geo["c"], min(REST_LENGTH_START, rest_bounds[1]) * d0
+        lo, hi = (r * d0 for r in rest_bounds)
         lines += [
             "",
             "[[bond]]",

@@ -27,7 +27,8 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.optimize import LinearConstraint, lsq_linear, minimize
+from scipy.linalg import lstsq, qr, solve_triangular
+from scipy.optimize import LinearConstraint, lsq_linear, minimize, nnls
 
 from .. import bonds
 from ..errors import InputError
@@ -242,34 +243,85 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     )
 
 
+def compress(a: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, c)`` with ``|r t - c|^2 = |a t - rhs|^2`` for every ``t``, at most K + 1 rows: the
+    triangular factor of the QR decomposition of ``[a | rhs]`` (its last row holds the part of
+    ``rhs`` no combination of the columns reaches). One O(R K^2) factorisation; every solve
+    after it works on the small system, and a subset of the unknowns on a subset of its
+    columns (the columns of ``a`` are ``Q r``)."""
+    if a.shape[0] <= a.shape[1] + 1:
+        return a, rhs
+    augmented = np.empty((a.shape[0], a.shape[1] + 1), order="F")
+    augmented[:, :-1], augmented[:, -1] = a, rhs
+    factor = qr(augmented, mode="r", overwrite_a=True, check_finite=False)[0][: a.shape[1] + 1]
+    return factor[:, :-1], factor[:, -1]
+
+
+def _lstsq(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The (minimum-norm) least-squares solution: by back substitution when ``a`` is a
+    well-conditioned triangular factor (as :func:`compress` gives), else by a rank-revealing
+    QR (LAPACK gelsy)."""
+    n = a.shape[1]
+    if a.shape[0] >= n and not np.tril(a[:n], -1).any():
+        diag = np.abs(np.diag(a))
+        if n and diag.min() > 1e-10 * diag.max():
+            return solve_triangular(a[:n], b[:n], check_finite=False)
+    return lstsq(a, b, lapack_driver="gelsy", check_finite=False)[0]
+
+
 def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, bool]:
     """The least-squares unknowns (natural units) and whether the optimum is exact.
 
-    The box problem (product bounds relaxed to their corners) is solved first; if its
-    solution breaks a product constraint, the constrained convex problem is solved by SLSQP
-    from there. Either point then fixes the active set (unknowns at a bound, products at
-    ``k lo`` or ``k hi``), on which the equality-constrained problem is solved directly:
-    the optimum to machine precision, kept if feasible and no worse."""
+    The system is compressed first (:func:`compress`, the same cost in K + 1 rows), its
+    columns scaled to unit norm. The unconstrained optimum is kept if it is feasible.
+    Otherwise, with products, the linearly constrained problem (bounds and ``k lo <= k x <=
+    k hi``) is solved as a least distance problem (Lawson & Hanson, ch. 23: one NNLS on the
+    constraints, exact when the system has full rank); without products, or where the system
+    is rank-deficient, the box problem (product bounds relaxed to their corners) is solved
+    by BVLS, then, if its solution breaks a product constraint, the constrained problem by
+    SLSQP from there. That point then fixes the active set (unknowns at a bound, products at
+    ``k lo`` or ``k hi``), on which the equality-constrained problem is solved directly: the
+    optimum to machine precision, kept if feasible and no worse."""
     a = problem.columns
     rhs = problem.target - problem.offset
     if a.shape[1] == 0:
         return np.zeros(0), True
     norm = np.linalg.norm(a, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
-    a_s = a / norm
+    a_s, c = compress(a / norm, rhs)  # scaled columns, compressed
+    free = _lstsq(a_s, c)
     if not bounded:
-        theta, *_ = np.linalg.lstsq(a_s, rhs, rcond=None)
-        return theta / norm, True
+        return free / norm, True
     lo, hi = problem.lower * norm, problem.upper * norm
-    box = lsq_linear(a_s, rhs, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
-    theta = box.x / norm
-    if _violation(problem, theta) > 1e-12:
-        theta = _constrained(problem, a_s, rhs, norm, theta)
-    polished = _polish(problem, a, rhs, theta)
+    inside = bool(np.all((free >= lo) & (free <= hi)))
+    theta = free / norm
+    if not inside or _violation(problem, theta) > 1e-12:
+        z = _least_distance(problem, a_s, c, norm) if problem.pairs else None
+        if z is not None:
+            theta = _feasible(problem, z / norm)
+        else:
+            if not inside:  # BVLS returns the unconstrained optimum when it is inside
+                box = lsq_linear(a_s, c, bounds=(lo, hi), method="bvls", tol=1e-14, lsmr_tol=None)
+                theta = box.x / norm
+            if _violation(problem, theta) > 1e-12:
+                theta = _slsqp(problem, a_s, c, norm, theta)
+    polished = _polish(problem, a_s * norm, c, theta)  # the compressed system, natural units
+    # on noiseless data both costs are rounding (|residual| ~ 1e-15 |rhs|): within that, the
+    # polished point, the optimum of its active set, is kept
     cost = lambda t: float(np.sum((a @ t - rhs) ** 2))  # noqa: E731
-    if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12):
+    rounding = (1e-13 * np.linalg.norm(rhs)) ** 2
+    if polished is not None and cost(polished) <= cost(theta) * (1 + 1e-12) + rounding:
         return polished, True
     return theta, False
+
+
+def _feasible(problem: LinearProblem, t: np.ndarray) -> np.ndarray:
+    """``t`` moved onto its bounds and product constraints where rounding left it outside
+    (the least distance solution holds its active constraints to ~1e-13, not exactly)."""
+    t = np.clip(t, problem.lower, problem.upper)
+    for k, p, xlo, xhi in problem.pairs:
+        t[p] = min(max(t[p], t[k] * xlo), t[k] * xhi)
+    return t
 
 
 def _violation(problem: LinearProblem, t: np.ndarray) -> float:
@@ -281,7 +333,58 @@ def _violation(problem: LinearProblem, t: np.ndarray) -> float:
     return worst
 
 
-def _constrained(problem, a_s, rhs, norm, theta):
+def _constraints(problem: LinearProblem, norm: np.ndarray, einv: np.ndarray):
+    """``(g einv, h)`` for the constraints ``g z >= h`` on the scaled unknowns ``z = theta *
+    norm``: the finite bounds (a product's only where it has no pair: ``k lo <= p <= k hi``
+    with ``k >= 0`` in its bounds implies them) and, for each product, ``p - k lo >= 0`` and
+    ``k hi - p >= 0``. The rows of ``g`` hold one or two entries, so ``g einv`` is built from
+    rows of ``einv`` directly."""
+    lo, hi = problem.lower * norm, problem.upper * norm
+    paired = np.zeros(len(norm), bool)
+    paired[[p for _, p, _, _ in problem.pairs]] = True
+    low = np.isfinite(lo) & ~paired
+    high = np.isfinite(hi) & ~paired
+    rows = [einv[low], -einv[high]]
+    h = [lo[low], -hi[high]]
+    if problem.pairs:
+        k, p, xlo, xhi = (np.array(v) for v in zip(*problem.pairs, strict=True))
+        kk, pp = einv[k] / norm[k, None], einv[p] / norm[p, None]
+        rows += [pp - xlo[:, None] * kk, xhi[:, None] * kk - pp]
+        h.append(np.zeros(2 * len(k)))
+    return np.concatenate(rows), np.concatenate(h)
+
+
+def _least_distance(problem, a_s, rhs, norm):
+    """The linearly constrained optimum in the scaled unknowns, or None where the system is
+    rank-deficient (or the solve fails): min |e z - f| subject to g z >= h, ``e`` the square
+    upper triangular factor (Lawson & Hanson, Solving Least Squares Problems, ch. 23). With
+    ``y = e z - f`` it is min |y| subject to ``g e^-1 y >= h - g e^-1 f``, whose solution is
+    the normalised residual of one NNLS problem on the constraints."""
+    n = len(norm)
+    if a_s.shape[0] < n or np.tril(a_s[:n], -1).any():
+        return None
+    e, f = a_s[:n], rhs[:n]  # the rows after n do not depend on z
+    diag = np.abs(np.diag(e))
+    if diag.min() <= 1e-10 * diag.max():
+        return None
+    einv = solve_triangular(e, np.eye(n), check_finite=False)
+    ginv, h = _constraints(problem, norm, einv)
+    b = h - ginv @ f
+    design = np.vstack([ginv.T, b[None, :]])  # [n + 1, constraints]
+    target = np.zeros(n + 1)
+    target[n] = 1.0
+    try:
+        u, _ = nnls(design, target, maxiter=50 * design.shape[1])
+    except RuntimeError:  # too many iterations
+        return None
+    resid = design @ u - target
+    if not np.isfinite(resid).all() or abs(resid[n]) < 1e-12:
+        return None  # infeasible (cannot happen for consistent bounds) or a failed solve
+    y = -resid[:n] / resid[n]
+    return einv @ (y + f)
+
+
+def _slsqp(problem, a_s, rhs, norm, theta):
     lo, hi = problem.lower * norm, problem.upper * norm
     rows = []
     for k, p, xlo, xhi in problem.pairs:
@@ -330,7 +433,7 @@ def _polish(problem: LinearProblem, a, rhs, theta, tol: float = 1e-7):
         m = a @ t_map
         scale = np.linalg.norm(m, axis=0)
         scale = np.where(scale > 0, scale, 1.0)
-        psi, *_ = np.linalg.lstsq(m / scale, rhs - a @ base, rcond=None)
+        psi = _lstsq(m / scale, rhs - a @ base)
         out = base + t_map @ (psi / scale)
     feasible = np.all(out >= lo - 1e-12 * span) and np.all(out <= hi + 1e-12 * span)
     return out if feasible and _violation(problem, out) <= 1e-12 else None

@@ -42,7 +42,7 @@ from ..errors import InputError
 from ..model import Model, build
 from ..model.schema import ModelSpec
 from .cost import Windows
-from .lsq import least_squares
+from .lsq import LinearProblem, compress, least_squares, linear_problem, solve
 
 TINY = 1e-300  # keeps a relative change finite when an RSS is exactly 0
 RESOLUTION = 1e-3  # the one-step model's accuracy, a share of the zero-force residual's RMS
@@ -105,30 +105,128 @@ def label(spec: ModelSpec, i: int) -> str:
 
 
 class _Scorer:
-    """Exact least squares and BIC of one structure, cached by its set of present bonds."""
+    """Exact least squares and BIC of one structure, cached by its set of present bonds.
 
-    def __init__(self, model: Model, windows: Windows):
+    Where every candidate's linear genes are its own (no type shared with another bond) and
+    it adds no known force (:class:`_Subsets`), one linear problem with every candidate
+    present is compressed once and each structure is solved on a subset of its columns;
+    otherwise each structure's model is built and solved on its own."""
+
+    def __init__(self, model: Model, windows: Windows, pool: list[int]):
         self.spec = model.spec
         self.disabled = model.disabled
         self.windows = windows
+        self.pool = pool
         self.n = int(np.sum(windows.weight)) * model.dimension  # residual coordinates
         free = windows.x0 + windows.dt * windows.v0  # the zero-force prediction
         r0 = windows.weight[:, 0, :, None] * (windows.target[:, 0] - free)
         self.zero_force = float(np.sum(r0**2))  # RSS of the zero-force predictor
         self.floor = self.zero_force * RESOLUTION**2
-        self.cache: dict[frozenset, tuple[float, float, Model, np.ndarray]] = {}
+        self.cache: dict[frozenset, tuple[float, float]] = {}
+        self.fits: dict[frozenset, tuple[float, Model, np.ndarray]] = {}
+        self.subsets = _Subsets.of(self, pool)
 
-    def __call__(self, present: frozenset, pool: list[int]):
-        """(RSS, BIC, model, genome) with exactly the bonds of ``pool`` in ``present``."""
-        if present not in self.cache:
-            spec = with_presence(self.spec, {i: i in present for i in pool})
-            model = build(spec, disable=self.disabled)
+    def model(self, present: frozenset) -> Model:
+        spec = with_presence(self.spec, {i: i in present for i in self.pool})
+        return build(spec, disable=self.disabled)
+
+    def fitted(self, present: frozenset) -> tuple[float, Model, np.ndarray]:
+        """(RSS, model, genome) of the structure, its model built and solved on its own."""
+        if present not in self.fits:
+            model = self.model(present)
             fit = least_squares(model, self.windows)
-            k = len(fit.values)
-            rss = max(fit.cost, self.floor, TINY)
-            bic = self.n * math.log(rss / self.n) + k * math.log(self.n)
-            self.cache[present] = (fit.cost, bic, model, fit.genome)
+            self.fits[present] = (fit.cost, model, fit.genome)
+            self.cache.setdefault(present, self._score(fit.cost, len(fit.values)))
+        return self.fits[present]
+
+    def _score(self, cost: float, k: int) -> tuple[float, float]:
+        rss = max(cost, self.floor, TINY)
+        return cost, self.n * math.log(rss / self.n) + k * math.log(self.n)
+
+    def __call__(self, present: frozenset) -> tuple[float, float]:
+        """(RSS, BIC) with exactly the candidates in ``present``."""
+        if present not in self.cache:
+            if self.subsets is not None:
+                self.cache[present] = self._score(*self.subsets.solve(present))
+            else:
+                self.fitted(present)
         return self.cache[present]
+
+
+class _Subsets:
+    """The exact least squares of any set of candidates from one compressed problem: the
+    problem with every candidate present, its columns scaled and compressed once
+    (:func:`~.lsq.compress`); a structure drops the columns of its absent candidates. Valid
+    when each candidate's unknowns are its own (its genes set no other bond) and the
+    candidates add no known force (the offset with none of them equals the offset with all,
+    and so do the other columns): then the problem of a structure is exactly a subset of the
+    columns of the full one."""
+
+    def __init__(self, problem: LinearProblem, owner: list[int | None]):
+        self.problem, self.owner = problem, owner
+        norm = np.linalg.norm(problem.columns, axis=0)
+        self.norm = np.where(norm > 0, norm, 1.0)
+        self.r, self.c = compress(problem.columns / self.norm, problem.target - problem.offset)
+        self.genes = [_genes(n) for n in problem.names]
+
+    @classmethod
+    def of(cls, scorer: _Scorer, pool: list[int]) -> _Subsets | None:
+        full = scorer.model(frozenset(pool))
+        owned: dict[int, int] = {}  # gene -> its candidate
+        for g, gene in enumerate(full.layout.genes):
+            mine = [b for b in gene.bonds if b in pool]
+            if mine and len(gene.bonds) > 1:
+                return None  # a type shared with another bond: its columns mix bonds
+            if mine:
+                owned[g] = mine[0]
+        problem = linear_problem(full, scorer.windows)
+        owner = []
+        for name in problem.names:
+            ids = {owned.get(g) for g in _genes(name)}
+            if len(ids) > 1:
+                return None
+            owner.append(ids.pop())
+        none = linear_problem(scorer.model(frozenset()), scorer.windows)
+        base = [k for k, o in enumerate(owner) if o is None]
+        same = (
+            [_gene_key(n, full) for n in (problem.names[k] for k in base)]
+            == [_gene_key(n, scorer.model(frozenset())) for n in none.names]
+            and np.array_equal(none.offset, problem.offset)
+            and np.array_equal(none.columns, problem.columns[:, base])
+        )
+        return cls(problem, owner) if same else None
+
+    def solve(self, present: frozenset) -> tuple[float, int]:
+        """(RSS, free linear genes) of the structure with the candidates ``present``."""
+        keep = [k for k, o in enumerate(self.owner) if o is None or o in present]
+        where = {k: i for i, k in enumerate(keep)}
+        p = self.problem
+        sub = LinearProblem(
+            columns=self.r[:, keep] * self.norm[keep],
+            offset=np.zeros(len(self.c)),
+            target=self.c,
+            names=tuple(p.names[k] for k in keep),
+            lower=p.lower[keep],
+            upper=p.upper[keep],
+            pairs=tuple((where[k], where[q], lo, hi) for k, q, lo, hi in p.pairs if k in where),
+            n_terms=p.n_terms,
+        )
+        theta, _ = solve(sub)
+        resid = sub.columns @ theta - sub.target
+        genes = set().union(*(self.genes[k] for k in keep)) if keep else set()
+        return float(resid @ resid), len(genes)
+
+
+def _genes(name: str) -> tuple[int, ...]:
+    """The genes of an unknown: "gene:g" or "product:gk*gx"."""
+    kind, rest = name.split(":")
+    return tuple(int(g) for g in rest.split("*"))
+
+
+def _gene_key(name: str, model: Model) -> str:
+    """An unknown by its genes' names (gene indices differ between structures)."""
+    kind = name.split(":")[0]
+    return kind + ":" + "*".join(model.layout.genes[g].name for g in _genes(name))
 
 
 def identify_structure(model: Model, windows: Windows) -> Structure:
@@ -144,22 +242,23 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
             "structure identification needs fixed masses (it solves the linear parameters "
             "exactly); fix the masses or identify them first",
         )
-    score = _Scorer(model, windows)
+    score = _Scorer(model, windows, pool)
     present = frozenset(pool)
-    rss_full, bic, _, _ = score(present, pool)
+    rss_full, bic = score(present)
     removed: list[int] = []
     while present:
-        trials = {i: score(present - {i}, pool)[1] for i in sorted(present)}
+        trials = {i: score(present - {i})[1] for i in sorted(present)}
         best = min(trials, key=trials.get)
         if not trials[best] < bic:
             break
         present, bic = present - {best}, trials[best]
         removed.append(best)
-    rss, bic, final, genome = score(present, pool)
+    rss, bic = score(present)
+    _, final, genome = score.fitted(present)
     decisions = []
     for i in pool:
         other = present - {i} if i in present else present | {i}
-        rss_o, bic_o, _, _ = score(other, pool)
+        rss_o, bic_o = score(other)
         with_rss, without_rss = (rss, rss_o) if i in present else (rss_o, rss)
         with_bic, without_bic = (bic, bic_o) if i in present else (bic_o, bic)
         decisions.append(
