@@ -179,15 +179,21 @@ class Refinement:
         )
         residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
         to_genome = self.bounded.to_genome
-        residual = jax.jit(lambda u: residuals(to_genome(u)))  # compiled once per stage
+
+        def plain(u):
+            return residuals(to_genome(u))
+
+        residual = jax.jit(plain)  # compiled once per stage
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
         start = _sum_squares(residual(u0))
         if not np.isfinite(start):  # no step can be judged from a non-finite cost
             u, steps, message = u0, 1, "not started"
         else:
-            solve = _solve_dense if self.solver == "dense" else _solve
-            u, steps, message = solve(residual, u0, max_steps)
+            if self.solver == "dense":  # optimistix compiles the function it is given
+                u, steps, message = _solve_dense(plain, u0, max_steps)
+            else:
+                u, steps, message = _solve(residual, u0, max_steps)
         end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
 
@@ -216,15 +222,16 @@ class Refinement:
         x0, v0 = start_states(windows, self.states)
         to_genome = self.bounded.to_genome
 
-        @jax.jit  # compiled once per stage
-        def residual(y):
+        def plain(y):
             u, xs, vs = y
             return residuals(to_genome(u), (xs, vs))
+
+        residual = jax.jit(plain)  # compiled once per stage
 
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
         start_tree = residual(y0)
         if self.solver == "dense":
-            y, steps, message = _solve_dense(residual, y0, max_steps)
+            y, steps, message = _solve_dense(plain, y0, max_steps)
         else:
             normal = jax.jit(
                 make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome)

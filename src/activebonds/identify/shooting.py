@@ -138,7 +138,6 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
     dt, h = windows.dt, windows.horizon
     link = jnp.asarray(windows.link)[:, None, None]
 
-    @jax.jit
     def run(genome, states):
         params = layout.decode(genome)
         xs0, vs0 = states
