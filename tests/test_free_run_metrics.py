@@ -225,6 +225,7 @@ def test_fit_validate_end_to_end(tmp_path, triangle):
     assert html.count("<td>zero force</td>") == 2
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_report_without_validation_has_the_fitted_rows(tmp_path):
     model = loads_model(TRIANGLE.read_text())
     from activebonds.identify import fit

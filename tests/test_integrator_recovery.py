@@ -92,7 +92,7 @@ def _recovery(truth, method, substeps, population=300, generations=4000, refine=
 # default Levenberg-Marquardt refinement on the same cost, at the same tolerance (the ES alone
 # at 300 x 4,000 took 20 minutes for euler-4 on a 2-core machine).
 RECOVERY = [
-    pytest.param("euler", 1, 1e-3, 300, 4000, "none", id="euler-1"),
+    pytest.param("euler", 1, 1e-3, 300, 4000, "none", id="euler-1", marks=pytest.mark.slow),
     pytest.param("verlet", 1, 5e-3, 300, 4000, "none", id="verlet-1", marks=pytest.mark.slow),
     pytest.param("euler", 4, 5e-3, 100, 300, "lm", id="euler-4", marks=pytest.mark.slow),
     pytest.param("verlet", 4, 5e-3, 100, 300, "lm", id="verlet-4", marks=pytest.mark.slow),

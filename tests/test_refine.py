@@ -218,6 +218,7 @@ def test_bad_refinement_options_are_one_line(tmp_path, triangle, options, messag
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_noise_does_not_bias_the_shooting_fit_as_it_biases_the_one_step_fit(triangle):
     """0.5 mm of marker noise on the triangle: the exact one-step optimum's dampings are far
     off (the noisy restart states), multiple shooting's are close."""
@@ -237,6 +238,7 @@ def test_noise_does_not_bias_the_shooting_fit_as_it_biases_the_one_step_fit(tria
     assert np.median(err(shot.genome)) < 0.5 * np.median(err(one_step.genome))
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_a_shooting_fit_from_the_exact_start_searches_on_the_one_step_cost(triangle):
     """With --init lsq and --cost shooting the search evolves on the one-step Euler cost
     (whatever --substeps the shooting uses), whose optimum the least squares is: the search's

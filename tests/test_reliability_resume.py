@@ -208,6 +208,7 @@ def _campaign(tmp_path, tmp_path_factory, n_fits: int, problems: list[str], max_
     return stats
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_kill_at_random_moments_then_resume(tmp_path, tmp_path_factory, record_property):
     """2 fits of the triangle, one SIGKILL each (at two of the moments: mid-checkpoint, in
     the evolution, during start-up/compilation), resumed with the command line."""

@@ -292,6 +292,7 @@ def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_best_model_has_the_permissions_of_the_other_run_files(tmp_path_factory):
     run = reference(tmp_path_factory)
     modes = {p.name: p.stat().st_mode & 0o777 for p in run.iterdir() if p.is_file()}

@@ -92,6 +92,7 @@ def test_the_mp4_beside_the_gif_has_the_gifs_frames(run, monkeypatch):
 # ----------------------------------------------------------------------------- frame numbers
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_frames_are_numbered_as_in_the_recording(run):
     run_dir, report = run
     text = report.read_text(encoding="utf-8")

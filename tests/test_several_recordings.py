@@ -53,6 +53,7 @@ def test_two_recordings_recover_the_truth(trials, cost):
     assert stage.accepted and stage.end_rms_mm < 1e-8
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_two_recordings_are_not_joined_by_shooting_continuity(trials):
     """Glued end to end as one recording, the two trials jump; fitted as two they do not."""
     model, a, b, truth = trials

@@ -137,6 +137,7 @@ def test_the_schur_complement_is_the_parameters_marginal_information(problem):
     np.testing.assert_allclose(got, full_cov, rtol=1e-6)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_structured_and_dense_levenberg_marquardt_end_at_the_same_parameters():
     """0.5 mm of noise on the triangle, windows of 10 frames: both paths from the same start,
     every parameter within 1e-6 relative."""

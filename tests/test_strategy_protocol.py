@@ -79,6 +79,7 @@ def test_random_search_keeps_the_best_of_every_genome_it_drew():
     assert float(((np.asarray(genome) - target) ** 2).sum()) == pytest.approx(float(cost))
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_random_search_through_fit_writes_its_own_history(tmp_path):
     data = tmp_path / "triangle.csv"
     from activebonds.data import write_trajectory

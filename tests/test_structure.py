@@ -192,6 +192,7 @@ def test_no_optional_bond_is_refused():
         identify_structure(model, _springs_windows(np.zeros((5, 3, 3))))
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_structure_command(tmp_path):
     edges = _springs_file(tmp_path / "s.npz")
     (tmp_path / "m.toml").write_text(candidate_model_toml())

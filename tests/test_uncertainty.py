@@ -85,6 +85,7 @@ def test_non_finite_jacobian_is_reported_not_raised():
     assert rank == 0 and not any(e.determined for e in est)
 
 
+@pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_fit_writes_uncertainty_csv(tmp_path):
     """A fit of the noiseless triangle: every parameter determined, intervals tiny around it."""
     data = tmp_path / "tri.csv"
