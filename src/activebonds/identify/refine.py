@@ -1,4 +1,10 @@
-"""Gradient refinement: Levenberg-Marquardt (optimistix) on the residual vector, in stages.
+"""Gradient refinement: Levenberg-Marquardt on the residual vector, in stages.
+
+The steps are solved from the normal equations with optimistix's rules (:mod:`.lm`): for the
+restart cost J^T J over the genes, for multiple shooting the blocks of each window with the
+window states eliminated (:mod:`.shooting_normal`: memory linear in the frames).
+``Refinement(..., solver="dense")`` runs optimistix's own solver on the whole Jacobian
+instead (``benchmarks/shooting.py`` compares the two).
 
 After the evolution strategy, ``fit --refine lm`` polishes its best genome with one
 Levenberg-Marquardt stage per horizon of ``--horizon`` (a curriculum: each stage starts from
