@@ -60,13 +60,13 @@ def levenberg_marquardt(
     atol: float,
     on_step: Callable[[int, float], None] | None = None,
 ):
-    """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y) -> (system,
+    """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y, r) -> (system,
     gradient J^T r)``, ``step(system, damping) -> d``. Returns (y, steps, message) as
     :func:`.refine._solve` does; ``on_step(steps, loss)`` after every evaluation."""
     y = y0
     r = residual(y)
     loss = 0.5 * float(_dot(r, r))
-    system, grad = linearize(y)
+    system, grad = linearize(y, r)
     step_size = 1.0
     steps = 1
     if on_step:
@@ -94,5 +94,5 @@ def levenberg_marquardt(
         y, r, loss = y_new, r_new, loss_new
         if done:
             return y, steps, "converged"
-        system, grad = linearize(y)
+        system, grad = linearize(y, r)
     return y, steps, f"stopped at the step limit ({max_steps}) before converging"

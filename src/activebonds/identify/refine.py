@@ -124,8 +124,8 @@ def _solve(residual, y0, max_steps: int):
     def flat(y):
         return ravel_pytree(residual(y))[0]
 
-    def linearize(y):
-        j, r = jacobian(y), flat(y)
+    def linearize(y, r):  # r: the residuals at y, already evaluated
+        j = jacobian(y)
         grad = j.T @ r
         return (j.T @ j, grad), grad
 
@@ -146,7 +146,7 @@ def _solve_shooting(residual, normal, y0, max_steps: int):
     def flat(z):
         return ravel_pytree(residual(split(z)))[0]
 
-    def linearize(z):
+    def linearize(z, _):
         system = normal(*z)
         return system, (system.grad_u, system.grad_s)
 
