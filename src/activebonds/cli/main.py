@@ -164,14 +164,14 @@ def fit(
     generations: Annotated[int, typer.Option(help="Generations.")] = DEFAULT["generations"],
     seed: Annotated[int, typer.Option(help="Random seed.")] = DEFAULT["seed"],
     horizon: Annotated[
-        str,
+        str | None,
         typer.Option(
             help="Frames predicted from each start: the ES's cost uses the first (1 with "
             "--cost shooting); with --refine lm, one refinement stage per entry, each from "
             "the previous one's result (a curriculum, e.g. 1,5,20). As long as the window: "
-            "a free run."
+            "a free run. Default: 1 (10 with --cost auto choosing shooting)."
         ),
-    ] = ",".join(map(str, DEFAULT["horizon"])),
+    ] = None,
     refine: Annotated[
         str,
         typer.Option(
@@ -183,10 +183,12 @@ def fit(
         str,
         typer.Option(
             help="The refinement's cost: restart (from the recorded states every horizon "
-            "frames; 1: the paper's one-step cost) or shooting (multiple shooting: windows "
-            "of horizon frames whose start states are fitted too; unbiased by noise)."
+            "frames; 1: the paper's one-step cost), shooting (multiple shooting: windows "
+            "of horizon frames whose start states are fitted too; unbiased by noise) or "
+            "auto: shooting (10-frame windows unless --horizon) where a window has at most "
+            "300 unknowns, else restart."
         ),
-    ] = DEFAULT["cost"],
+    ] = "auto",
     smooth: Annotated[
         int,
         typer.Option(
@@ -258,9 +260,9 @@ def fit(
             population=population,
             generations=generations,
             seed=seed,
-            horizon=parse_horizons(horizon),
+            horizon=parse_horizons(horizon or ",".join(map(str, DEFAULT["horizon"]))),
             refine=refine,
-            cost=cost,
+            cost="restart" if cost == "auto" else cost,
             smooth=smooth,
             substeps=substeps,
             integrator=integrator,
@@ -280,6 +282,9 @@ def fit(
             for path in traj:
                 read_trajectory(path, strict=True)
         first = traj[0]
+        if cost == "auto":
+            settings, why = _choose_cost(model, first, settings, horizon_given=horizon is not None)
+            say(why)
         predictions = _check_predictions(model, traj, settings)
         _check_validation(model, first, settings)
         out.print(predictions, markup=False, highlight=False)
@@ -382,6 +387,20 @@ def _check_validation(model, traj, settings) -> None:
         validation_frames(
             variant(load_model(model), settings.bonds), read_trajectory(traj), settings
         )
+
+
+def _choose_cost(model, first, settings, horizon_given: bool):
+    """:func:`~activebonds.identify.cost_choice.choose_cost` for the model file and the first
+    recording (its markers followed by the model's particles)."""
+    from ..data import read_trajectory
+    from ..identify.cost_choice import choose_cost
+    from ..identify.problem import select_recordings, variant
+    from ..model import load_model
+
+    spec = variant(load_model(model), settings.bonds)
+    data = select_recordings(spec, [read_trajectory(first)], settings)[0]
+    coords = data.positions.shape[1] * data.positions.shape[2]
+    return choose_cost(settings, spec.layout.n_genes, coords, horizon_given)
 
 
 def _check_predictions(model, trajs, settings) -> str:

@@ -200,6 +200,14 @@ def make_residuals(model: Model, windows: Windows, substeps: int = 1, method: st
     return residuals
 
 
+def constant_velocity_cost(windows: Windows) -> float:
+    """The zero-force predictor's summed squared error (m^2) on ``windows``' terms: each
+    start's positions carried on at its start velocity, ``x0 + k dt v0`` k frames ahead."""
+    k = np.arange(1, windows.target.shape[1] + 1)[None, :, None, None]
+    err = windows.x0[:, None] + k * windows.dt * windows.v0[:, None] - windows.target
+    return float(np.sum(windows.weight[..., None] * err**2))
+
+
 def rms_mm(cost, n_terms: int):
     """A summed squared error (m^2) shown as the RMS position error in millimetres."""
     return np.sqrt(np.asarray(cost, dtype=np.float64) / max(n_terms, 1)) * 1000.0

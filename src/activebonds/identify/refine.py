@@ -34,7 +34,7 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from .cost import join_windows, make_residuals, make_windows, rms_mm
+from .cost import constant_velocity_cost, join_windows, make_residuals, make_windows, rms_mm
 from .lm import levenberg_marquardt
 from .problem import Identification
 from .settings import FitSettings
@@ -129,7 +129,21 @@ def _solve(residual, y0, max_steps: int):
         grad = j.T @ r
         return (j.T @ j, grad), grad
 
-    return levenberg_marquardt(flat, linearize, _dense_step, y0, max_steps, RTOL, ATOL)
+    return levenberg_marquardt(
+        flat, linearize, _dense_step, y0, max_steps, RTOL, ATOL, scale=_dense_scale
+    )
+
+
+@jax.jit
+def _dense_scale(system):
+    return jnp.max(jnp.diagonal(system[0]))
+
+
+@jax.jit
+def _normal_scale(normal):
+    return jnp.maximum(
+        jnp.max(jnp.diagonal(normal.diag, axis1=1, axis2=2)), jnp.max(jnp.diagonal(normal.params))
+    )
 
 
 def _solve_shooting(residual, normal, y0, max_steps: int):
@@ -151,7 +165,9 @@ def _solve_shooting(residual, normal, y0, max_steps: int):
         return system, (system.grad_u, system.grad_s)
 
     z0 = (u0, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
-    z, steps, message = levenberg_marquardt(flat, linearize, damped_step, z0, max_steps, RTOL, ATOL)
+    z, steps, message = levenberg_marquardt(
+        flat, linearize, damped_step, z0, max_steps, RTOL, ATOL, scale=_normal_scale
+    )
     return split(z), steps, message
 
 
@@ -219,6 +235,10 @@ class Refinement:
         warm = self._restart(horizon, genome, max_steps)
         if warm.accepted:
             genome = np.asarray(warm.genome)
+            # the restart cost's optimum at this horizon: shooting cannot do better there
+            unfit = self._versus_constant_velocity(genome, (horizon,))
+            if unfit:
+                return self._one_step_instead(f"not shot: the model's best {unfit[4:]}", original)
         windows = join_shooting(
             [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
         )
@@ -258,10 +278,41 @@ class Refinement:
             warm.steps + steps,
             message,
         )
+        unfit = stage.accepted and self._versus_constant_velocity(result, (1, horizon))
+        if unfit:
+            return self._one_step_instead(f"the shot model was rejected: {unfit}", original)
         if stage.accepted:
             gap = float(jnp.max(jnp.abs(end_tree[1]))) if end_tree[1].size else 0.0
             stage.continuity_mm = gap / CONTINUITY_WEIGHT * 1000.0
             self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
+        return stage
+
+    def _versus_constant_velocity(self, genome, horizons) -> str | None:
+        """Why ``genome`` loses to the zero-force predictor, or None: its restart predictions
+        ``h`` frames ahead (from every recorded state, each h of ``horizons``) against
+        constant velocity's on the same terms. Shooting fits free runs of H frames joined
+        into one continuous motion; a model that cannot follow the recording over a window
+        only trades the markers for continuity there, and ends worse than doing nothing."""
+        s = self.settings
+        for h in horizons:
+            windows = join_windows(
+                [make_windows(d.positions, d.mask, d.dt, h, s.smooth) for d in self.recordings]
+            )
+            residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+            model = float(rms_mm(_sum_squares(residuals(jnp.asarray(genome))), windows.n_terms))
+            baseline = float(rms_mm(constant_velocity_cost(windows), windows.n_terms))
+            if not model < baseline:
+                return (
+                    f"its {h}-frame predictions are no better than constant velocity's "
+                    f"({model:.4g} vs {baseline:.4g} mm)"
+                )
+        return None
+
+    def _one_step_instead(self, why: str, genome) -> Stage:
+        """The one-step refinement from ``genome``, its message saying ``why`` not shooting."""
+        stage = self._restart(1, genome, MAX_STEPS)
+        stage.cost = "restart"
+        stage.message = f"{why}; refined on the one-step cost instead: {stage.message}"
         return stage
 
     def _judge(self, horizon, start_genome, result, objective, rms, steps, message):

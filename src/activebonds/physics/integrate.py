@@ -56,11 +56,19 @@ def advance(
     """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``."""
     step = STEPS[method]
     h = dt / substeps
-    for k in range(substeps):
-        x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
+    if substeps <= UNROLLED:
+        for k in range(substeps):
+            x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
+        return x, v
+
+    def body(state, k):  # a loop, not unrolled: compile time independent of substeps
+        return step(params, topo, *state, h, t + k * h), None
+
+    (x, v), _ = jax.lax.scan(body, step(params, topo, x, v, h, t), jnp.arange(1, substeps))
     return x, v
 
 
+UNROLLED = 2  # substeps written out in the program; more run as a loop
 START_ITERATIONS = 3  # fixed-point iterations of start_velocity (substeps > 1)
 START_TOLERANCE = 1e-6  # largest last residual, relative to the frame's displacement
 
