@@ -16,7 +16,7 @@ from ...errors import InputError
 from ..ahead import DEFAULT_AHEAD, comparisons
 from ..baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..metrics import FreeRunMetrics, censored_text, window_metrics
-from ..verdict import comparisons_from
+from ..verdict import comparisons_from, verdict
 from ..verdict import lines as verdict_lines
 from .base import Fit, Outcome
 
@@ -149,6 +149,9 @@ def table(record: dict, pred) -> Table:
     if record.get("least_squares_rms_mm") is not None:
         rows.append((LSQ, record["least_squares_rms_mm"], None))
     rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
+    judged = [verdict(model_fit, record["zero_force_rms_mm"])]
+    judged.append(verdict(model_beyond, zero_beyond) if beyond else None)
+    rows.append(("verdict", *(v.text() if v is not None else "—" for v in judged)))
     return Table(
         ("one-step RMS (mm)", "fitted frames", "frames beyond"),
         rows,
