@@ -8,8 +8,8 @@ beside the zero-force (constant-velocity) predictor on the same terms:
 * **better** when the model's RMS error is below the zero-force predictor's by at least
   :data:`MARGIN_PCT` percent: ``better than zero force by 12.3 % (1.59 vs 1.81 mm)``;
 * otherwise it is not: ``worse than zero force (1.842 vs 1.811 mm): the model does not explain
-  this motion`` (or ``no better than zero force`` when the two agree within the margin, as a
-  model whose forces vanish does);
+  this motion`` (``no better than zero force`` when the two agree within the margin either
+  way, as a model whose forces vanish does);
 * ``not judged`` when either number is missing (NaN: nothing to predict).
 
 A :class:`Comparison` holds one kind of prediction (one step, or K frames ahead: the model's
@@ -74,7 +74,8 @@ class Verdict:
             return "not judged"
         if self.better:
             return "better"
-        return "worse" if self.model_mm > self.zero_force_mm else "no better"
+        worse = self.model_mm > self.zero_force_mm * (1.0 + MARGIN_PCT / 100.0)
+        return "worse" if worse else "no better"
 
     def text(self) -> str:
         """The verdict in words, with both numbers."""
