@@ -261,6 +261,26 @@ def _span(gene) -> float:
     return gene.upper - gene.lower
 
 
+def warnings(cost: str, horizon: int, substeps: int) -> list[str]:
+    """Where the intervals of a fit on cost ``cost`` at ``horizon`` with ``substeps`` cannot
+    be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle)."""
+    out = []
+    if cost == "restart" and int(horizon) == 1:
+        out.append(
+            "these intervals come from the one-step cost: on noisy markers they can be up to "
+            "18 times too wide and blind to the bias noise puts in the damping (5-7 standard "
+            "errors); refit with --cost shooting for intervals that hold"
+        )
+    if int(substeps) == 1:
+        out.append(
+            "the integrator takes one step per frame: if the motion is finer than the frames, "
+            "the parameters can sit several standard errors off with no visible symptom (64 % "
+            "coverage of 95 % intervals measured); refit at --substeps 4 and check that the "
+            "parameters move by less than their intervals"
+        )
+    return out
+
+
 def _residual_function(
     ident: Identification, settings: FitSettings, horizon: int, cost: str, states
 ):
