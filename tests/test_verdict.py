@@ -194,3 +194,24 @@ def test_a_fit_says_its_verdict_on_fitted_and_held_out_frames(recording, tmp_pat
     columns = row(tmp_path / "run")
     assert columns["fitted_one_step_verdict"] in ("better", "worse", "no better")
     assert "held_out_10_ahead_gain_pct" in columns
+
+
+def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
+    """The triangle with gravity and nothing to hold it: its free run falls metres in a
+    second; evaluate says so once, with what to add. The true model gets no advice."""
+    from activebonds.identify.verdict import free_run_advice
+    from activebonds.report.evaluate import evaluate
+
+    falling = loads_model(
+        TRIANGLE.read_text().replace("dimension = 3", "dimension = 3\ngravity = [0.0, 0.0, -9.81]")
+    )
+    found = evaluate(falling, recording)
+    assert found.model.free_run_rms_mm > 1000.0
+    advice = [line for line in found.lines() if line.startswith("advice:")]
+    assert len(advice) == 1
+    assert f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS)" in advice[0]
+    assert "contacts" in advice[0] and "anchors" in advice[0] and "drive" in advice[0]
+    assert not any(
+        line.startswith("advice:") for line in evaluate(load_model(TRIANGLE), recording).lines()
+    )
+    assert free_run_advice(999.0) is None and "non-finite" in free_run_advice(float("inf"))

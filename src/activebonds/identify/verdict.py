@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 MARGIN_PCT = 0.1  # better by less than this (percent of the zero-force error): not better
 EXPLAINS_NOT = "the model does not explain this motion"
+ADVICE_MM = 1000.0  # a free run this far from the recording (RMS) gets a line of advice
 
 
 def _number(x) -> float:
@@ -204,3 +205,16 @@ def comparisons_from(records: Sequence[dict] | None) -> list[Comparison]:
 def lines(label: str, comparisons: Sequence[Comparison]) -> list[str]:
     """Every comparison's :meth:`Comparison.lines` under one label."""
     return [line for c in comparisons for line in c.lines(label)]
+
+
+def free_run_advice(free_run_rms_mm) -> str | None:
+    """One line of advice for a free run that leaves the recording by metres (RMS above
+    :data:`ADVICE_MM`, or non-finite), None otherwise."""
+    x = _number(free_run_rms_mm)
+    if math.isnan(x) or x <= ADVICE_MM:
+        return None
+    far = "goes non-finite" if math.isinf(x) else f"ends {x / 1000:.3g} m (RMS) from the recording"
+    return (
+        f"advice: the free run {far}: nothing holds the body or drives it; add ground "
+        "contacts (gravity without support falls), anchors (unary springs) or a rhythmic drive"
+    )

@@ -42,7 +42,7 @@ from ..identify.metrics import (
     window_metrics,
 )
 from ..identify.predictions import rms_mm
-from ..identify.verdict import Comparison, Verdict
+from ..identify.verdict import Comparison, Verdict, free_run_advice
 from ..model import Model
 from .predict import predict
 
@@ -82,7 +82,9 @@ class Evaluation:
     def lines(self) -> list[str]:
         """The verdicts in words: overall and per marker, one step and K frames ahead."""
         a, b = self.frames
-        return [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
+        out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
+        advice = free_run_advice(self.model.free_run_rms_mm)
+        return out + ([advice] if advice else [])
 
     def record(self) -> dict:
         """Plain JSON values (non-finite floats as 'inf', '-inf' or 'nan', as

@@ -25,7 +25,7 @@ from ..identify.baselines import zero_force_predictions
 from ..identify.metrics import FreeRunMetrics
 from ..identify.predictions import rms_mm
 from ..identify.stages import baselines, validation
-from ..identify.verdict import Comparison, comparisons_from, verdict
+from ..identify.verdict import Comparison, comparisons_from, free_run_advice, verdict
 from ..identify.verdict import lines as verdict_lines
 from ..model.names import NEAR_BOUND, parameter_rows
 from . import animation, plots
@@ -306,6 +306,9 @@ def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
     start = int(record.settings.frames[0])
     fitted = record.records.get(baselines.NAME, {})
     out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
+    if "fitted" in fitted:
+        run = FreeRunMetrics.from_dict(fitted["fitted"]["model"]).free_run_rms_mm
+        out += [a for a in (free_run_advice(run),) if a is not None]
     held = record.records.get(validation.NAME)
     if held is not None and "judged" in held:
         a, b = held["frames"]

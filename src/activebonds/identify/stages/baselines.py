@@ -16,7 +16,7 @@ from ...errors import InputError
 from ..ahead import DEFAULT_AHEAD, comparisons
 from ..baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..metrics import FreeRunMetrics, censored_text, window_metrics
-from ..verdict import comparisons_from, verdict
+from ..verdict import comparisons_from, free_run_advice, verdict
 from ..verdict import lines as verdict_lines
 from .base import Fit, Outcome
 
@@ -55,7 +55,10 @@ class BaselinesStage:
     def lines(self, record: dict) -> list[str]:
         out = [f"zero-force baseline on the same frames {record['zero_force_rms_mm']:.4g} mm"]
         if "fitted" in record:
-            out.append(metrics_line("fitted frames", _metrics(record["fitted"])))
+            found = _metrics(record["fitted"])
+            out.append(metrics_line("fitted frames", found))
+            if (advice := free_run_advice(found["model"].free_run_rms_mm)) is not None:
+                out.append(advice)
         out += verdict_lines("fitted frames", comparisons_from(record.get("judged")))
         return out
 
