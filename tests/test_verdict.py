@@ -215,3 +215,26 @@ def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
         line.startswith("advice:") for line in evaluate(load_model(TRIANGLE), recording).lines()
     )
     assert free_run_advice(999.0) is None and "non-finite" in free_run_advice(float("inf"))
+
+
+def test_the_report_marks_the_markers_worse_than_zero_force_in_red(recording):
+    """The per-particle table of a report: a too-stiff triangle is worse than zero force at
+    every marker one step ahead (fitted frames and beyond): those cells are marked and
+    rendered red; the true model's are not."""
+    from activebonds.document import Marked
+    from activebonds.report.html import _table, errors_table
+    from activebonds.report.predict import predict
+
+    stiff = predict(loads_model(_text(stiffness=900.0)), recording, fit_frames=60)
+    table = errors_table(stiff)
+    assert list(table.columns[2:4]) == ["one-step (fit)", "zero force (fit)"]
+    marked = [row[0] for row in table.rows if isinstance(row[2], Marked)]
+    assert marked == ["A", "B", "C"]
+    a = table.rows[0]
+    assert a[2].value > a[3] and "worse than zero force" in a[2].why
+    assert isinstance(a[5], Marked) and a[5].value > a[6]  # beyond the fitted frames
+    html = _table(table)
+    assert html.count('class="num worse"') == 6 and "red: not better than zero force" in html
+    assert "worse" not in _table(
+        errors_table(predict(load_model(TRIANGLE), recording, fit_frames=60))
+    )

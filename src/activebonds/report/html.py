@@ -262,7 +262,7 @@ WORSE = "not better than zero force"
 def _judged(model_mm: float, zero_mm: float):
     """The model's number, marked (red) where it does not beat zero force."""
     v = verdict(model_mm, zero_mm)
-    return Marked(float(model_mm), f"{WORSE}: {v.text()}") if v.better is False else model_mm
+    return Marked(float(model_mm), v.text()) if v.better is False else model_mm
 
 
 def zero_force_one_step_mm(pred: Prediction) -> tuple[np.ndarray, np.ndarray | None]:
