@@ -283,3 +283,14 @@ def test_every_log_searched_interval_of_a_noisy_fit_is_positive():
     for e in shown:
         assert 0 < e.low < e.value < e.high
         assert np.log(e.high / e.value) == pytest.approx(np.log(e.value / e.low), rel=1e-9)
+
+
+def test_the_intervals_say_where_they_cannot_be_trusted():
+    from activebonds.identify.uncertainty import warnings
+
+    one_step = warnings("restart", 1, 1)
+    assert len(one_step) == 2
+    assert "one-step cost" in one_step[0] and "18 times too wide" in one_step[0]
+    assert "--substeps 4" in one_step[1] and "64 % coverage" in one_step[1]
+    assert warnings("shooting", 20, 4) == []
+    assert warnings("restart", 10, 4) == []
