@@ -207,6 +207,7 @@ def test_no_flight_no_gravity_guess():
     d = describe(read_trajectory(HORSE_WALK))
     assert d["gravity"]["up"] is None and d["gravity"]["text"].startswith("none")
     assert d["vertical_agree"] is None and d["ground"]["up"] == "+Z"
+    assert d["vertical_confident"] is False and "(uncertain: no flight phase" in d["ground"]["text"]
 
 
 def _hopper(rate=100.0) -> Trajectory:
@@ -236,6 +237,7 @@ def test_info_shows_both_vertical_guesses(tmp_path):
     assert d["gravity"]["normal"] == [0.0, 1.0, 0.0] and d["gravity"]["phases"] == 3
     assert d["gravity"]["along_up"] == pytest.approx(-G, abs=0.1)
     assert d["vertical_agree"] is True
+    assert d["vertical_confident"] is True and "uncertain" not in d["ground"]["text"]
     table = _invoke("info", path)
     assert "vertical from gravity (guessed)" in table.stdout
     assert "up = +Y: the markers accelerate at -9.8" in table.stdout

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, read_trajectory
@@ -61,3 +62,55 @@ def test_a_human_walk_from_opensim_is_y_up():
     assert (g.axis, g.up) == (1, 1.0) and g.clear
     assert 0.0 < g.height < 0.06
     assert "Toe" in g.lowest or "Heel" in g.lowest
+
+
+def _overground(gaps: float = 0.0) -> Trajectory:
+    """The treadmill trot carried forward at 3 m/s (overground: the lowest marker along x
+    moves, so z is clearly the flattest axis), its hooves missing in a share ``gaps`` of the
+    frames (blocks of 5)."""
+    t = read_trajectory(HORSE / "Horse1_M1_trot1_kinematics.csv")
+    x = np.array(t.positions)
+    x[:, :, 0] += 3.0 * np.arange(t.n_frames)[:, None] / t.rate
+    mask = np.array(t.mask)
+    hooves = [i for i, m in enumerate(t.markers) if m.startswith("H") and m != "Head"]
+    rng = np.random.default_rng(1)
+    for f in range(0, t.n_frames, 5):
+        if rng.random() < gaps:
+            x[f : f + 5, hooves] = np.nan
+            mask[f : f + 5, hooves] = False
+    return Trajectory(positions=x, mask=mask, markers=t.markers, rate=t.rate)
+
+
+def test_an_upside_down_guess_through_gaps_is_flagged_uncertain():
+    """Hooves missing in about 30 % of the frames: there the head is the lowest marker along
+    -Z, and the per-frame minimum along -Z (the head's height) is flatter than along +Z, so
+    the guess turns upside down, clearly so by its flatness score alone. The frames with every
+    marker say +Z: the guess says '(uncertain: ...)' and why, and is not confident."""
+    from activebonds.data import describe
+    from activebonds.data.orientation import confident, guess_gravity
+
+    whole = guess_ground(_overground())
+    assert (whole.axis, whole.up, whole.clear, whole.doubts) == (2, 1.0, True, ())
+    gappy = _overground(0.3)
+    g = guess_ground(gappy)
+    assert (g.axis, g.up) == (2, -1.0) and g.lowest == "Head"  # upside down
+    assert g.clear  # the flatness alone does not see it
+    assert any("the frames with every marker say up = +Z" in d for d in g.doubts)
+    assert "(uncertain: markers missing in" in g.describe()
+    gravity = guess_gravity(gappy)
+    assert not confident(g, gravity)
+    info = describe(gappy)
+    assert info["vertical_confident"] is False
+    assert "uncertain" in info["ground"]["text"] and "up = +Z" in info["ground"]["text"]
+
+
+def test_the_vertical_is_uncertain_without_a_second_guess():
+    """No flight phase on a treadmill trot: the vertical rests on one guess and says so."""
+    from activebonds.data.orientation import confident, guess_gravity, vertical_doubts
+
+    t = _overground()
+    g, gravity = guess_ground(t), guess_gravity(t)
+    assert not gravity.found
+    assert vertical_doubts(g, gravity) == ["no flight phase to check it against"]
+    assert g.describe(gravity).endswith("(uncertain: no flight phase to check it against)")
+    assert not confident(g, gravity)

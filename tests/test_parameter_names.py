@@ -257,3 +257,42 @@ def test_fit_summary_and_report_flag_a_value_at_its_bound(tmp_path):
     assert [r["label"] for r in found] == list(rows)
     section = uncertainty_stage.section(record.records["uncertainty"], record.model.spec)
     assert [row[0] for row in section.tables[0].rows] == list(rows)
+
+
+def test_a_mass_under_total_mass_at_its_bound_is_flagged_in_kg():
+    """Three free masses under total_mass = 10 kg, each with bounds 3 ... 10 (kg up to a
+    common scale): the ratios are held within [0.3, 3.33]. A fit that puts p0 at 0.62 kg
+    beside p1 at 6.6 kg has pushed the ratio p1/p0 to its largest value (10/3 once scaled):
+    p0 is flagged near its min and p1 near its max, both shown in kg with bounds in kg
+    (the weights' bounds times the factor best_model.toml writes); a fit inside the
+    ratios' range flags nothing, whatever the weights' common scale."""
+    from activebonds.model import loads_model
+    from activebonds.model.names import bounds_line
+    from test_gravity_masses import chain
+
+    free = "{ value = 5.0, min = 3.0, max = 10.0 }"
+    model = loads_model(chain("total_mass = 10.0", masses=(free,) * 3))
+    rest = model.layout.mass_rest
+    assert rest == pytest.approx(10.0)
+    # weights: p1 / p0 = 10 / 3 exactly (at the bound), p2 in between
+    for scale in (1.0, 7.0):
+        weights = scale * np.array([3.0, 10.0, 5.0])
+        rows = parameter_rows(model, weights)
+        kg = [r.value for r in rows]
+        assert kg == pytest.approx(10.0 * weights / weights.sum(), rel=1e-12)
+        assert [r.bound for r in rows] == ["min", "max", None]
+        assert [r.unit for r in rows] == ["kg"] * 3
+        assert rows[0].name == "particle p0 mass (share of total_mass)"
+        assert rows[0].lower == pytest.approx(kg[0]) and rows[1].upper == pytest.approx(kg[1])
+        assert rows[0].bound_text() == f"near min {kg[0]:.6g} kg"
+        assert rows[0].lower <= kg[0] <= rows[0].upper and 0.0 <= rows[2].position <= 1.0
+        line = bounds_line(rows)
+        assert line.startswith("2 of 3 parameters at or near a search bound")
+        assert f"particle p0 mass (share of total_mass) = {kg[0]:.6g} (near min" in line
+    inside = parameter_rows(model, np.array([3.2, 3.5, 3.3]))  # kg, each within 3 ... 10
+    assert [r.bound for r in inside] == [None, None, None]
+    # the common factor nearest 1 keeps the file's bounds: kg bounds are 3 ... 10
+    assert (inside[0].lower, inside[0].upper) == pytest.approx((3.0, 10.0))
+    # just inside the 1 % band of the ratio's log range (2 log(10/3)): still flagged
+    near = np.array([3.0, 10.0 * np.exp(-0.009 * 2 * np.log(10 / 3)), 5.0])
+    assert [r.bound for r in parameter_rows(model, near)][:2] == ["min", "max"]

@@ -233,3 +233,64 @@ def test_a_jacobian_too_large_is_skipped_in_one_line(tmp_path, monkeypatch):
     record = json.loads((tmp_path / "run" / "uncertainty.json").read_text())
     assert record["not_computed"].startswith("the Jacobian would take")
     assert not (tmp_path / "run" / "uncertainty.csv").exists()
+
+
+def test_a_log_searched_parameter_has_its_interval_in_log_space_never_below_zero():
+    """A positive stiffness of 1000 determined to +-60 % (se 600): in linear space its 95 %
+    interval would go to -176; searched in log space, it is formed there: 1000 exp(+-1.96
+    se / 1000), always positive, and held against the log range for 'not determined'."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(80, 1))
+    resid = rng.normal(0.0, 1.0, 80)
+    resid -= x[:, 0] * (x[:, 0] @ resid) / (x[:, 0] @ x[:, 0])  # at the optimum: J^T r = 0
+    s = np.sqrt(resid @ resid / 79)
+    x *= s / (600.0 * np.linalg.norm(x))  # se = s / |x| = 600
+    args = (x, resid, ["bond[0].stiffness"], np.array([1000.0]))
+    (linear,), *_ = from_jacobian(*args, np.array([1e4]), 79)
+    assert linear.std_error == pytest.approx(600.0, rel=1e-9) and linear.low < 0
+    wide = np.array([np.log(1e4 / 1.0)])  # search range 1 ... 10,000
+    (logged,), *_ = from_jacobian(*args, wide, 79, log=np.array([True]))
+    assert logged.determined and logged.std_error == pytest.approx(600.0, rel=1e-9)
+    half = Z95 * 600.0 / 1000.0
+    assert logged.low == pytest.approx(1000.0 * np.exp(-half), rel=1e-9) and logged.low > 0
+    assert logged.high == pytest.approx(1000.0 * np.exp(half), rel=1e-9)
+    assert "log space" in logged.note
+    narrow = np.array([np.log(2.0)])  # search range 700 ... 1400: the data say less
+    (undetermined,), *_ = from_jacobian(*args, narrow, 79, log=np.array([True]))
+    assert not undetermined.determined
+
+
+def test_every_log_searched_interval_of_a_noisy_fit_is_positive():
+    """The estimate of a fit on noisy data, every gene log-scaled (masses under total_mass,
+    stiffnesses): no interval reaches 0 or below."""
+    from activebonds.identify.problem import identification
+    from activebonds.identify.settings import FitSettings
+    from activebonds.identify.uncertainty import estimate
+    from activebonds.model import loads_model
+    from activebonds.simulation import simulate
+    from test_gravity_masses import FREE_MASS, MASSES, chain
+
+    data = simulate(loads_model(chain()), 40, 50.0)
+    rng = np.random.default_rng(6)
+    noisy = data.positions + rng.normal(0.0, 0.003, data.positions.shape)  # 3 mm
+    data = type(data)(positions=noisy, mask=data.mask, markers=data.markers, rate=data.rate)
+    free_k = "{ value = 50.0, min = 0.5, max = 5000.0 }"
+    text = chain(f"total_mass = {sum(MASSES)}", masses=(FREE_MASS,) * 3, stiffness=(free_k,) * 3)
+    ident = identification(loads_model(text), data, FitSettings())
+    report = estimate(ident, FitSettings(), np.log([*MASSES, 90.0, 40.0, 25.0]))
+    shown = [e for e in report.estimates if e.determined]
+    assert len(shown) >= 3
+    for e in shown:
+        assert 0 < e.low < e.value < e.high
+        assert np.log(e.high / e.value) == pytest.approx(np.log(e.value / e.low), rel=1e-9)
+
+
+def test_the_intervals_say_where_they_cannot_be_trusted():
+    from activebonds.identify.uncertainty import warnings
+
+    one_step = warnings("restart", 1, 1)
+    assert len(one_step) == 2
+    assert "one-step cost" in one_step[0] and "18 times too wide" in one_step[0]
+    assert "--substeps 4" in one_step[1] and "64 % coverage" in one_step[1]
+    assert warnings("shooting", 20, 4) == []
+    assert warnings("restart", 10, 4) == []

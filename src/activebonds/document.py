@@ -21,6 +21,15 @@ class Figure:
 
 
 @dataclass(frozen=True)
+class Marked:
+    """A table cell shown with a warning (e.g. a model's error where it does not beat zero
+    force: red in the report); ``value`` is rendered as any other cell's."""
+
+    value: object
+    why: str = ""  # a tooltip, in words
+
+
+@dataclass(frozen=True)
 class Table:
     columns: Sequence[str]
     rows: Sequence[Sequence[object]]

@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
@@ -33,11 +34,20 @@ def evaluate(
     integrator: Annotated[
         str, typer.Option(help="euler or verlet (as the model was fitted).")
     ] = "euler",
+    horizon: Annotated[
+        int,
+        typer.Option(
+            help="Frames ahead of the multi-step comparison: the RMS error of the model's "
+            "free run HORIZON frames from each recorded state, beside zero force's (1: one "
+            "step only)."
+        ),
+    ] = 10,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
-    free run stays within 50 mm (as fit's summary and --validate), for the model and the
-    zero-force (constant-velocity) predictor, overall and per particle (mm)."""
+    free run stays within 50 mm (as fit's summary and --validate), the RMS error HORIZON
+    frames ahead, for the model and the zero-force (constant-velocity) predictor, overall and
+    per particle (mm), each with its verdict (better than zero force by X %, or worse)."""
     from ..data import read_trajectory
     from ..identify.settings import parse_frames, parse_markers
     from ..model import load_model
@@ -53,6 +63,7 @@ def evaluate(
             frames=window,
             substeps=substeps,
             integrator=integrator,
+            horizon=horizon,
         )
     except InputError as e:
         fail(e)
@@ -65,30 +76,55 @@ def evaluate(
     table.add_column("")
     table.add_column("model", justify="right")
     table.add_column("zero force", justify="right")
-    table.add_row("one-step RMS (mm)", _mm(m.one_step_rms_mm), _mm(z.one_step_rms_mm))
-    table.add_row("free-run RMS (mm)", _mm(m.free_run_rms_mm), _mm(z.free_run_rms_mm))
+    table.add_column("verdict")
+    one = found.comparisons[0]
+    table.add_row(
+        "one-step RMS (mm)", _mm(m.one_step_rms_mm), _mm(z.one_step_rms_mm), _word(one.overall)
+    )
+    for c in found.comparisons[1:]:
+        table.add_row(
+            f"{c.horizon}-frame-ahead RMS (mm)",
+            _mm(c.model_mm),
+            _mm(c.zero_force_mm),
+            _word(c.overall),
+        )
+    table.add_row("free-run RMS (mm)", _mm(m.free_run_rms_mm), _mm(z.free_run_rms_mm), "")
     table.add_row(
         f"frames within {m.threshold_mm:g} mm (median of {len(m.starts)} starts)",
         m.frames_text(),
         z.frames_text(),
+        "",
     )
     out.print(table)
-    per = Table(title="per particle (RMS error, mm)")
+    per = Table(title="per particle (RMS error, mm; red: not better than zero force)")
     for col in ("particle", "marker"):
         per.add_column(col)
-    for col in ("one-step", "one-step zero force", "free run", "free run zero force"):
+    heads = ["one-step", "one-step zero force"]
+    for c in found.comparisons[1:]:
+        heads += [f"{c.horizon} ahead", f"{c.horizon} ahead zero force"]
+    heads += ["free run", "free run zero force"]
+    for col in heads:
         per.add_column(col, justify="right")
-    for p in found.particles:
-        per.add_row(
-            p.particle,
-            p.marker,
-            _mm(p.one_step_rms_mm),
-            _mm(p.zero_force_one_step_rms_mm),
-            _mm(p.free_run_rms_mm),
-            _mm(p.zero_force_free_run_rms_mm),
-        )
+    verdicts = [list(c.per_marker.values()) for c in found.comparisons]
+    for i, p in enumerate(found.particles):
+        cells = [p.particle, p.marker]
+        for c, v in zip(found.comparisons, verdicts, strict=True):
+            cells += [_judged(c.model_per_marker[i], v[i]), _mm(c.zero_force_per_marker[i])]
+        cells += [_mm(p.free_run_rms_mm), _mm(p.zero_force_free_run_rms_mm)]
+        per.add_row(*cells)
     out.print(per)
+    for line in found.lines():
+        out.print(line, markup=False, highlight=False, emoji=False)
 
 
 def _mm(x: float) -> str:
     return "—" if x != x else f"{x:.6g}"
+
+
+def _word(v) -> Text:
+    return Text(v.word, style="" if v.better or v.better is None else "bold red")
+
+
+def _judged(x: float, v) -> Text:
+    """A model's number, red where it is not better than zero force."""
+    return Text(_mm(x), style="bold red" if v.better is False else "")

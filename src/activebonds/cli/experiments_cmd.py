@@ -68,8 +68,40 @@ def _finish(summaries: dict, folder: Path, started: float) -> Path:
                 f"(standard) {b['lsq_standard_fit_rms_mm']:.5g} mm; momentum floor "
                 + ("n/a" if floor is None else f"{floor:.4g} mm")
             )
+    for line in verdict_lines(summaries):
+        out.print(line, markup=False, highlight=False, emoji=False)
     out.print(f"done in {time.time() - started:.0f} s; report: [bold]{report}[/]")
     return report
+
+
+def verdict_lines(summaries: dict) -> list[str]:
+    """Each series' verdicts (:mod:`activebonds.identify.verdict`): on the fitted frames and
+    the next ones, one step (medians over seeds) and K frames ahead, and per marker (the best
+    seed's), beside zero force on the same frames."""
+    from ..identify.verdict import comparisons_from, verdict
+
+    lines = []
+    for name, s in summaries.items():
+        b = s.get("baselines")
+        if not b:
+            continue
+        a, z = b["test_frames"]
+        for config, c in s["configs"].items():
+            for series, r in c["series"].items():
+                head = f"verdict, {name} {config} {series}"
+                seeds = f" (median of {len(s['seeds'])} seeds)"
+                fitted = verdict(r["fit_rms_mm_median"], b["zero_force_fit_rms_mm"])
+                lines.append(f"{head}{seeds}, fitted frames, one step: {fitted.text()}")
+                best = comparisons_from(r.get("held_out_best_seed"))
+                medians = r.get("held_out_model_mm_median", [])
+                for comp, median in zip(best, medians, strict=False):
+                    v = verdict(median, comp.zero_force_mm)
+                    lines.append(f"{head}{seeds}, frames {a}:{z}, {comp.what}: {v.text()}")
+                    lines.append(
+                        f"{head}, frames {a}:{z}, {comp.what}, per marker (best seed "
+                        f"{r['best_seed']}): {comp.markers_text()}"
+                    )
+    return lines
 
 
 @app.command()

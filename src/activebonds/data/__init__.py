@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from activebonds.data.coverage import coverage
-from activebonds.data.orientation import agree, guess_gravity, guess_ground
+from activebonds.data.orientation import (
+    agree,
+    confident,
+    guess_gravity,
+    guess_ground,
+    vertical_doubts,
+)
 from activebonds.data.readers import read_trajectory
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
@@ -28,7 +34,8 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
     and ground level guessed from the markers (:mod:`activebonds.data.orientation`), or None;
     ``gravity`` the vertical guessed from the markers' acceleration in flight (``up`` None and
     ``text`` saying why when there is no flight phase), ``vertical_agree`` whether the two
-    guesses name the same up (None unless both found one); ``coverage`` where the data is
+    guesses name the same up (None unless both found one), ``vertical_confident`` whether
+    neither has a doubt (the ground's ``doubts`` say why); ``coverage`` where the data is
     (:func:`activebonds.data.coverage.coverage`; ``chosen`` for the names in ``markers``).
     """
     if markers is not None:
@@ -62,7 +69,8 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
             "height": ground.height,
             "clear": ground.clear,
             "lowest_marker": ground.lowest,
-            "text": ground.describe(),
+            "text": ground.describe(gravity),
+            "doubts": vertical_doubts(ground, gravity),
         },
         "gravity": {
             "up": None
@@ -76,5 +84,6 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
             "text": gravity.describe(),
         },
         "vertical_agree": agree(ground, gravity),
+        "vertical_confident": confident(ground, gravity),
         "coverage": coverage(traj, markers),
     }

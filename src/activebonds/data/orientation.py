@@ -11,7 +11,10 @@ markers' spread (``flatness = std_t(min_p x_a) / spread_a``, spread = range of t
 mean positions), picks the flattest, signs it so that the markers' mean lies above the
 minimum, and takes the ground height as the 5th percentile of the per-frame minimum. The
 guess says how sure it is (its score beside the next axis's): a recording of a body in the
-air, or of markers at one height, has no clear answer and is reported as such.
+air, or of markers at one height, has no clear answer and is reported as such. Gaps are a
+second doubt: in a frame whose foot markers are missing, the lowest marker present may be the
+head, and enough such frames turn the guess upside down; so a gappy recording's guess is
+checked against its frames with every marker (:func:`ground_doubts`).
 
 :func:`guess_gravity` is a second, independent guess, from the acceleration: only in flight
 (a ballistic phase, no marker on the ground) do the markers fall freely, their mean
@@ -24,11 +27,15 @@ the mean position of the markers present throughout is fitted by one parabola in
 acceleration is within :data:`GRAVITY_TOLERANCE` of ``-g * up`` (as a vector: sideways
 acceleration counts too) is the guess; when none is, there is no guess ("no flight phase
 found"), never a forced one.
+
+The vertical is **uncertain** (:func:`vertical_doubts`, :meth:`Ground.describe` given the
+gravity guess, "(uncertain: why)") when the ground guess has a doubt, or when the two guesses
+disagree or the second is missing; :func:`confident` says when it is not.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +47,7 @@ G = 9.81  # m/s^2
 FLIGHT_MARGIN = 0.03  # m: in flight, the lowest marker is at least this far above the ground
 MIN_PHASE = 5  # frames: the shortest flight phase used (a parabola needs a few frames)
 GRAVITY_TOLERANCE = 0.25  # the flight acceleration is within this fraction of g of -g * up
+MIN_COMPLETE = 10  # frames with every marker needed to check a guess made through gaps
 
 
 @dataclass(frozen=True)
@@ -50,6 +58,8 @@ class Ground:
     flatness: tuple[float, ...]  # the score of every axis (lower: flatter)
     clear: bool  # the flattest axis is clearly flatter than the others
     lowest: str  # the marker most often lowest (a foot)
+    # why the guess may be wrong, from the recording alone (see :func:`ground_doubts`)
+    doubts: tuple[str, ...] = ()
 
     @property
     def normal(self) -> list[float]:
@@ -63,17 +73,61 @@ class Ground:
         """The ground's offset along ``normal`` (a contact bond's ``height``)."""
         return self.up * self.height
 
-    def describe(self) -> str:
-        sign = "+" if self.up > 0 else "-"
-        text = (
-            f"up = {sign}{AXES[self.axis]}, ground at {self.height:.4f} m (lowest: {self.lowest})"
-        )
-        return text if self.clear else text + " (uncertain)"
+    @property
+    def up_text(self) -> str:
+        return ("+" if self.up > 0 else "-") + AXES[self.axis]
+
+    def describe(self, gravity: Gravity | None = None) -> str:
+        """``up = +Z, ground at -0.0105 m (lowest: HFL)``, then ``(uncertain: why)`` when
+        there is a doubt: the ground's own (:attr:`doubts`) and, given the ``gravity`` guess,
+        :func:`vertical_doubts`."""
+        text = f"up = {self.up_text}, ground at {self.height:.4f} m (lowest: {self.lowest})"
+        doubts = list(self.doubts) if gravity is None else vertical_doubts(self, gravity)
+        return text + (f" (uncertain: {'; '.join(doubts)})" if doubts else "")
 
 
 def guess_ground(traj: Trajectory) -> Ground | None:
     """The vertical axis and ground level of a recording, or None if fewer than two markers
-    or frames are present."""
+    or frames are present; its :attr:`Ground.doubts` from :func:`ground_doubts`."""
+    found = _guess_ground(traj)
+    if found is None:
+        return None
+    return replace(found, doubts=ground_doubts(traj, found))
+
+
+def ground_doubts(traj: Trajectory, ground: Ground) -> tuple[str, ...]:
+    """Why the ground guess may be wrong, from the recording alone: the flattest axis is not
+    clearly flatter than the next; or markers are missing in some frames (there the lowest
+    *present* marker may be a head: a gap can turn the guess upside down) and the frames with
+    every marker say otherwise, or there are too few of them (fewer than
+    :data:`MIN_COMPLETE`) to check."""
+    out = []
+    if not ground.clear:
+        out.append("the flattest axis is not clearly flatter than the next")
+    mask = np.asarray(traj.mask, bool)
+    if mask.all():
+        return tuple(out)
+    complete = mask.all(axis=1)
+    share = f"markers missing in {100 * (1 - complete.mean()):.0f} % of frames"
+    if complete.sum() < MIN_COMPLETE:
+        out.append(f"{share}, too few frames with every marker to check the guess")
+        return tuple(out)
+    whole = _guess_ground(_frames(traj, complete))
+    if whole is not None and (whole.axis, whole.up) != (ground.axis, ground.up):
+        out.append(f"{share}; the frames with every marker say up = {whole.up_text}")
+    return tuple(out)
+
+
+def _frames(traj: Trajectory, keep: np.ndarray) -> Trajectory:
+    return Trajectory(
+        positions=np.asarray(traj.positions)[keep],
+        mask=np.asarray(traj.mask)[keep],
+        markers=traj.markers,
+        rate=traj.rate,
+    )
+
+
+def _guess_ground(traj: Trajectory) -> Ground | None:
     x = np.asarray(traj.positions, np.float64)  # [F, P, D], NaN where missing
     if x.shape[1] < 2 or x.shape[0] < 2:
         return None
@@ -220,6 +274,24 @@ def guess_gravity(traj: Trajectory) -> Gravity:
         return Gravity(None, None, None, 0, 0, reason)
     _, axis, up, acc, frames, phases = best
     return Gravity(axis, up, tuple(float(a) for a in acc), frames, phases)
+
+
+def vertical_doubts(ground: Ground, gravity: Gravity) -> list[str]:
+    """Why the vertical may be wrong: the ground guess's own doubts, and the second guess
+    (the acceleration in flight) disagreeing or missing."""
+    out = list(ground.doubts)
+    if not gravity.found:
+        out.append("no flight phase to check it against")
+    elif not agree(ground, gravity):
+        sign = "+" if gravity.up > 0 else "-"
+        out.append(f"the acceleration in flight says up = {sign}{AXES[gravity.axis]}")
+    return out
+
+
+def confident(ground: Ground | None, gravity: Gravity) -> bool:
+    """Whether the vertical is known without doubt: a ground guess with no doubt, which the
+    acceleration in flight confirms."""
+    return ground is not None and not vertical_doubts(ground, gravity)
 
 
 def agree(ground: Ground | None, gravity: Gravity) -> bool | None:

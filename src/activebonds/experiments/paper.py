@@ -24,6 +24,7 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
+from ..identify.ahead import DEFAULT_AHEAD, comparisons
 from ..identify.baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from ..identify.cost import make_windows
 from ..identify.es import ESSettings
@@ -215,10 +216,13 @@ def _analyse(exp, model, recording, runs: SeedRuns, folder: Path, series: str) -
     neurons and of near-zero (uncoupling) weights."""
     best_seed = int(np.argmin(runs.final_rms_mm))
     shown = recording.window(0, min(exp.test_stop, recording.n_frames))
+    fit_stop = exp.fit_frames[1]
+    held = shown.window(fit_stop - 2, shown.n_frames)  # states from the fit's last two frames
     per_seed = []
     for i, seed in enumerate(runs.seeds):
         fitted = model.with_genome(runs.genomes[i])
-        pred = predict(fitted, shown, fit_frames=exp.fit_frames[1])
+        pred = predict(fitted, shown, fit_frames=fit_stop)
+        judged = comparisons(fitted, held, DEFAULT_AHEAD, offset=fit_stop - 2)
         entry = {
             "seed": seed,
             "fit_rms_mm": float(runs.final_rms_mm[i]),
@@ -226,6 +230,7 @@ def _analyse(exp, model, recording, runs: SeedRuns, folder: Path, series: str) -
             "free_run_rms_mm": _pooled(pred.free_run_rms_mm_beyond),
             "free_run_fit_rms_mm": _pooled(pred.free_run_rms_mm),
             "diverged_at": pred.diverged_at,
+            "held_out": [c.to_dict() for c in judged],
         }
         if series == "neural":
             entry["saturated_share"] = float(pred.saturated_share)
@@ -249,6 +254,13 @@ def _analyse(exp, model, recording, runs: SeedRuns, folder: Path, series: str) -
         "one_step_rms_mm_median": med("one_step_rms_mm"),
         "free_run_rms_mm_median": med("free_run_rms_mm"),
         "best_seed": runs.seeds[best_seed],
+        # the comparisons with zero force on the next frames (one step, K ahead): the best
+        # seed's, per marker, and the medians over seeds of the model's RMS
+        "held_out_best_seed": per_seed[best_seed]["held_out"],
+        "held_out_model_mm_median": [
+            float(np.median([float(e["held_out"][j]["model_mm"]) for e in per_seed]))
+            for j in range(len(per_seed[best_seed]["held_out"]))
+        ],
         "per_seed": per_seed,
     }
     if series == "neural":

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..document import Marked
+from ..identify.verdict import verdict
 from ..model import load_model
 from ..report import animation, plots
 from ..report.html import Figure, Section, Table, fmt, write_comparison_report
@@ -31,16 +33,27 @@ def _baseline_rows(base: dict | None) -> list[list[str]]:
             fmt(base["zero_force_fit_rms_mm"], 3),
             fmt(base["zero_force_test_rms_mm"], 3),
             "-",
+            "-",
             *dash,
         ],
         [
             "exact least squares, standard bonds",
             fmt(base["lsq_standard_fit_rms_mm"], 3),
             fmt(base["lsq_standard_test_rms_mm"], 3),
+            _verdict_cell(base["lsq_standard_test_rms_mm"], base),
             fmt(base["lsq_standard_free_run_rms_mm"], 3),
             *dash,
         ],
     ]
+
+
+def _verdict_cell(model_mm, base: dict | None):
+    """The verdict on the next frames' one-step RMS beside zero force's (red when not better)."""
+    if not base:
+        return "-"
+    v = verdict(model_mm, base["zero_force_test_rms_mm"])
+    word = v.word if v.better is not True else f"better by {v.gain_pct:.3g} %"
+    return Marked(word, v.text()) if v.better is False else word
 
 
 def _config_section(
@@ -67,6 +80,7 @@ def _config_section(
                 f"{fmt(r['fit_rms_mm_median'], 3)} [{fmt(r['fit_rms_mm_iqr'][0], 3)}, "
                 f"{fmt(r['fit_rms_mm_iqr'][1], 3)}]",
                 fmt(r["one_step_rms_mm_median"], 3),
+                _verdict_cell(r["one_step_rms_mm_median"], base),
                 fmt(r["free_run_rms_mm_median"], 3),
                 fmt(r.get("saturated_share_median", float("nan")), 2),
                 fmt(r.get("near_zero_weight_share_median", float("nan")), 2),
@@ -89,6 +103,7 @@ def _config_section(
             "series",
             "fit RMS mm, median [IQR]",
             f"one-step RMS mm, frames {a}-{b - 1}",
+            "verdict (one step, those frames)",
             f"free-run RMS mm, frames {a}-{b - 1}",
             "saturated neurons",
             "near-zero weights",

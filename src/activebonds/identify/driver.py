@@ -56,6 +56,28 @@ class FitResult:
     # validation, ...), as RUN/NAME.json holds them
     records: dict[str, dict] = field(default_factory=dict)
 
+    @property
+    def comparisons(self) -> dict[str, list]:
+        """The model beside zero force (:class:`~activebonds.identify.verdict.Comparison`:
+        one step and K frames ahead, overall and per marker): ``"fitted"`` on the fitted
+        frames (the first recording) and ``"held_out"`` on the validation frames, where
+        those stages ran."""
+        from .verdict import comparisons_from
+
+        out = {}
+        for key, stage in (("fitted", "baselines"), ("held_out", "validation")):
+            if "judged" in self.records.get(stage, {}):
+                out[key] = comparisons_from(self.records[stage]["judged"])
+        return out
+
+    @property
+    def verdict(self):
+        """The one-step :class:`~activebonds.identify.verdict.Verdict` on the held-out frames
+        when there are some, else on the fitted frames (None before the baselines ran)."""
+        found = self.comparisons
+        chosen = found.get("held_out") or found.get("fitted")
+        return chosen[0].overall if chosen else None
+
     def lines(self) -> list[str]:
         """What the post-fit stages say of this fit, one line each, in their order."""
         return [

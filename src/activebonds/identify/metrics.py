@@ -343,17 +343,30 @@ def validation_record(
     model: Model, data: Trajectory, settings, frames: tuple[int, int], **options
 ) -> dict:
     """What RUN/validation.json holds: the frames, the model's and the zero-force
-    predictor's metrics on them (:func:`window_metrics`)."""
+    predictor's metrics on them (:func:`window_metrics`) and their comparisons one step and
+    :data:`~activebonds.identify.ahead.DEFAULT_AHEAD` frames ahead, overall and per marker
+    (``judged``, :mod:`activebonds.identify.ahead`)."""
     # time runs on from the fitted window (a window before it starts at time 0)
     offset = max(int(frames[0]) - int(settings.frames[0]), 0)
     found = window_metrics(
         model, data, settings.substeps, settings.integrator, offset=offset, **options
+    )
+    from .ahead import DEFAULT_AHEAD, comparisons
+
+    judged = comparisons(
+        model,
+        data,
+        DEFAULT_AHEAD,
+        substeps=settings.substeps,
+        method=settings.integrator,
+        offset=offset,
     )
     return {
         "frames": [int(frames[0]), int(frames[1])],
         "source": data.source,
         "time_offset_frames": offset,
         **{name: m.to_dict() for name, m in found.items()},
+        "judged": [c.to_dict() for c in judged],
     }
 
 

@@ -24,8 +24,12 @@ space for log-scaled genes (``log(value)`` within 1 % of ``log(max) - log(min)``
 otherwise. Such a value is where the search stopped, not necessarily where the data want it:
 widen the bound and fit again. The bounds are those searched, the *input* model's (a fitted
 model file written without ``min``/``max`` derives new bounds around its fitted values).
-Free masses under ``total_mass`` are searched as weights whose common scale changes nothing;
-they are never flagged.
+Free masses under ``total_mass`` are searched as weights ``w_i`` whose common scale changes
+nothing (``m_i = rest w_i / sum(w)``): what the bounds constrain is their *ratios*, ``m_i /
+m_j`` within ``[min_i / max_j, max_i / min_j]``. They are shown as masses in kg, with their
+bounds in kg (the weights' bounds times one common factor, the one ``best_model.toml`` writes:
+:func:`mass_rows`), and flagged like every parameter where a ratio is within 1 % of its log
+range from a bound (``near max`` for the numerator, ``near min`` for the denominator).
 """
 
 from __future__ import annotations
@@ -188,8 +192,11 @@ def parameter_labels(model: Model) -> list[str]:
 def bound_position(gene: Gene, value: float) -> float:
     """Where ``value`` sits in ``gene``'s search range: 0 at ``min``, 1 at ``max`` (log space
     for a log-scaled gene; outside [0, 1] beyond the bounds); NaN for an empty range."""
-    lo, hi, v = float(gene.lower), float(gene.upper), float(value)
-    if gene.log:
+    return _position(float(gene.lower), float(gene.upper), bool(gene.log), float(value))
+
+
+def _position(lo: float, hi: float, log: bool, v: float) -> float:
+    if log:
         if lo <= 0 or hi <= 0:
             return float("nan")
         lo, hi = math.log(lo), math.log(hi)
@@ -231,13 +238,20 @@ class ParameterRow:
     upper: float
     log: bool  # searched in log space
     bound: str | None  # "min" or "max": within NEAR_BOUND of it; None otherwise
+    unit: str = ""  # "kg" for a mass under total_mass
 
     def bound_text(self) -> str:
-        """``at max 1000``-style words for a flagged row, "" otherwise."""
+        """``near max 1000``-style words for a flagged row, "" otherwise."""
         if self.bound is None:
             return ""
         limit = self.lower if self.bound == "min" else self.upper
-        return f"near {self.bound} {limit:.6g}"
+        return f"near {self.bound} {limit:.6g}" + (f" {self.unit}" if self.unit else "")
+
+    @property
+    def position(self) -> float:
+        """Where the value sits in the row's bounds: 0 at ``lower``, 1 at ``upper`` (log
+        space for a log row), NaN for an empty range."""
+        return _position(self.lower, self.upper, self.log, self.value)
 
 
 def parameter_rows(
@@ -257,9 +271,14 @@ def parameter_rows(
     vals = [g.value for g in genes] if values is None else [float(v) for v in values]
     searched = {g.name: g for g in (bounds or model).layout.genes}
     words = _Words(model.spec)
+    rest = (bounds or model).layout.mass_rest
+    kg = mass_rows(genes, vals, searched, rest, share) if rest is not None else {}
     rows = []
-    for g, v in zip(genes, vals, strict=True):
+    for i, (g, v) in enumerate(zip(genes, vals, strict=True)):
         b = searched.get(g.name, g)
+        if i in kg:
+            rows.append(kg[i])
+            continue
         rows.append(
             ParameterRow(
                 key=g.name,
@@ -272,6 +291,54 @@ def parameter_rows(
             )
         )
     return rows
+
+
+def mass_rows(
+    genes: Sequence[Gene], values: Sequence[float], searched: dict, rest: float, share: float
+) -> dict[int, ParameterRow]:
+    """The rows of the free masses under ``total_mass`` (genes that are weights, by genome
+    index): each mass in kg, ``rest w_i / sum(w)`` (whatever the weights' common scale), its
+    bounds in kg, the weights' times the common factor nearest 1 that keeps every mass inside
+    (as ``best_model.toml`` writes them), and flagged where a mass ratio is within ``share``
+    of its log range from a bound."""
+    idx = [i for i, g in enumerate(genes) if is_mass_weight(g)]
+    if not idx:
+        return {}
+    w = np.array([float(values[i]) for i in idx], np.float64)
+    bs = [searched.get(genes[i].name, genes[i]) for i in idx]
+    lo = np.array([float(b.lower) for b in bs])
+    hi = np.array([float(b.upper) for b in bs])
+    if not (np.all(w > 0) and np.all(lo > 0) and np.all(hi > lo)):
+        return {}
+    m = rest * w / w.sum()
+    s_lo, s_hi = float(np.max(m / hi)), float(np.min(m / lo))
+    scale = min(max(1.0, s_lo), s_hi) if s_lo <= s_hi else float(np.sqrt(s_lo * s_hi))
+    width = np.log(hi / lo)
+    # gap[i, j]: how far the ratio m_i / m_j is below its largest value max_i / min_j (log)
+    gap = np.log(m[None, :] / lo[None, :]) - np.log(m[:, None] / hi[:, None])
+    near = gap < share * (width[:, None] + width[None, :])
+    np.fill_diagonal(near, False)
+    words = {}
+    for k, i in enumerate(idx):
+        at_max, at_min = bool(near[k].any()), bool(near[:, k].any())
+        bound = None
+        if at_max != at_min:
+            bound = "max" if at_max else "min"
+        elif at_max:  # both: the nearer, in its own range
+            bound = (
+                "max" if np.log(hi[k] * scale / m[k]) < np.log(m[k] / (lo[k] * scale)) else "min"
+            )
+        words[i] = ParameterRow(
+            key=genes[i].name,
+            name=f"particle {genes[i].particle} mass (share of total_mass)",
+            value=float(m[k]),
+            lower=float(min(lo[k] * scale, m[k])),
+            upper=float(max(hi[k] * scale, m[k])),
+            log=True,
+            bound=bound,
+            unit="kg",
+        )
+    return words
 
 
 def flagged(rows: Sequence[ParameterRow]) -> list[ParameterRow]:

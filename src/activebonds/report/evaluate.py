@@ -11,7 +11,11 @@ for the model and for the zero-force (constant-velocity) predictor:
   (:func:`~activebonds.report.predict.predict` for the model,
   :func:`~activebonds.report.predict.rms_mm` of the constant-velocity predictions for the
   zero force). Squared and averaged with each particle's count of terms, they give the
-  overall numbers back.
+  overall numbers back;
+* one step and ``horizon`` frames ahead (the model's free run from each recorded state, beside
+  the zero-force predictor's: :func:`~activebonds.identify.ahead.comparisons`), overall and per
+  marker, each with its verdict (:mod:`activebonds.identify.verdict`: better than zero force by
+  X %, or worse: the model does not explain this motion).
 
 The model's time starts at the window's first frame (only a model with a rhythmic drive
 sees it). Nothing is fitted: a model identified on one trial can be judged on another.
@@ -28,6 +32,7 @@ from pydantic import ValidationError
 
 from ..data import Trajectory
 from ..errors import InputError
+from ..identify.ahead import DEFAULT_AHEAD, comparisons
 from ..identify.baselines import zero_force_predictions
 from ..identify.metrics import (
     DEFAULT_STARTS,
@@ -37,6 +42,7 @@ from ..identify.metrics import (
     window_metrics,
 )
 from ..identify.predictions import rms_mm
+from ..identify.verdict import Comparison, Verdict, free_run_advice
 from ..model import Model
 from .predict import predict
 
@@ -66,6 +72,19 @@ class Evaluation:
     model: FreeRunMetrics
     zero_force: FreeRunMetrics
     particles: tuple[ParticleScore, ...]
+    comparisons: tuple[Comparison, ...] = ()  # one step, then `horizon` frames ahead
+
+    @property
+    def verdict(self) -> Verdict | None:
+        """The one-step verdict, overall (None without a comparison)."""
+        return self.comparisons[0].overall if self.comparisons else None
+
+    def lines(self) -> list[str]:
+        """The verdicts in words: overall and per marker, one step and K frames ahead."""
+        a, b = self.frames
+        out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
+        advice = free_run_advice(self.model.free_run_rms_mm)
+        return out + ([advice] if advice else [])
 
     def record(self) -> dict:
         """Plain JSON values (non-finite floats as 'inf', '-inf' or 'nan', as
@@ -94,6 +113,7 @@ class Evaluation:
                 }
                 for p in self.particles
             ],
+            "comparisons": [c.to_dict() for c in self.comparisons],
         }
 
 
@@ -111,10 +131,12 @@ def evaluate(
     integrator: str = "euler",
     starts: int | Sequence[int] = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
+    horizon: int = DEFAULT_AHEAD,
 ) -> Evaluation:
     """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
     particle, in order; default the model's). ``substeps`` and ``integrator``: the
-    integration the model was fitted with. Raises :class:`InputError` (one line) for markers
+    integration the model was fitted with; ``horizon``: the frames ahead of the multi-step
+    comparison (1: one step only). Raises :class:`InputError` (one line) for markers
     or frames the recording does not have."""
     from ..identify.problem import select_data
     from ..identify.settings import FitSettings
@@ -130,6 +152,8 @@ def evaluate(
         first = e.errors()[0]
         name = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "options"
         raise InputError(name, first["msg"].removeprefix("Value error, ")) from None
+    if int(horizon) < 1:
+        raise InputError("--horizon", f"must be at least 1, got {horizon}")
     start = settings.frames[0]
     data = select_data(model, recording, settings)
     found = window_metrics(
@@ -162,6 +186,7 @@ def evaluate(
         model=found["model"],
         zero_force=found["zero_force"],
         particles=particles,
+        comparisons=tuple(comparisons(model, data, horizon, substeps=substeps, method=integrator)),
     )
 
 

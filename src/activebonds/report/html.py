@@ -18,11 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..document import Figure, Section, Table
+from ..document import Figure, Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
+from ..identify.baselines import zero_force_predictions
 from ..identify.metrics import FreeRunMetrics
+from ..identify.predictions import rms_mm
 from ..identify.stages import baselines, validation
+from ..identify.verdict import Comparison, comparisons_from, free_run_advice, verdict
+from ..identify.verdict import lines as verdict_lines
 from ..model.names import NEAR_BOUND, parameter_rows
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
@@ -77,6 +81,9 @@ def _table(t: Table) -> str:
     for row in t.rows:
         cells = []
         for i, v in enumerate(row):
+            marked = isinstance(v, Marked)
+            title = f' title="{html.escape(v.why)}"' if marked and v.why else ""
+            v = v.value if marked else v
             text = html.escape(fmt(v))
             if t.key_value:
                 cells.append(f"<th>{text}</th>" if i == 0 else f"<td>{text}</td>")
@@ -84,7 +91,11 @@ def _table(t: Table) -> str:
                 num = isinstance(v, int | float | np.integer | np.floating) and not isinstance(
                     v, bool
                 )
-                cells.append(f'<td class="num">{text}</td>' if num else f"<td>{text}</td>")
+                classes = " ".join(
+                    c for c in ("num" if num else "", "worse" if marked else "") if c
+                )
+                attr = f' class="{classes}"' if classes else ""
+                cells.append(f"<td{attr}{title}>{text}</td>")
         out.append("<tr>" + "".join(cells) + "</tr>")
     out.append("</table>")
     return "\n".join(out)
@@ -245,17 +256,93 @@ def _refinement_text(s) -> str:
     return f"Levenberg-Marquardt (optimistix), {s.cost} cost, horizons {horizons}"
 
 
+WORSE = "not better than zero force"
+
+
+def _judged(model_mm: float, zero_mm: float):
+    """The model's number, marked (red) where it does not beat zero force."""
+    v = verdict(model_mm, zero_mm)
+    return Marked(float(model_mm), v.text()) if v.better is False else model_mm
+
+
+def zero_force_one_step_mm(pred: Prediction) -> tuple[np.ndarray, np.ndarray | None]:
+    """The zero-force predictor's one-step RMS (mm) per particle on the terms of the model's
+    (:attr:`Prediction.one_step_rms_mm`), over the fitted frames and beyond them."""
+    one, _ = zero_force_predictions(pred.recorded, 1)
+    fit, n = pred.fit_frames, pred.n_frames
+    beyond = rms_mm(one, pred.recorded, slice(fit, n)) if n > fit else None
+    return rms_mm(one, pred.recorded, slice(0, fit)), beyond
+
+
 def errors_table(pred: Prediction, caption: str = "RMS position error per particle (mm)") -> Table:
-    cols = ["particle", "marker", "one-step (fit)", "free run (fit)"]
+    """Per particle, the model's one-step and free-run RMS beside zero force's one-step RMS,
+    on the fitted frames and beyond them; red where the model is not better."""
+    zero_fit, zero_beyond = zero_force_one_step_mm(pred)
+    cols = ["particle", "marker", "one-step (fit)", "zero force (fit)", "free run (fit)"]
     if pred.extended:
-        cols += ["one-step (beyond)", "free run (beyond)"]
+        cols += ["one-step (beyond)", "zero force (beyond)", "free run (beyond)"]
     rows = []
     for p, (n, m) in enumerate(zip(pred.names, pred.markers, strict=True)):
-        row = [n, m, float(pred.one_step_rms_mm[p]), float(pred.free_run_rms_mm[p])]
+        one = float(pred.one_step_rms_mm[p])
+        row = [n, m, _judged(one, zero_fit[p]), float(zero_fit[p]), float(pred.free_run_rms_mm[p])]
         if pred.extended:
-            row += [float(pred.one_step_rms_mm_beyond[p]), float(pred.free_run_rms_mm_beyond[p])]
+            one = float(pred.one_step_rms_mm_beyond[p])
+            row += [
+                _judged(one, zero_beyond[p]),
+                float(zero_beyond[p]),
+                float(pred.free_run_rms_mm_beyond[p]),
+            ]
         rows.append(row)
+    caption += f"; red: {WORSE} (the constant-velocity predictor, same terms)"
     return Table(columns=cols, rows=rows, caption=caption)
+
+
+def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
+    """The verdicts in words (:mod:`activebonds.identify.verdict`): on the fitted frames and,
+    after ``fit --validate``, the validation frames (one step and K frames ahead, overall and
+    per marker, as ``fit`` printed them), and one step on the frames the report predicts
+    beyond the fitted window."""
+    out = []
+    start = int(record.settings.frames[0])
+    fitted = record.records.get(baselines.NAME, {})
+    out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
+    if "fitted" in fitted:
+        run = FreeRunMetrics.from_dict(fitted["fitted"]["model"]).free_run_rms_mm
+        out += [a for a in (free_run_advice(run),) if a is not None]
+    held = record.records.get(validation.NAME)
+    if held is not None and "judged" in held:
+        a, b = held["frames"]
+        out += verdict_lines(f"validation frames {a}:{b}", comparisons_from(held["judged"]))
+    if pred.extended:
+        _, zero = zero_force_one_step_mm(pred)
+        model = pred.one_step_rms_mm_beyond
+        fit, n = pred.fit_frames, pred.n_frames
+        c = Comparison(
+            1,
+            _pooled(model, pred, fit, n),
+            _pooled(zero, pred, fit, n),
+            tuple(pred.markers),
+            tuple(float(x) for x in model),
+            tuple(float(x) for x in zero),
+        )
+        out += c.lines(f"frames beyond the fit {start + fit}:{start + n}")
+    return out
+
+
+def _pooled(per: np.ndarray, pred: Prediction, lo: int, hi: int) -> float:
+    """One RMS over particles from per-particle one-step RMS values, each weighted by its
+    count of terms (recorded target, complete input frames)."""
+    rec = pred.recorded
+    complete = np.isfinite(rec).all(axis=(1, 2))
+    inputs = np.zeros(rec.shape[0], bool)
+    inputs[2:] = complete[1:-1] & complete[:-2]
+    n = (np.isfinite(rec).all(axis=-1) & inputs[:, None])[lo:hi].sum(axis=0)
+    per = np.asarray(per, np.float64)
+    ok = n > 0
+    if not ok.any():
+        return float("nan")
+    with np.errstate(over="ignore", invalid="ignore"):
+        return float(np.sqrt(np.sum(per[ok] ** 2 * n[ok]) / n[ok].sum()))
 
 
 def free_run_table(record: RunRecord) -> Table | None:
@@ -417,6 +504,7 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     sections = [
         Section(
             "Summary",
+            text=verdict_text(record, pred),
             tables=[
                 t
                 for t in (summary_table(record, pred), free_run_table(record), errors_table(pred))

@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 from ..identify.operators import VARIANTS
 from ..identify.predictions import neural_bonds, to_mm
 from ..model import Model
-from ..model.names import bound_position, parameter_label, parameter_rows
+from ..model.names import parameter_label, parameter_rows
 from .predict import Prediction, neural_weights
 from .runs import history_rms_mm
 
@@ -233,9 +233,7 @@ def parameters(
         ax.text(0.5, 0.5, "no free parameter", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
         return save(fig, stem)
-    searched = {g.name: g for g in (bounds or model).layout.genes}
-    genes = [searched.get(g.name, g) for g in model.layout.genes]
-    pos = np.array([bound_position(g, r.value) for g, r in zip(genes, rows, strict=True)])
+    pos = np.array([r.position for r in rows])
     pos = np.clip(np.nan_to_num(pos, nan=0.5), 0.0, 1.0)
     y = np.arange(n)[::-1]
     ax.barh(y, np.ones(n), color="0.9", edgecolor="0.6", height=0.6)

@@ -17,10 +17,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..atomic import write_text_atomic
-from ..document import Section, Table
+from ..document import Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
 from ..identify.metrics import THRESHOLD_MM, censored_text
+from ..identify.verdict import EXPLAINS_NOT
 from ..report.html import render
 from ..report.runs import load_run
 from .manifest import Job
@@ -127,7 +128,7 @@ def html_text(columns: list[str], rows: list[list], title: str) -> str:
         median = values[FRAMES_WITHIN]
         if median is not None:
             values[FRAMES_WITHIN] = censored_text(median, bool(values["frames_within_censored"]))
-        out_rows.append([_cell(values[c]) for c in shown])
+        out_rows.append([_cell(values[c], c) for c in shown])
     done = sum(1 for r in rows if r[1] == "completed")
     section = Section(
         "Fits",
@@ -136,7 +137,10 @@ def html_text(columns: list[str], rows: list[list], title: str) -> str:
             "position error. Zero force: the constant-velocity predictor on the same one-step "
             "terms. Free-run RMS and frames within "
             f"{THRESHOLD_MM:g} mm: as in each run's report (first fitted recording; '>=' when "
-            "the free runs reached the window's end first). Then the identified parameters."
+            "the free runs reached the window's end first). Verdicts (fitted_..., and held_out_... "
+            "after --validate): one step and 10 frames ahead, better than zero force by the "
+            "gain (%) or not (red), with the markers where the model is not better. Then the "
+            "identified parameters."
         ],
         tables=[Table([headings.get(c, c) for c in shown], out_rows)],
         anchor="fits",
@@ -144,9 +148,11 @@ def html_text(columns: list[str], rows: list[list], title: str) -> str:
     return render(title, [section])
 
 
-def _cell(value):
+def _cell(value, column: str = ""):
     if isinstance(value, float) and math.isnan(value):
         return None
+    if column.endswith("_verdict") and value in ("worse", "no better"):
+        return Marked(value, f"{value} than zero force: {EXPLAINS_NOT}")
     return value
 
 

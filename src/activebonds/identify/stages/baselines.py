@@ -13,8 +13,11 @@ import numpy as np
 
 from ...document import Section, Table
 from ...errors import InputError
+from ..ahead import DEFAULT_AHEAD, comparisons
 from ..baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..metrics import FreeRunMetrics, censored_text, window_metrics
+from ..verdict import comparisons_from, free_run_advice, verdict
+from ..verdict import lines as verdict_lines
 from .base import Fit, Outcome
 
 NAME = "baselines"
@@ -45,12 +48,18 @@ class BaselinesStage:
             record["least_squares_rms_mm"] = _least_squares_rms_mm(model, data)
         found = window_metrics(model, data, s.substeps, s.integrator)
         record["fitted"] = {k: m.to_dict() for k, m in found.items()}
+        judged = comparisons(model, data, DEFAULT_AHEAD, substeps=s.substeps, method=s.integrator)
+        record["judged"] = [c.to_dict() for c in judged]
         return Outcome(record)
 
     def lines(self, record: dict) -> list[str]:
         out = [f"zero-force baseline on the same frames {record['zero_force_rms_mm']:.4g} mm"]
         if "fitted" in record:
-            out.append(metrics_line("fitted frames", _metrics(record["fitted"])))
+            found = _metrics(record["fitted"])
+            out.append(metrics_line("fitted frames", found))
+            if (advice := free_run_advice(found["model"].free_run_rms_mm)) is not None:
+                out.append(advice)
+        out += verdict_lines("fitted frames", comparisons_from(record.get("judged")))
         return out
 
     def sections(self, record: dict, report) -> list[Section]:
@@ -63,7 +72,21 @@ class BaselinesStage:
             out["free_run_rms_mm"] = m.free_run_rms_mm
             out[f"frames_within_{m.threshold_mm:g}mm"] = m.median_frames_within
             out["frames_within_censored"] = m.median_censored
+        out.update(verdict_columns("fitted", record))
         return out
+
+
+def verdict_columns(prefix: str, record: dict) -> dict:
+    """A sweep's columns of a record's comparisons: per horizon, the verdict word, the gain
+    over zero force (%) and the markers where the model is not better."""
+    out = {}
+    for c in comparisons_from(record.get("judged")):
+        key = f"{prefix}_{'one_step' if c.horizon == 1 else f'{c.horizon}_ahead'}"
+        v = c.overall
+        out[f"{key}_verdict"] = v.word
+        out[f"{key}_gain_pct"] = v.gain_pct
+        out[f"{key}_worse_markers"] = " ".join(c.worse_markers())
+    return out
 
 
 def _least_squares_rms_mm(model, data) -> float | None:
@@ -129,6 +152,9 @@ def table(record: dict, pred) -> Table:
     if record.get("least_squares_rms_mm") is not None:
         rows.append((LSQ, record["least_squares_rms_mm"], None))
     rows = [(n, "—" if a is None else a, "—" if b is None else b) for n, a, b in rows]
+    judged = [verdict(model_fit, record["zero_force_rms_mm"])]
+    judged.append(verdict(model_beyond, zero_beyond) if beyond else None)
+    rows.append(("verdict", *(v.text() if v is not None else "—" for v in judged)))
     return Table(
         ("one-step RMS (mm)", "fitted frames", "frames beyond"),
         rows,

@@ -36,7 +36,9 @@ class UncertaintyStage:
             )
         except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
             return Outcome({"not_computed": str(err)}, files={"csv": None})
-        return Outcome(report.record(), files={"csv": report.csv_text()})
+        record = report.record()
+        record["warnings"] = uncertainty.warnings(cost, horizon, fit.settings.substeps)
+        return Outcome(record, files={"csv": report.csv_text()})
 
     def lines(self, record: dict) -> list[str]:
         if "not_computed" in record:
@@ -44,8 +46,9 @@ class UncertaintyStage:
         est = record["estimates"]
         ok = sum(e["determined"] for e in est)
         return [
-            f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals in "
-            "uncertainty.csv"
+            f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals (from the "
+            f"{record['cost']} cost, horizon {record['horizon']}) in uncertainty.csv",
+            *(f"uncertainty: warning: {w}" for w in record.get("warnings", [])),
         ]
 
     def sections(self, record: dict, report) -> list[Section]:
@@ -84,6 +87,7 @@ def section(rec: dict, spec) -> Section:
         "(shooting or a free run); on the one-step cost with noisy markers the optimum itself "
         "is biased and no interval describes that.",
     ]
+    text += [f"Warning: {w}." for w in rec.get("warnings", [])]
     text += [f"Not determined: {d}." for d in rec.get("directions", [])]
     table = Table(("parameter", "value", "standard error", "95 % interval", "note"), rows)
     return Section("Uncertainty", text=text, tables=[table], anchor="uncertainty")

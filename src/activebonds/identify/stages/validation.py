@@ -9,8 +9,10 @@ import numpy as np
 
 from ...document import Section
 from ..metrics import read_validation, validation_record
+from ..verdict import comparisons_from
+from ..verdict import lines as verdict_lines
 from .base import Fit, Outcome
-from .baselines import metrics_line
+from .baselines import metrics_line, verdict_columns
 
 NAME = "validation"
 
@@ -33,7 +35,9 @@ class ValidationStage:
 
     def lines(self, record: dict) -> list[str]:
         frames, found = read_validation(record)
-        return [metrics_line(f"validation frames {frames[0]}:{frames[1]}", found)]
+        label = f"validation frames {frames[0]}:{frames[1]}"
+        judged = comparisons_from(record.get("judged"))
+        return [metrics_line(label, found), *verdict_lines(f"held-out {label}", judged)]
 
     def sections(self, record: dict, report) -> list[Section]:
         return []  # shown in the free-run table of the report's summary, beside the fit's
@@ -45,6 +49,7 @@ class ValidationStage:
             "validation_one_step_rms_mm": m.one_step_rms_mm,
             "validation_zero_force_rms_mm": z.one_step_rms_mm,
             "validation_free_run_rms_mm": m.free_run_rms_mm,
+            **verdict_columns("held_out", record),
         }
 
 

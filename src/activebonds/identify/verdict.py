@@ -1,0 +1,220 @@
+"""The verdict on a score: does the model predict better than no force at all?
+
+Every place that scores a model (``fit``'s summary, ``evaluate``, ``report``, ``demo``, a
+sweep's summary, :class:`~activebonds.identify.driver.FitResult` and
+:class:`~activebonds.report.evaluate.Evaluation`) says it with these words and this rule,
+beside the zero-force (constant-velocity) predictor on the same terms:
+
+* **better** when the model's RMS error is below the zero-force predictor's by at least
+  :data:`MARGIN_PCT` percent: ``better than zero force by 12.3 % (1.59 vs 1.81 mm)``;
+* otherwise it is not: ``worse than zero force (1.842 vs 1.811 mm): the model does not explain
+  this motion`` (``no better than zero force`` when the two agree within the margin either
+  way, as a model whose forces vanish does);
+* ``not judged`` when either number is missing (NaN: nothing to predict).
+
+A :class:`Comparison` holds one kind of prediction (one step, or K frames ahead: the model's
+free run from each recorded state) on one window, overall and per marker; its
+:meth:`Comparison.lines` are what people read. Plain numbers only: nothing here computes a
+prediction (:mod:`activebonds.identify.ahead` does).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+MARGIN_PCT = 0.1  # better by less than this (percent of the zero-force error): not better
+EXPLAINS_NOT = "the model does not explain this motion"
+ADVICE_MM = 1000.0  # a free run this far from the recording (RMS) gets a line of advice
+
+
+def _number(x) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The model's RMS error (mm) judged against the zero-force predictor's on the same terms."""
+
+    model_mm: float
+    zero_force_mm: float
+
+    @property
+    def judged(self) -> bool:
+        return not (math.isnan(self.model_mm) or math.isnan(self.zero_force_mm))
+
+    @property
+    def gain_pct(self) -> float:
+        """How much smaller the model's error is, in percent of the zero-force error
+        (negative: larger; NaN when not judged or the zero-force error is 0)."""
+        if not self.judged or self.zero_force_mm <= 0 or math.isinf(self.zero_force_mm):
+            return math.nan
+        if math.isinf(self.model_mm):
+            return -math.inf
+        return 100.0 * (1.0 - self.model_mm / self.zero_force_mm)
+
+    @property
+    def better(self) -> bool | None:
+        """True when the model beats zero force by at least :data:`MARGIN_PCT` %, False when
+        it does not, None when not judged."""
+        if not self.judged:
+            return None
+        gain = self.gain_pct
+        if math.isnan(gain):  # zero force exact (or infinite): only an exact model ties it
+            return bool(self.model_mm < self.zero_force_mm)
+        return bool(gain >= MARGIN_PCT)
+
+    @property
+    def word(self) -> str:
+        """``better``, ``worse``, ``no better`` or ``not judged``: a table's cell."""
+        if self.better is None:
+            return "not judged"
+        if self.better:
+            return "better"
+        worse = self.model_mm > self.zero_force_mm * (1.0 + MARGIN_PCT / 100.0)
+        return "worse" if worse else "no better"
+
+    def text(self) -> str:
+        """The verdict in words, with both numbers."""
+        m, z = _mm(self.model_mm), _mm(self.zero_force_mm)
+        if self.better is None:
+            return f"not judged ({m} vs {z} mm for zero force)"
+        if self.better:
+            gain = self.gain_pct
+            by = f"by {gain:.3g} %" if math.isfinite(gain) else "(zero force fails)"
+            return f"better than zero force {by} ({m} vs {z} mm)"
+        return f"{self.word} than zero force ({m} vs {z} mm): {EXPLAINS_NOT}"
+
+    def to_dict(self) -> dict:
+        """Plain JSON values (non-finite numbers as the strings 'inf', 'nan')."""
+        return {
+            "model_mm": _plain(self.model_mm),
+            "zero_force_mm": _plain(self.zero_force_mm),
+            "gain_pct": _plain(self.gain_pct),
+            "better": self.better,
+            "verdict": self.word,
+            "text": self.text(),
+        }
+
+
+def verdict(model_mm, zero_force_mm) -> Verdict:
+    """The :class:`Verdict` of two RMS errors (mm; None counts as missing)."""
+    return Verdict(_number(model_mm), _number(zero_force_mm))
+
+
+def _mm(x: float) -> str:
+    if math.isnan(x):
+        return "—"
+    return "∞" if math.isinf(x) else f"{x:.4g}"
+
+
+def _plain(x: float) -> float | str:
+    return float(x) if math.isfinite(x) else str(float(x))
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One kind of prediction on one window: the model's and the zero-force predictor's RMS
+    errors (mm), overall (pooled over every term) and per marker."""
+
+    horizon: int  # frames ahead: 1 for the one-step prediction
+    model_mm: float
+    zero_force_mm: float
+    markers: tuple[str, ...]
+    model_per_marker: tuple[float, ...]
+    zero_force_per_marker: tuple[float, ...]
+    terms: int = 0  # (start, marker) terms counted
+
+    @property
+    def what(self) -> str:
+        """``one step`` or ``10 frames ahead``."""
+        return "one step" if self.horizon == 1 else f"{self.horizon} frames ahead"
+
+    @property
+    def overall(self) -> Verdict:
+        return Verdict(self.model_mm, self.zero_force_mm)
+
+    @property
+    def per_marker(self) -> dict[str, Verdict]:
+        return {
+            m: Verdict(a, b)
+            for m, a, b in zip(
+                self.markers, self.model_per_marker, self.zero_force_per_marker, strict=True
+            )
+        }
+
+    def worse_markers(self) -> list[str]:
+        """The markers where the model is not better than zero force (judged ones only)."""
+        return [m for m, v in self.per_marker.items() if v.better is False]
+
+    def markers_text(self) -> str:
+        """``better than zero force at every marker (7)`` or ``not better than zero force at
+        2 of 7 markers: Head 0.79 vs 0.39 mm, ...``."""
+        judged = {m: v for m, v in self.per_marker.items() if v.judged}
+        if not judged:
+            return "no marker judged"
+        worse = [m for m, v in judged.items() if not v.better]
+        if not worse:
+            return f"better than zero force at every marker ({len(judged)})"
+        listed = ", ".join(
+            f"{m} {_mm(judged[m].model_mm)} vs {_mm(judged[m].zero_force_mm)} mm" for m in worse
+        )
+        return f"not better than zero force at {len(worse)} of {len(judged)} markers: {listed}"
+
+    def lines(self, label: str) -> list[str]:
+        """Two lines: ``verdict, LABEL, one step: better than zero force by ...`` and the
+        markers where it is not."""
+        head = f"verdict, {label}, {self.what}"
+        return [f"{head}: {self.overall.text()}", f"{head}, per marker: {self.markers_text()}"]
+
+    def to_dict(self) -> dict:
+        return {
+            "horizon": self.horizon,
+            "model_mm": _plain(self.model_mm),
+            "zero_force_mm": _plain(self.zero_force_mm),
+            "markers": list(self.markers),
+            "model_per_marker_mm": [_plain(x) for x in self.model_per_marker],
+            "zero_force_per_marker_mm": [_plain(x) for x in self.zero_force_per_marker],
+            "terms": int(self.terms),
+            "verdict": self.overall.to_dict(),
+            "worse_markers": self.worse_markers(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Comparison:
+        return cls(
+            horizon=int(data["horizon"]),
+            model_mm=_number(data["model_mm"]),
+            zero_force_mm=_number(data["zero_force_mm"]),
+            markers=tuple(data["markers"]),
+            model_per_marker=tuple(_number(x) for x in data["model_per_marker_mm"]),
+            zero_force_per_marker=tuple(_number(x) for x in data["zero_force_per_marker_mm"]),
+            terms=int(data.get("terms", 0)),
+        )
+
+
+def comparisons_from(records: Sequence[dict] | None) -> list[Comparison]:
+    """:class:`Comparison` objects back from their dicts (none for a record without them)."""
+    return [Comparison.from_dict(r) for r in records or ()]
+
+
+def lines(label: str, comparisons: Sequence[Comparison]) -> list[str]:
+    """Every comparison's :meth:`Comparison.lines` under one label."""
+    return [line for c in comparisons for line in c.lines(label)]
+
+
+def free_run_advice(free_run_rms_mm) -> str | None:
+    """One line of advice for a free run that leaves the recording by metres (RMS above
+    :data:`ADVICE_MM`, or non-finite), None otherwise."""
+    x = _number(free_run_rms_mm)
+    if math.isnan(x) or x <= ADVICE_MM:
+        return None
+    far = "goes non-finite" if math.isinf(x) else f"ends {x / 1000:.3g} m (RMS) from the recording"
+    return (
+        f"advice: the free run {far}: nothing holds the body or drives it; add ground "
+        "contacts (gravity without support falls), anchors (unary springs) or a rhythmic drive"
+    )
