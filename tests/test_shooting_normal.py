@@ -28,6 +28,7 @@ from activebonds.identify.shooting_normal import (
     make_normal,
     marginal_information,
 )
+from activebonds.identify.uncertainty import estimate
 from activebonds.model import load_model
 from helpers import EXAMPLES
 
@@ -139,8 +140,9 @@ def test_the_schur_complement_is_the_parameters_marginal_information(problem):
 
 @pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)
 def test_structured_and_dense_levenberg_marquardt_end_at_the_same_parameters():
-    """0.5 mm of noise on the triangle, windows of 10 frames: both paths from the same start,
-    every parameter within 1e-6 relative."""
+    """0.5 mm of noise on the triangle, windows of 10 frames: both paths from the same start
+    end within 0.05 standard deviations in every parameter (the structured path stops there,
+    lm.PRECISION; optimistix's runs on to its Cauchy test) and at the same cost."""
     model = load_model(EXAMPLES / "triangle.toml")
     clean = activebonds.simulate(model, 61, 60.0)
     rng = np.random.default_rng(11)
@@ -149,12 +151,15 @@ def test_structured_and_dense_levenberg_marquardt_end_at_the_same_parameters():
     settings = FitSettings(horizon=(10,), cost="shooting", refine="lm", bonds="standard")
     ident = identification(model, traj, settings)
     start = ident.model.layout.initial() * 1.02
-    stages = {
-        path: Refinement(ident, settings, solver=path).stage(10, start)
-        for path in ("dense", "structured")
+    refinements = {
+        path: Refinement(ident, settings, solver=path) for path in ("dense", "structured")
     }
+    stages = {path: r.stage(10, start) for path, r in refinements.items()}
     dense, structured = stages["dense"], stages["structured"]
     assert dense.accepted and structured.accepted
     a, b = np.asarray(dense.genome), np.asarray(structured.genome)
-    assert np.max(np.abs(a - b) / np.abs(a)) < 1e-6
-    assert structured.end_rms_mm == pytest.approx(dense.end_rms_mm, rel=1e-9)
+    report = estimate(ident, settings, a, 10, "shooting", refinements["dense"].states)
+    se = np.array([e.std_error for e in report.estimates])
+    layout = ident.model.layout
+    assert np.max(np.abs(layout.natural(a) - layout.natural(b)) / se) < 0.05
+    assert structured.end_rms_mm == pytest.approx(dense.end_rms_mm, rel=1e-6)

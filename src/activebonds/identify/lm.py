@@ -74,12 +74,14 @@ def levenberg_marquardt(
     on_step: Callable[[int, float], None] | None = None,
     scale: Callable | None = None,
     precision: float = PRECISION,
+    linear_enough: Callable | None = None,
 ):
     """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y, r) -> (system,
     gradient J^T r)``, ``step(system, damping) -> d``. Returns (y, steps, message) as
     :func:`.refine._solve` does; ``on_step(steps, loss)`` after every evaluation;
     ``scale(system)``: the largest diagonal entry of J^T J, for the precision test (none
-    without it)."""
+    without it); ``linear_enough(y)``: whether the Gauss-Newton model can be trusted that far
+    at y (else the test waits: e.g. a variable whose transform is flat at a bound)."""
     y = y0
     r = residual(y)
     loss = 0.5 * float(_dot(r, r))
@@ -115,7 +117,8 @@ def levenberg_marquardt(
             return y, steps, "converged"
         system, grad = linearize(y, r)
         variance = 2.0 * loss / dof  # sigma^2
-        if scale is not None and -change < 0.5 * variance:
+        trusted = linear_enough is None or linear_enough(y)
+        if scale is not None and -change < 0.5 * variance and trusted:
             gauss_newton = step(system, JITTER * float(scale(system)))
             distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
             if distance < precision**2:

@@ -86,6 +86,11 @@ class Bounded:
         s = 2.0 * (np.asarray(genome, np.float64) - self.lower) / self.span - 1.0
         return np.arcsin(np.clip(s, -1.0 + EDGE, 1.0 - EDGE))
 
+    def interior(self, u) -> bool:
+        """Whether every gene is more than about 0.25 % of its span from its bounds, where
+        the transform is flat (|cos u| > 0.1) and a Gauss-Newton step in u means little."""
+        return bool(np.all(np.abs(np.cos(np.asarray(u))) > 0.1))
+
     def inside(self, genome) -> bool:
         g = np.asarray(genome)
         return bool(np.all((g >= self.lower) & (g <= self.lower + self.span)))
@@ -116,7 +121,7 @@ def _dense_step(system, damping):
     return jnp.linalg.solve(jtj + damping * jnp.eye(jtj.shape[0]), -grad)
 
 
-def _solve(residual, y0, max_steps: int):
+def _solve(residual, y0, max_steps: int, interior=None):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
     accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`."""
     jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
@@ -130,7 +135,15 @@ def _solve(residual, y0, max_steps: int):
         return (j.T @ j, grad), grad
 
     return levenberg_marquardt(
-        flat, linearize, _dense_step, y0, max_steps, RTOL, ATOL, scale=_dense_scale
+        flat,
+        linearize,
+        _dense_step,
+        y0,
+        max_steps,
+        RTOL,
+        ATOL,
+        scale=_dense_scale,
+        linear_enough=interior,
     )
 
 
@@ -146,7 +159,7 @@ def _normal_scale(normal):
     )
 
 
-def _solve_shooting(residual, normal, y0, max_steps: int):
+def _solve_shooting(residual, normal, y0, max_steps: int, interior=None):
     """Levenberg-Marquardt on a shooting stage's structured normal equations
     (:mod:`.shooting_normal`): as :func:`_solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
     u0, x0, v0 = y0
@@ -166,7 +179,15 @@ def _solve_shooting(residual, normal, y0, max_steps: int):
 
     z0 = (u0, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
     z, steps, message = levenberg_marquardt(
-        flat, linearize, damped_step, z0, max_steps, RTOL, ATOL, scale=_normal_scale
+        flat,
+        linearize,
+        damped_step,
+        z0,
+        max_steps,
+        RTOL,
+        ATOL,
+        scale=_normal_scale,
+        linear_enough=None if interior is None else (lambda z: interior(z[0])),
     )
     return split(z), steps, message
 
@@ -215,7 +236,7 @@ class Refinement:
             if self.solver == "dense":  # optimistix compiles the function it is given
                 u, steps, message = _solve_dense(plain, u0, max_steps)
             else:
-                u, steps, message = _solve(residual, u0, max_steps)
+                u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
         end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
 
@@ -262,7 +283,9 @@ class Refinement:
             normal = jax.jit(
                 make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome)
             )
-            y, steps, message = _solve_shooting(residual, normal, y0, max_steps)
+            y, steps, message = _solve_shooting(
+                residual, normal, y0, max_steps, self.bounded.interior
+            )
         end_tree = residual(y)
         result = np.asarray(to_genome(y[0]), np.float64)
 
