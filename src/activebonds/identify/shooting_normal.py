@@ -96,8 +96,7 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         batch = max(1, min(n_windows, BATCH_BYTES // (8 * rows * (n + p) * 2)))
         nxt = jnp.concatenate([states[1:], jnp.zeros((1, n))])
         us = jnp.broadcast_to(u, (n_windows, p))
-        args = (us, states, nxt, t0, target, weight, c)
-        out = _over_devices(lambda a: jax.lax.map(blocks, a, batch_size=batch), args, n_windows)
+        out = jax.lax.map(blocks, (us, states, nxt, t0, target, weight, c), batch_size=batch)
         tkk, tk1, ykk, yk1, pkk, gkk, gk1, guk, dk1 = out
 
         def shift(a):  # window k's contribution to window k + 1
@@ -114,28 +113,6 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         )
 
     return normal
-
-
-SHARD = True
-
-
-def _over_devices(fn, args, n_windows: int):
-    """``fn`` over the windows (the leading axis of every array of ``args``), the windows
-    split between the machine's CPU devices (one per core: ``runtime.fast_cpu_flags``), each
-    device computing its share (padded with copies of the last window, dropped after)."""
-    devices = jax.local_devices()
-    count = min(len(devices), n_windows // 2) if SHARD else 1
-    if count < 2:
-        return fn(args)
-    padded = -(-n_windows // count) * count
-
-    def pad(a):  # with copies of the last window
-        return jnp.concatenate([a, jnp.repeat(a[-1:], padded - n_windows, axis=0)])
-
-    mesh = jax.sharding.Mesh(np.array(devices[:count]), ("windows",))
-    spec = jax.sharding.PartitionSpec("windows")
-    out = jax.shard_map(fn, mesh=mesh, in_specs=(spec,), out_specs=spec)(jax.tree.map(pad, args))
-    return jax.tree.map(lambda a: a[:n_windows], out)
 
 
 def block_tridiagonal_solve(diag, off, rhs):
