@@ -108,9 +108,14 @@ def advance(
     form and the exact least squares are unchanged."""
     step = STEPS[method]
     h = dt / substeps
-    implicit = substeps > 1 and stiff(topo)
+    if substeps > 1 and stiff(topo):  # a loop, not unrolled: the kicks solve and differentiate
+
+        def body(k, state):
+            return step(params, topo, *state, h, t + k * h, True)
+
+        return jax.lax.fori_loop(0, substeps, body, (x, v))
     for k in range(substeps):
-        x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h, implicit)
+        x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
     return x, v
 
 
@@ -192,9 +197,12 @@ def start_velocity(
             return x_end.ravel(), x_end
 
         jac = jax.jacfwd(land_flat, has_aux=True)
-        for _ in range(iterations):
+
+        def newton(_, v):
             j, x_end = jac(v.ravel())
-            v = v + jnp.linalg.solve(j, (x - x_end).ravel()).reshape(x.shape)
+            return v + jnp.linalg.solve(j, (x - x_end).ravel()).reshape(x.shape)
+
+        v = jax.lax.fori_loop(0, iterations, newton, v)
     else:
         for _ in range(iterations):
             x_end, _ = land(v)
