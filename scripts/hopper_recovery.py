@@ -34,7 +34,7 @@ import hopper_truth  # noqa: E402
 from activebonds.model import loads_model  # noqa: E402
 
 GENES = {  # gene name -> the truth's key
-    "particle:foot.mass": "foot_mass",
+    "mass:foot.mass": "foot_mass",
     "type:leg.stiffness": "leg.stiffness",
     "type:leg.rest_length": "leg.rest_length",
     "type:leg.damping": "leg.damping",
@@ -59,12 +59,15 @@ def run(noise_mm: float = 0.0, seed: int = 0, **options) -> dict:
     started = time.time()
     res = activebonds.fit(model, data, seed=seed, **options)
     seconds = time.time() - started
+    for line in res.lines():
+        print("  " + line, file=sys.stderr)
     return {
         "noise_mm": noise_mm,
         "seed": seed,
         "options": options,
         "seconds": round(seconds, 1),
         "errors": errors(model, res.genome),
+        "search_errors": errors(model, res.es_genome if res.es_genome is not None else res.genome),
         "stages": [s.record() for s in res.refinement],
     }
 
@@ -84,6 +87,7 @@ def main(argv=None) -> int:
     ap.add_argument("--population", type=int, default=100)
     ap.add_argument("--generations", type=int, default=1000)
     ap.add_argument("--refine", default="lm")
+    ap.add_argument("--smooth", type=int, default=0)
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     options = dict(
@@ -95,6 +99,7 @@ def main(argv=None) -> int:
         population=args.population,
         generations=args.generations,
         refine=args.refine,
+        smooth=args.smooth,
     )
     rows = []
     for noise in (float(s) for s in args.noise_mm.split(",")):
@@ -107,6 +112,8 @@ def main(argv=None) -> int:
                 file=sys.stderr,
             )
         print(f"noise {noise} mm: {row['seconds']} s", file=sys.stderr)
+        search = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in row["search_errors"].items())
+        print(f"  the search's result: {search}", file=sys.stderr)
     print("| parameter | " + " | ".join(f"noise {r['noise_mm']:g} mm" for r in rows) + " |")
     print("|---|" + "---|" * len(rows))
     for key in rows[0]["errors"]:

@@ -171,8 +171,8 @@ def start_velocity(
     order by its residual, a few micrometres in such frames): the fit counts these starts
     and says so (:func:`activebonds.identify.cost.unsolved_starts`).
 
-    ``with_residual``: also return the last residual (m; 0 where no solve is needed), for
-    counting the starts that could not be solved.
+    ``with_residual``: also return the last residual where the solve has not converged (m;
+    0 where it has or none is needed), for counting the starts that could not be solved.
     """
     v_b = (x - x_prev) / dt
     if substeps == 1 and method == "euler":
