@@ -70,7 +70,7 @@ def test_start_velocities_are_solved_through_sticking(truth):
     assert np.median(err[~unsolved]) < 1e-3, np.median(err[~unsolved])  # m/s
 
 
-@pytest.mark.slow  # integration scale: in pytest -m slow (every landing); about 70 s
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing); 70 s quiet, 3 min under load
 def test_the_recommended_fit_recovers_the_hopper_without_noise(truth):
     """The recommended command for real data (without --init lsq, which contact bonds do not
     enter): the search on the one-step cost, then multiple shooting, windows of 10 frames at
