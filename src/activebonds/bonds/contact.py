@@ -39,13 +39,17 @@ free parameter gives no min/max: height ``h +- 0.1`` m; stiffness ``k/100 .. 100
 
 Step sizes. Near rest on the surface the smoothed friction is a viscous drag of ``mu Fn / eps``
 (about 6000 N s/m for 1 kg pressed by gravity with mu = 0.6): with a (sub)step ``h`` above
-``m eps / (mu Fn)`` (~0.2 ms there) a sticking particle's tangential velocity chatters within
-about ``mu Fn h / m`` of the surface's instead of settling (bounded: the force saturates at
-``mu Fn``). The normal spring needs ``h sqrt(k / m)`` well below 2. For identification, one
-substep (Euler or Verlet) gives the exact start velocity; with substeps > 1 the start
-velocity's fixed-point solve (:func:`~activebonds.physics.integrate.start_velocity`) does not
-converge in frames where that drag is stiff (``dt mu Fn / (m eps) >> 1``), and those
-predictions are NaN (the candidate costs +inf): fit contact models with ``substeps = 1``.
+``m eps / (mu Fn)`` (~0.2 ms there) a sticking particle's tangential velocity would chatter
+within about ``mu Fn h / m`` of the surface's under an explicit kick. The normal spring needs
+``h sqrt(k / m)`` well below 2. One step per frame (the paper's one-step cost) keeps the
+explicit kick, which from a recorded state is a single step; with substeps > 1 every
+substep's kick is linearly implicit in the contact's velocity dependence
+(:func:`~activebonds.physics.integrate.kick`), so sticking settles at any substep, and the
+start velocity is solved by Newton's method
+(:func:`~activebonds.physics.integrate.start_velocity`); the few frames where it stalls at a
+kink of this law (a contact starting or ending within the frame) are counted in the fit's
+output. Multiple shooting (``fit --cost shooting --substeps 20``) fits contact models without
+the one-step cost's bias (tests/test_hopper_recovery.py).
 """
 
 from __future__ import annotations

@@ -22,7 +22,14 @@ import numpy as np
 
 from ..data.smoothing import smooth_positions
 from ..model.model import Model
-from ..physics.integrate import START_ITERATIONS, advance, rollout_states, start_velocity
+from ..physics.integrate import (
+    START_ITERATIONS,
+    START_TOLERANCE,
+    advance,
+    rollout_states,
+    start_velocity,
+    stiff,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,6 +213,57 @@ def constant_velocity_cost(windows: Windows) -> float:
     k = np.arange(1, windows.target.shape[1] + 1)[None, :, None, None]
     err = windows.x0[:, None] + k * windows.dt * windows.v0[:, None] - windows.target
     return float(np.sum(windows.weight[..., None] * err**2))
+
+
+def unsolved_starts(
+    model: Model, windows: Windows, genome, substeps: int = 1, method: str = "euler"
+) -> tuple[int, int, float]:
+    """(unsolved, starts, largest residual in m): the restart states of ``windows`` (those
+    that count) whose start velocity (:func:`~activebonds.physics.integrate.start_velocity`)
+    did not converge at ``genome``; (0, S, 0.0) where no solve is needed (one Euler substep)."""
+    used = windows.weight[:, 0].any(axis=1)
+    n = int(used.sum())
+    if substeps == 1:
+        return 0, n, 0.0
+    params = model.layout.decode(jnp.asarray(genome))
+    topo = model.topology
+
+    @jax.jit
+    def residuals(x_prev, x0, t0):
+        def one(a, b, t):
+            v, r = start_velocity(
+                params, topo, a, b, windows.dt, substeps, method, START_ITERATIONS, t, True
+            )
+            return jnp.where(jnp.all(jnp.isfinite(v)), r, jnp.inf)
+
+        return jax.vmap(one)(x_prev, x0, t0)
+
+    r = np.asarray(residuals(windows.x_prev[used], windows.x0[used], windows.times[used]))
+    bad = r > 0
+    return int(bad.sum()), n, float(r[bad].max()) if bad.any() else 0.0
+
+
+def starts_line(
+    model: Model, windows: Windows, genome, substeps: int = 1, method: str = "euler"
+) -> str | None:
+    """One line on the start velocities the restart cost could not solve at ``genome``
+    (None when every one converged or none needs a solve): how many, why, and what became of
+    their predictions."""
+    bad, n, worst = unsolved_starts(model, windows, genome, substeps, method)
+    if bad == 0:
+        return None
+    if stiff(model.topology):
+        what = (
+            "Newton's method stalled at a kink of the contact law within the frame (a contact "
+            "starting, ending or sticking); they start from its last iterate"
+        )
+    else:
+        what = "the fixed point diverged (forces too stiff for the frame); they cost +inf"
+    return (
+        f"start velocities ({substeps} {method} substeps): {bad} of {n} restart states not "
+        f"solved to {START_TOLERANCE:g} of the frame's displacement (largest residual "
+        f"{worst * 1000:.3g} mm): {what}"
+    )
 
 
 def rms_mm(cost, n_terms: int):

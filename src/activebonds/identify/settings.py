@@ -79,11 +79,12 @@ class FitSettings(BaseModel):
 
     @property
     def es_exact(self) -> bool:
-        """The ES evolves on the plain one-step cost (one Euler substep) whose optimum
-        ``--init lsq`` solves exactly: when the refinement shoots from it, the ES's cost is
-        only the shooting's start, and at the shooting's substeps it would cost them times
-        more for a start no better than the exact one."""
-        return self.cost == "shooting" and self.init == "lsq"
+        """The ES evolves on the plain one-step cost (one Euler substep, whose optimum
+        ``--init lsq`` solves exactly where the model's families allow) when the refinement
+        shoots: the ES's cost is then only the shooting's start, and at the shooting's
+        substeps it would cost them times more (a start-velocity solve per prediction, Newton's
+        method on contact models) for a start no better."""
+        return self.cost == "shooting"
 
     @property
     def es_substeps(self) -> int:

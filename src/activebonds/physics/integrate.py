@@ -15,29 +15,74 @@ from typing import Literal
 import jax
 import jax.numpy as jnp
 
+from .. import bonds
 from ..model.params import Params, Topology
 from .forces import total_force
 
 Integrator = Literal["euler", "verlet"]
 
 
-def euler_step(params: Params, topo: Topology, x, v, h, t=0.0):
-    """Semi-implicit (symplectic) Euler: v <- v + h F(x, v, t)/m; x <- x + h v."""
-    acc = total_force(params, topo, x, v, t) / params.mass[:, None]
-    v = v + h * acc
+# Kinds whose forces can be stiff in the velocity for a step: a contact's friction near
+# sticking is a drag of ``mu Fn / eps`` (eps = 1e-3 m/s), ``h mu Fn / (m eps)`` = 1-500 for
+# steps of 0.05-5 ms. With substeps, their velocity dependence is taken implicitly (see
+# :func:`kick`), and the start velocity is solved by Newton's method.
+STIFF_KINDS = frozenset({"contact"})
+
+
+def stiff(topo: Topology) -> bool:
+    """Whether a kind of :data:`STIFF_KINDS` is active in this topology."""
+    return any(k in STIFF_KINDS for k in topo.active())
+
+
+def _stiff_jacobian(params: Params, topo: Topology, x, v, t):
+    """[P, D, D] d F / d v_p of the stiff kinds on each particle: each of their bonds acts on
+    one particle and depends on its velocity only, so the Jacobian is block-diagonal and D
+    forward-mode directions (one velocity axis of every particle at once) give its blocks."""
+    kinds = [k for k in topo.active() if k in STIFF_KINDS]
+
+    def f(v):
+        out = jnp.zeros_like(x)
+        for k in kinds:
+            out = out + bonds.get(k).forces(params.bonds[k], topo.bonds[k], x, v, t)
+        return out
+
+    eye = jnp.eye(x.shape[1], dtype=x.dtype)
+    cols = [jax.jvp(f, (v,), (jnp.broadcast_to(eye[d], x.shape),))[1] for d in range(x.shape[1])]
+    return jnp.stack(cols, axis=-1)  # [P, D (force axis), D (velocity axis)]
+
+
+def kick(params: Params, topo: Topology, x, v, h, force, t=0.0, implicit: bool = False):
+    """The velocity change of a step of length h under ``force`` = F(x, v): ``h F / m``, or
+    with ``implicit`` the linearly implicit kick ``(m I - h J)^-1 h F`` per particle, ``J``
+    the stiff kinds' d F / d v (:func:`_stiff_jacobian`): the stiff drag's part of the force is
+    then taken at the step's new velocity (to first order), so a sticking contact settles
+    instead of chattering when ``h mu Fn / (m eps)`` exceeds 2 (explicit steps are unstable
+    there). Where no stiff bond acts, J = 0 and the kick is the explicit one."""
+    m = params.mass[:, None]
+    if not implicit:
+        return h * force / m
+    dim = x.shape[1]
+    jac = _stiff_jacobian(params, topo, x, v, t)
+    system = m[..., None] * jnp.eye(dim, dtype=x.dtype) - h * jac  # [P, D, D]
+    return jnp.linalg.solve(system, h * force[..., None])[..., 0]
+
+
+def euler_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False):
+    """Semi-implicit (symplectic) Euler: v <- v + h F(x, v, t)/m; x <- x + h v (the kick
+    linearly implicit in the stiff kinds' velocity dependence with ``implicit``)."""
+    v = v + kick(params, topo, x, v, h, total_force(params, topo, x, v, t), t, implicit)
     return x + h * v, v
 
 
-def verlet_step(params: Params, topo: Topology, x, v, h, t=0.0):
+def verlet_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False):
     """Velocity Verlet. With velocity-dependent forces the second force uses the
     half-step velocity (exact Verlet when forces do not depend on velocity); it is
-    evaluated at the step's end, t + h."""
-    inv_m = 1.0 / params.mass[:, None]
-    acc = total_force(params, topo, x, v, t) * inv_m
-    v_half = v + 0.5 * h * acc
+    evaluated at the step's end, t + h. ``implicit``: both half kicks as in
+    :func:`euler_step`."""
+    v_half = v + kick(params, topo, x, v, 0.5 * h, total_force(params, topo, x, v, t), t, implicit)
     x = x + h * v_half
-    acc_new = total_force(params, topo, x, v_half, t + h) * inv_m
-    return x, v_half + 0.5 * h * acc_new
+    f_new = total_force(params, topo, x, v_half, t + h)
+    return x, v_half + kick(params, topo, x, v_half, 0.5 * h, f_new, t + h, implicit)
 
 
 STEPS: dict[str, Callable] = {"euler": euler_step, "verlet": verlet_step}
@@ -53,9 +98,22 @@ def advance(
     method: Integrator = "euler",
     t=0.0,
 ):
-    """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``."""
+    """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``.
+
+    With substeps (> 1) and a stiff kind (:data:`STIFF_KINDS`), every substep's kick is
+    linearly implicit in that kind's velocity dependence (:func:`kick`): substeps exist to
+    resolve fast dynamics, and an explicit kick cannot resolve a sticking contact's drag
+    (stable only below ``h = 2 m eps / (mu Fn)``, about 20 us at a hopper's landing). One
+    step per frame keeps the explicit kick, so the paper's one-step cost, its population
+    form and the exact least squares are unchanged."""
     step = STEPS[method]
     h = dt / substeps
+    if substeps > 1 and stiff(topo):  # a loop, not unrolled: the kicks solve and differentiate
+
+        def implicit(k, state):
+            return step(params, topo, *state, h, t + k * h, True)
+
+        return jax.lax.fori_loop(0, substeps, implicit, (x, v))
     if substeps <= UNROLLED:
         for k in range(substeps):
             x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
@@ -69,8 +127,9 @@ def advance(
 
 
 UNROLLED = 2  # substeps written out in the program; more run as a loop
-START_ITERATIONS = 3  # fixed-point iterations of start_velocity (substeps > 1)
+START_ITERATIONS = 3  # fixed-point (or Newton) iterations of start_velocity (substeps > 1)
 START_TOLERANCE = 1e-6  # largest last residual, relative to the frame's displacement
+START_ATOL = 1e-10  # m: ... plus this (a particle at rest has no displacement to be relative to)
 
 
 def start_velocity(
@@ -83,6 +142,7 @@ def start_velocity(
     method: Integrator = "euler",
     iterations: int = START_ITERATIONS,
     t=0.0,
+    with_residual: bool = False,
 ):
     """The velocity at a recorded frame that the integrator itself would carry there, given
     the two recorded positions ``x_prev`` (frame t - 1) and ``x`` (frame t); ``t`` is the
@@ -97,35 +157,72 @@ def start_velocity(
     * Euler, one substep: ``v_b`` (exact);
     * Verlet, one substep: ``v_b + dt/2 a(x, v_b)`` (exact: ``v_b`` is the step's half-step
       velocity, and the step closes with ``+ dt/2 a(x_t, v_half)``);
-    * otherwise: the state at t - 1 whose step lands on ``x`` is solved by a fixed-point
-      iteration on its velocity (``v <- v + (x - x_end) / dt``, contracting by about
-      ``dt * (c/m + dt k/m)`` per round, started from the constant-acceleration estimate)
-      and the velocity that step ends with is returned (corrected to first order by the last
-      residual). On data the same scheme generated, this recovers the true state to
-      ``~ contraction^(iterations+1)``. Where it has not converged (a last residual above
-      ``START_TOLERANCE`` of the frame's displacement: stiff or heavily damped parameters for
-      the frame interval) the velocity is NaN, so such a candidate costs +inf and is counted
-      as failed rather than silently biased.
+    * otherwise: the state at t - 1 whose step lands on ``x`` is solved for its velocity,
+      started from the constant-acceleration estimate, and the velocity that step ends with
+      is returned (corrected to first order by the last residual). The solve is a
+      fixed-point iteration ``v <- v + (x - x_end) / dt`` (Newton's method with the
+      Jacobian ``d x_end / d v`` taken as ``dt I``), contracting by about
+      ``dt * (c/m + dt k/m)`` per round; on data the same scheme generated it recovers the
+      true state to ``~ contraction^(iterations+1)``. Where a force is stiff in the velocity
+      for the frame interval, that contraction exceeds 1 and the iteration diverges: a
+      contact's friction near sticking is a drag of ``mu Fn / eps`` (``dt mu Fn / (m eps)``
+      is 10-500 at 100-200 Hz). With a kind of :data:`STIFF_KINDS` the solve is therefore
+      Newton's method on the exact Jacobian (forward mode over the P D velocity
+      coordinates: about P D + 1 times a step's cost per round, quadratic convergence), the
+      substeps' kicks being linearly implicit in that kind's drag (:func:`advance`).
+
+    A solve has converged when its last residual is at most ``START_TOLERANCE`` of the
+    frame's displacement plus ``START_ATOL``. Where it has not, the velocity is NaN, so such
+    a candidate costs +inf and is counted as failed rather than silently biased; with a stiff
+    kind, whose landing map has kinks (a contact starting, ending or sticking within the
+    frame) where Newton's method can stall, it is the last iterate's (corrected to first
+    order by its residual, a few micrometres in such frames): the fit counts these starts
+    and says so (:func:`activebonds.identify.cost.unsolved_starts`).
+
+    ``with_residual``: also return the last residual where the solve has not converged (m;
+    0 where it has or none is needed), for counting the starts that could not be solved.
     """
     v_b = (x - x_prev) / dt
     if substeps == 1 and method == "euler":
-        return v_b
+        return (v_b, jnp.zeros(())) if with_residual else v_b
     inv_m = 1.0 / params.mass[:, None]
     if substeps == 1 and method == "verlet":
-        return v_b + 0.5 * dt * total_force(params, topo, x, v_b, t) * inv_m
+        v = v_b + 0.5 * dt * total_force(params, topo, x, v_b, t) * inv_m
+        return (v, jnp.zeros(())) if with_residual else v
     # Constant acceleration a: Euler's N substeps start from v_b - dt (N+1)/(2N) a, Verlet's
     # from v_b - dt/2 a.
     lag = 0.5 * (substeps + 1) / substeps if method == "euler" else 0.5
     t_prev = t - dt
     v = v_b - lag * dt * total_force(params, topo, x_prev, v_b, t_prev) * inv_m
-    for _ in range(iterations):
-        x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
-        v = v + (x - x_end) / dt
-    x_end, v_end = advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
+
+    def land(v):
+        return advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
+
+    if stiff(topo):
+
+        def land_flat(vf):  # (x_end flat, x_end)
+            x_end = land(vf.reshape(x.shape))[0]
+            return x_end.ravel(), x_end
+
+        jac = jax.jacfwd(land_flat, has_aux=True)
+
+        def newton(_, v):
+            j, x_end = jac(v.ravel())
+            return v + jnp.linalg.solve(j, (x - x_end).ravel()).reshape(x.shape)
+
+        v = jax.lax.fori_loop(0, iterations, newton, v)
+    else:
+        for _ in range(iterations):
+            x_end, _ = land(v)
+            v = v + (x - x_end) / dt
+    x_end, v_end = land(v)
     residual = jnp.sqrt(jnp.sum((x - x_end) ** 2))
-    scale = jnp.sqrt(jnp.sum((x - x_prev) ** 2)) + 1e-12
-    converged = residual <= START_TOLERANCE * scale
-    return jnp.where(converged, v_end + (x - x_end) / dt, jnp.nan)
+    scale = jnp.sqrt(jnp.sum((x - x_prev) ** 2))
+    converged = residual <= START_TOLERANCE * scale + START_ATOL
+    v_out = v_end + (x - x_end) / dt
+    if not stiff(topo):
+        v_out = jnp.where(converged, v_out, jnp.nan)
+    return (v_out, jnp.where(converged, 0.0, residual)) if with_residual else v_out
 
 
 def rollout(

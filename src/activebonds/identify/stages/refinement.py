@@ -18,7 +18,10 @@ def costs_line(settings) -> str:
     """Which cost the search and the refinement used, and why, in one line."""
     s = settings
     search = (
-        "the search on the one-step cost (1 Euler substep, whose optimum --init lsq solves exactly)"
+        (
+            "the search on the one-step cost (1 Euler substep, whose optimum --init lsq solves "
+            "exactly; only the shooting's start)"
+        )
         if s.es_exact
         else f"the search on the restart cost (horizon {s.es_horizon}, {s.substeps} "
         f"{s.integrator} substep(s))"
@@ -64,6 +67,11 @@ class RefinementStage:
             outcome = self._outcome(fit, start, stages, refinement, current)
             if fit.run is not None:  # each stage kept as it ends
                 fit.run.save_record(NAME, outcome.record, arrays=outcome.arrays)
+        line = _starts(fit, current)
+        if line:
+            outcome.record["starts"] = line
+            if fit.run is not None:
+                fit.run.save_record(NAME, outcome.record, arrays=outcome.arrays)
         return outcome
 
     @staticmethod
@@ -86,6 +94,7 @@ class RefinementStage:
         """One line per stage: its cost, horizon, RMS before and after, steps."""
         stages = record.get("stages", [])
         out = [record["costs"]] if record.get("costs") else []
+        out += [record["starts"]] if record.get("starts") else []
         for i, st in enumerate(stages, 1):
             joined = (
                 ""
@@ -141,6 +150,20 @@ def table(record: dict) -> Table:
         f"Refinement after generation {record.get('from_generation')} of the ES: each stage "
         "starts from the previous one's result; RMS of the stage's own position residuals.",
     )
+
+
+def _starts(fit: Fit, genome) -> str | None:
+    """The line on the restart states whose start velocity the refinement's substeps could
+    not solve at its result (:func:`~activebonds.identify.cost.starts_line`), if any."""
+    s = fit.settings
+    if s.substeps == 1:
+        return None
+    from ..cost import join_windows, make_windows, starts_line
+
+    windows = join_windows(
+        [make_windows(d.positions, d.mask, d.dt, 1, s.smooth) for d in fit.ident.all_data]
+    )
+    return starts_line(fit.ident.model, windows, genome, s.substeps, s.integrator)
 
 
 def _states(arrays: dict) -> list | None:
