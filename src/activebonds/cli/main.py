@@ -472,6 +472,7 @@ from . import (  # noqa: E402,F401
     datasets_cmd,
     evaluate_cmd,
     export_cmd,
+    scaffold_cmd,
     structure_cmd,
     sweep_cmd,
 )
