@@ -301,7 +301,7 @@ def scaffold(
         "# Every candidate bond is optional: `activebonds structure` decides which the recording",
         "# needs. The rules behind every number: activebonds.model.scaffold's docstring.",
         f"name = {_q(name or 'scaffold')}",
-        f"dimension = {d}",
+        f"dimension = {d}  # the recording's",
     ]
     bond_blocks: list[str] = []
     contacts = 0
