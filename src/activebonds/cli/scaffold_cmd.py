@@ -50,7 +50,7 @@ def scaffold(
     overwrite: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
 ):
     """Write a candidate model of a recording: a particle per marker, candidate springs
-    (near-rigid pairs and nearest neighbours, every one optional for 'structure'), gravity and
+    (near-rigid pairs, nearest neighbours, Delaunay edges; every one optional for 'structure'), gravity and
     ground contacts where the vertical is confident; every number with a comment saying
     where it came from."""
     from ..atomic import write_text_atomic

@@ -10,8 +10,9 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   :data:`MASS_PER_MARKER` kg per marker); free them (as ratios of ``total_mass``) once the
   structure is chosen, as ``structure`` needs fixed masses.
 * **Candidate bonds** (binary springs): the union of the near-rigid pairs (their distance's
-  spread, 5th to 95th percentile, at most :data:`RIGID` of its median) and the ``k`` nearest
-  neighbours of each marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension).
+  spread, 5th to 95th percentile, at most :data:`RIGID` of its median), the ``k`` nearest
+  neighbours of each marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension)
+  and the edges of the Delaunay triangulation of the markers at the placement frame.
 * **Rest length**: the pair's median distance; bounds the observed range (minimum to maximum)
   widened by half the range on each side and to at least :data:`REST_MARGIN` of the median
   (a spring compressed under a load is never seen at its rest length).
@@ -39,7 +40,8 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   ``M g`` shared by the ``n`` contacts at a penetration ``delta`` = :data:`PENETRATION`),
   bounds a factor 100 either way; damping 10 % of critical for a mass ``M / n``, bounds a
   factor 100 either way; friction 0.8 in ``[0, 2]``. On a treadmill (the contact markers
-  move along the ground at a median speed over :data:`BELT_SPEED` while on it) the belt's
+  move along the ground at a median velocity over :data:`BELT_SPEED` while on it, and that
+  much faster than the markers' mean: a body sliding with its feet rides no belt) the belt's
   velocity, that median, is the contacts' fixed ``surface_velocity``.
 """
 
@@ -62,7 +64,7 @@ G = 9.81  # m/s^2
 FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
 CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it
 CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at least this often
-HEIGHT_RANGE = 0.02  # m: the ground's height is free within this of its guess
+HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
 PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
 BELT_SPEED = 0.1  # m/s: contact markers sliding faster than this ride a treadmill belt
 FRICTION = (0.8, 0.0, 2.0)  # Coulomb coefficient: value, min, max
@@ -202,10 +204,34 @@ def _ground(x: np.ndarray, axis: int, sign: float) -> float:
     return float(np.percentile(np.nanmin(h[some], axis=1), 5))
 
 
-def _pairs(dist: np.ndarray, spread: np.ndarray, k: int) -> dict[tuple[int, int], list[str]]:
+def _delaunay(x: np.ndarray) -> set[tuple[int, int]]:
+    """The edges (i < j) of the Delaunay triangulation of the points x [P, D] (none where
+    the points are too few or flat: no simplex of full dimension)."""
+    from scipy.spatial import Delaunay, QhullError
+
+    if x.shape[0] <= x.shape[1]:
+        return set()
+    try:
+        simplices = Delaunay(x).simplices
+    except (QhullError, ValueError):
+        return set()
+    edges = set()
+    for simplex in simplices:
+        for a in range(len(simplex)):
+            for b in range(a + 1, len(simplex)):
+                i, j = sorted((int(simplex[a]), int(simplex[b])))
+                edges.add((i, j))
+    return edges
+
+
+def _pairs(
+    dist: np.ndarray, spread: np.ndarray, k: int, placed: np.ndarray
+) -> dict[tuple[int, int], list[str]]:
     """Candidate pairs (i < j) and why each is one."""
     p = dist.shape[0]
     why: dict[tuple[int, int], list[str]] = {}
+    for i, j in sorted(_delaunay(placed)):
+        why.setdefault((i, j), []).append("a Delaunay edge at the placement frame")
     for i in range(p):
         for j in range(i + 1, p):
             if spread[i, j] <= RIGID:
@@ -287,7 +313,7 @@ def scaffold(
         lo5, hi95 = np.nanpercentile(length, [5, 95], axis=0)
         spread = (hi95 - lo5) / med
     k_nn = neighbours or NEIGHBOURS[d]
-    pairs = _pairs(med, np.nan_to_num(spread, nan=np.inf), k_nn)
+    pairs = _pairs(med, np.nan_to_num(spread, nan=np.inf), k_nn, x[t0])
 
     k_lo = mu * (2 * math.pi / duration) ** 2 / 10
     k_hi = 10 * mu * (math.pi * rate) ** 2
@@ -394,11 +420,17 @@ def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     on = near[1:] & near[:-1]
     tangential = [vel[on[:, i], i] for i in touching]
     tangential = np.concatenate(tangential) if tangential else np.zeros((0, d))
+    body = np.nanmean(vel, axis=1)  # [F-1, D] the markers' mean velocity
+    with_body = [body[on[:, i]] for i in touching]
+    with_body = np.concatenate(with_body) if with_body else np.zeros((0, d))
     belt = None
     if len(tangential):
         med = np.median(tangential, axis=0)
         med[axis] = 0.0
-        if np.linalg.norm(med) > BELT_SPEED:
+        along = np.median(with_body, axis=0)
+        along[axis] = 0.0
+        # a belt carries the feet, not the body: a body sliding with its feet rides none
+        if np.linalg.norm(med) > BELT_SPEED and np.linalg.norm(med - along) > BELT_SPEED:
             belt = med
     n = len(touching)
     k = total * G / (n * PENETRATION)
