@@ -131,10 +131,11 @@ def test_candidates_are_near_rigid_pairs_and_nearest_neighbours():
     x[:, 1] = x[:, 0] + [0.1, 0, 0]  # M0-M1 rigid
     x[:, 4] = x[:, 0] + [5, 5, 5]  # M0-M4 rigid, though far
     traj = Trajectory(x, np.ones((80, 5), bool), tuple(f"M{i}" for i in range(5)), 100.0)
-    made = scaffold(traj, neighbours=1, gravity=False)
+    made = scaffold(traj, neighbours=2, gravity=False)
     spec = loads_model(made.text).spec
     pairs = {tuple(b.particles) for b in spec.bond}
     assert ("M0", "M4") in pairs and ("M0", "M1") in pairs  # near-rigid
+    assert "# M0-M4: near-rigid (distance spread 0 % of its median)" in made.text
     assert ("M2", "M3") in pairs  # each other's nearest neighbour
     assert made.gravity == "none" and made.contacts == 0
 
@@ -188,3 +189,22 @@ def test_best_model_carries_its_start_and_exports_as_is(tmp_path):
     )  # fmt: skip
     assert proc.returncode == 2 and "--frame" in proc.stderr
     assert not (tmp_path / "no.xml").exists()
+
+
+def test_neural_turns_the_present_springs_of_a_structure_result_into_neural_bonds(tmp_path):
+    x = _wobble(particles=3)
+    data = _recording(tmp_path, x)
+    cand = tmp_path / "cand.toml"
+    assert cli_in_process("scaffold", data, "--out", cand, "--no-gravity").returncode == 0
+    spec = tomllib.loads(cand.read_text())
+    first, *rest = cand.read_text().split("optional = true")
+    absent, present = "optional = true\npresent = false", "optional = true\npresent = true"
+    found = first + absent + present.join(rest)  # the first candidate absent, the others present
+    found_path = tmp_path / "found.toml"
+    found_path.write_text(found)
+    out = tmp_path / "neural.toml"
+    proc = cli_in_process("scaffold", data, "--neural", found_path, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    neural = load_model(out).spec
+    assert len(neural.bond) == len(spec["bond"]) - 1
+    assert all(b.neural and not b.optional for b in neural.bond)

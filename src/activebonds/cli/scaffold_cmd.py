@@ -65,7 +65,7 @@ def scaffold(
         if not out_file.parent.exists():
             raise InputError(out_file, "the folder does not exist")
         if neural is not None:
-            text = neural_text(neural)
+            text = neural_text(neural, read_trajectory(traj))
             loads_model(text, str(out_file))
             write_text_atomic(out_file, text)
             out.print(f"wrote {out_file} (the present bonds of {neural}, neural)", markup=False)

@@ -300,8 +300,10 @@ def fitted_model(ident: Identification, settings: FitSettings, genome) -> Model:
     both = np.flatnonzero(mask[:-1] & mask[1:])
     if both.size == 0:
         return model
+    data = ident.data  # the fitted columns in particle order (--markers may rename them)
+    data = Trajectory(data.positions, data.mask, model.markers, data.rate, source=data.source)
     try:
-        return start_at(model, ident.data, int(both[0]), settings.substeps, settings.integrator)
+        return start_at(model, data, int(both[0]), settings.substeps, settings.integrator)
     except InputError:
         return model
 

@@ -9,10 +9,13 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   first frame). Masses are fixed, ``total_mass / P`` each (``--total-mass``, default
   :data:`MASS_PER_MARKER` kg per marker); free them (as ratios of ``total_mass``) once the
   structure is chosen, as ``structure`` needs fixed masses.
-* **Candidate bonds** (binary springs): the union of the near-rigid pairs (their distance's
-  spread, 5th to 95th percentile, at most :data:`RIGID` of its median), the ``k`` nearest
-  neighbours of each marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension)
-  and the edges of the Delaunay triangulation of the markers at the placement frame.
+* **Candidate bonds** (binary springs): the union of the ``k`` nearest neighbours of each
+  marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension), the near-rigid
+  pairs among each marker's ``2 k`` nearest (their distance's spread, 5th to 95th
+  percentile, at most :data:`RIGID` of its median) and, up to :data:`DELAUNAY_MAX` markers,
+  the edges of the Delaunay triangulation of the markers at the placement frame (braces that
+  nearest neighbours miss; beyond, their number and ``structure``'s time, which grows with
+  the square of the candidates, grow fast).
 * **Rest length**: the pair's median distance; bounds the observed range (minimum to maximum)
   widened by half the range on each side and to at least :data:`REST_MARGIN` of the median
   (a spring compressed under a load is never seen at its rest length).
@@ -59,6 +62,8 @@ from ..errors import InputError
 MASS_PER_MARKER = 1.0  # kg: the default total mass is this times the markers
 RIGID = 0.05  # a near-rigid pair's distance spread (5th-95th percentile) / its median
 NEIGHBOURS = {2: 3, 3: 4}  # nearest neighbours per marker, by dimension
+RIGID_REACH = 2  # near-rigid pairs are looked for among this many times k nearest neighbours
+DELAUNAY_MAX = 16  # markers: the Delaunay edges are candidates up to this many (they grow fast)
 REST_MARGIN = 0.2  # the rest length's bounds reach at least this share of the median
 G = 9.81  # m/s^2
 FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
@@ -230,15 +235,19 @@ def _pairs(
     """Candidate pairs (i < j) and why each is one."""
     p = dist.shape[0]
     why: dict[tuple[int, int], list[str]] = {}
-    for i, j in sorted(_delaunay(placed)):
-        why.setdefault((i, j), []).append("a Delaunay edge at the placement frame")
+    if p <= DELAUNAY_MAX:
+        for i, j in sorted(_delaunay(placed)):
+            why.setdefault((i, j), []).append("a Delaunay edge at the placement frame")
+    order = np.argsort(np.where(np.eye(p, dtype=bool), np.inf, dist), axis=1)
+    local = np.zeros((p, p), bool)
+    for i in range(p):
+        local[i, order[i, : RIGID_REACH * k]] = True
     for i in range(p):
         for j in range(i + 1, p):
-            if spread[i, j] <= RIGID:
+            if spread[i, j] <= RIGID and (local[i, j] or local[j, i]):
                 why.setdefault((i, j), []).append(
                     f"near-rigid (distance spread {100 * spread[i, j]:.2g} % of its median)"
                 )
-    order = np.argsort(np.where(np.eye(p, dtype=bool), np.inf, dist), axis=1)
     for i in range(p):
         for rank, j in enumerate(order[i, : min(k, p - 1)]):
             if not np.isfinite(dist[i, j]):
@@ -470,14 +479,22 @@ def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     return out
 
 
-def neural_text(found) -> str:
+def neural_text(found, recording=None) -> str:
     """The model file of a structure result (``FOUND.toml``) with its present springs as
     mechanical-neural bonds (``fit --bonds neural``'s defaults for the neural parameters) and
-    its absent candidates dropped: neural bonds cannot be optional."""
+    its absent candidates dropped: neural bonds cannot be optional. With ``recording``, its
+    markers must hold the model's (InputError otherwise)."""
     from ..model import dumps_model, load_model
     from ..model.variants import as_neural
 
     model = load_model(found)
+    if recording is not None:
+        missing = [m for m in model.markers if m not in recording.markers]
+        if missing:
+            raise InputError(
+                recording.source or "the recording",
+                f"has no marker {missing[0]!r} of {found}",
+            )
     kept = [
         b.model_copy(update={"optional": None, "present": None})
         for b in model.spec.bond
