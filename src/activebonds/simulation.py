@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
-from .model import Model, load_model
-from .physics import rollout, start_velocity
+from .model import Model, build, load_model
+from .physics import advance, rollout, start_velocity
 from .runtime import float64
 
 
@@ -144,3 +145,65 @@ def simulate_to_file(
     traj = simulate(model, n_frames, rate, start, substeps, integrator)
     write_trajectory(traj, Path(out))
     return traj.n_frames
+
+
+START_ROUNDS = 50  # fixed-point rounds of the start velocity
+START_TOLERANCE = 1e-9  # of the frame's displacement: the start velocity's step lands there
+
+
+def start_at(
+    model: Model,
+    recording: Trajectory,
+    frame: int = 0,
+    substeps: int = 1,
+    integrator: str = "euler",
+    where: str = "--frame",
+) -> Model:
+    """The model with every particle's ``position`` and ``velocity`` at ``frame`` of
+    ``recording`` (its markers, the model's): the position recorded there, and the velocity
+    from which the model's own step (``substeps``, ``integrator``) lands on the next frame
+    (a fixed-point iteration, ``v <- v + (x_next - x_end) / dt``, from the forward
+    difference; the forward difference itself where it does not converge). So ``simulate``
+    from the model file reproduces the recording's next frame, and ``export`` starts there.
+    Time in the model's forces starts at 0 at that frame. InputError (naming ``where``) when
+    the frame or the next one misses a model marker or is outside the recording."""
+    data = recording.select(list(model.markers))
+    n = data.n_frames
+    if not 0 <= frame < n - 1:
+        raise InputError(
+            where, f"frame {frame} is not one of the {n} frames with a next one (0..{n - 2})"
+        )
+    if not (data.mask[frame].all() and data.mask[frame + 1].all()):
+        raise InputError(
+            where,
+            f"frames {frame} and {frame + 1} of {recording.source or 'the recording'} must "
+            "hold every model marker",
+        )
+    x0 = np.asarray(data.positions[frame], np.float64)
+    x1 = np.asarray(data.positions[frame + 1], np.float64)
+    dt = data.dt
+
+    def step(v):  # eager: a few rounds, not worth a compilation at every checkpoint
+        return advance(model.params, model.topology, x0, v, dt, substeps, integrator, 0.0)[0]
+
+    forward = (x1 - x0) / dt
+    v = forward
+    scale = float(np.sqrt(np.sum((x1 - x0) ** 2))) + 1e-12
+    with jax.enable_x64(True):
+        for _ in range(START_ROUNDS):
+            miss = x1 - np.asarray(step(jnp.asarray(v)), np.float64)
+            if not np.all(np.isfinite(miss)):
+                break
+            v = v + miss / dt
+            if np.sqrt(np.sum(miss**2)) <= START_TOLERANCE * scale:
+                break
+    if not (np.all(np.isfinite(v)) and np.sqrt(np.sum(miss**2)) <= 1e-3 * scale):
+        v = forward
+    particles = [
+        p.model_copy(
+            update={"position": [float(a) for a in x0[i]], "velocity": [float(a) for a in v[i]]}
+        )
+        for i, p in enumerate(model.spec.particle)
+    ]
+    spec = model.spec.model_copy(update={"particle": particles})
+    return build(spec, disable=model.disabled)

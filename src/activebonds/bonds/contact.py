@@ -77,12 +77,31 @@ def forces(params, topology, x, v):
     return accumulate(x.shape[0], [(idx, 1, f)])
 
 
+def _height_bounds(v):
+    return (v - 0.1, v + 0.1)
+
+
+def reach(bond, x):
+    """[S] True where the particle at ``x`` [S, D] is below the highest plane its height's
+    bounds allow (where the contact may push)."""
+    import numpy as np
+
+    h = bond.height
+    if isinstance(h, int | float) or h.fixed:
+        top = float(getattr(h, "value", h))
+    else:
+        top = h.max if h.max is not None else _height_bounds(h.value)[1]
+    n = np.asarray(bond.normal, np.float64)
+    n = n / np.linalg.norm(n)
+    return np.asarray(x, np.float64) @ n < top
+
+
 KIND = BondKind(
     name="contact",
     arity=1,
     parameters=(
         Parameter("normal", "normal", None, form="constant", note=" (a list of D numbers)"),
-        Parameter("height", "height", 0.0, lambda v: (v - 0.1, v + 0.1)),
+        Parameter("height", "height", 0.0, _height_bounds),
         Parameter("stiffness", "stiffness", None, spread(100, (1e2, 1e6)), check=NON_NEGATIVE),
         Parameter("damping", "damping", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
         Parameter(
@@ -97,4 +116,5 @@ KIND = BondKind(
     what="contacts",
     noun="contact",
     mujoco=MujocoForm(why="MuJoCo's contacts are solver constraints, not this penalty law"),
+    reach=reach,
 )

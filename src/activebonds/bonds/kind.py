@@ -157,6 +157,11 @@ class BondKind:
     off: tuple[str, ...] = ()  # fields that, all at 0, remove every force of a bond: a kind
     # with them can be optional (``optional = true``); an absent bond has them at 0, no genes
     mujoco: MujocoForm | None = None  # how MuJoCo expresses it; None: it cannot
+    # (bond table, x [S, D] of its particle) -> [S] bool: the states where a bond of a kind
+    # acting on one particle may exert a force for any value of its parameters within their
+    # bounds (structure identification leaves its particle's predictions there out); None:
+    # it may act anywhere
+    reach: Callable | None = None
 
     def __post_init__(self):
         if not self.noun:

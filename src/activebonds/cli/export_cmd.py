@@ -26,9 +26,19 @@ def export(
         ),
     ] = None,
     substeps: Annotated[int, typer.Option(min=1, help="Integration steps per frame.")] = 1,
+    start: Annotated[
+        Path | None,
+        typer.Option(
+            "--from",
+            help="Start from this recording: the positions at --frame and the velocity the "
+            "model's step carries to the next frame (instead of the model file's).",
+        ),
+    ] = None,
+    frame: Annotated[int, typer.Option(help="The frame of --from to start at.")] = 0,
 ):
     """Write the model for MuJoCo: point masses, gravity, binary spring-dampers (tendons) and
-    fixed unary anchors (joint springs); neural, ternary and contact bonds are refused."""
+    fixed unary anchors (joint springs); neural, ternary and contact bonds are refused. The
+    start is the model file's positions and velocities, or --from a recording's --frame."""
     from ..export import FORMATS, write_mjcf
     from ..model import load_model
 
@@ -36,6 +46,25 @@ def export(
         if fmt not in FORMATS:
             raise InputError("--format", f"expected {' or '.join(FORMATS)}, got '{fmt}'")
         m = load_model(model)
+        if start is not None:
+            from ..data import read_trajectory
+            from ..simulation import start_at
+
+            recording = read_trajectory(start)
+            missing = [k for k in m.markers if k not in recording.markers]
+            if missing:
+                raise InputError(
+                    start,
+                    f"has no marker {missing[0]!r} of the model; it has: "
+                    f"{', '.join(recording.markers)}",
+                )
+            if recording.dimension != m.dimension:
+                raise InputError(
+                    start, f"is {recording.dimension}D but the model is {m.dimension}D"
+                )
+            m = start_at(m, recording, frame, substeps, where="--frame")
+        elif frame != 0:
+            raise InputError("--frame", "needs --from TRAJ (the recording to start from)")
         write_mjcf(m, out_path, rate=rate, substeps=substeps, source=str(model))
     except InputError as e:
         fail(e)

@@ -216,8 +216,9 @@ def fit(
     init: Annotated[
         str,
         typer.Option(
-            help="uniform (within the bounds) or lsq (one individual at the exact "
-            "least-squares optimum of the linear parameters, neural gains 0)."
+            help="uniform (within the bounds), lsq (one individual at the exact "
+            "least-squares optimum of the linear parameters, neural gains 0) or model (one "
+            "individual at the model file's values, e.g. a structure result's)."
         ),
     ] = DEFAULT["init"],
     optimizer: Annotated[
@@ -491,6 +492,7 @@ from . import (  # noqa: E402,F401
     datasets_cmd,
     evaluate_cmd,
     export_cmd,
+    scaffold_cmd,
     structure_cmd,
     sweep_cmd,
 )

@@ -309,6 +309,27 @@ def _evolve(
     return _finish(*args, say=status, held_out=held_out)
 
 
+def fitted_model(ident: Identification, settings: FitSettings, genome) -> Model:
+    """The identified model with its start: every particle's position and velocity at the
+    first frame of the fitted window of the first recording (the first frame there with the
+    next one complete), the velocity the model's own step carries to the next frame
+    (:func:`~activebonds.simulation.start_at`); so ``simulate``, ``evaluate`` and ``export``
+    take the model file as it is. Without such a frame, the model as fitted."""
+    from ..simulation import start_at
+
+    model = ident.model.with_genome(genome)
+    mask = np.asarray(ident.data.mask, bool).all(axis=1)
+    both = np.flatnonzero(mask[:-1] & mask[1:])
+    if both.size == 0:
+        return model
+    data = ident.data  # the fitted columns in particle order (--markers may rename them)
+    data = Trajectory(data.positions, data.mask, model.markers, data.rate, source=data.source)
+    try:
+        return start_at(model, data, int(both[0]), settings.substeps, settings.integrator)
+    except InputError:
+        return model
+
+
 def _check_space_to_resume(run: RunDir, shapes: dict, columns: int, total: int) -> None:
     """Refuse (one line) to resume in a folder without the space the rest of the run needs:
     what the run writes in all, less what it holds now (replaced as it goes), and at least
@@ -344,7 +365,7 @@ def _checkpoint(run, ident, settings, strategy, state, history, integer, status,
     genome, cost, _ = _best(strategy, state)
     display = Display(ident.windows.n_terms)
     if np.isfinite(cost):
-        run.save_best_model(ident.model.with_genome(genome))
+        run.save_best_model(fitted_model(ident, settings, genome))
     run.write_status(
         status=status,
         generation=int(state.generation),
@@ -389,10 +410,10 @@ def _finish(
                 cost = float(cost)
                 fit.genome = genome = new
                 if run is not None:
-                    run.save_best_model(ident.model.with_genome(genome))
+                    run.save_best_model(fitted_model(ident, settings, genome))
                     run.update_status(status=status, best_rms_mm=float(display(cost)))
     per_particle = ident.windows.weight.sum(axis=(0, 1))
-    model = ident.model.with_genome(genome) if np.isfinite(cost) else ident.model
+    model = fitted_model(ident, settings, genome) if np.isfinite(cost) else ident.model
     refined = fit.products.get("refine", ([], None))[0]
     return FitResult(
         model=model,

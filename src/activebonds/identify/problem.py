@@ -107,6 +107,8 @@ def identification(
             start = least_squares(model, cut(1)).genome[None, :]
         except InputError as err:
             raise InputError("--init lsq", err.message) from None
+    elif settings.init == "model":
+        start = np.asarray(layout.initial(), np.float64)[None, :]
     problem = Problem(
         evaluate=cost,
         evaluate_population=make_population_cost(

@@ -30,7 +30,9 @@ class FitSettings(BaseModel):
     selection_pressure: float = Field(4.0, ge=0)
     sigma_init: float = Field(0.1, gt=0, le=1)
     adapt_variants: bool = False
-    init: Literal["uniform", "lsq"] = "uniform"  # lsq: one individual at the linear optimum
+    # lsq: one individual at the linear optimum; model: one at the model file's values (a
+    # structure result's, say)
+    init: Literal["uniform", "lsq", "model"] = "uniform"
     optimizer: str = "es"  # a name of identify.strategies: "es" (the paper's), "random", "cmaes"
     chunk: int = Field(250, ge=1, le=100_000)  # generations per compiled call, at most
     checkpoint_every: int = Field(5000, ge=1)  # generations between checkpoints

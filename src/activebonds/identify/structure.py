@@ -34,13 +34,15 @@ evolutionary route, which is not built: the model file refuses ``optional`` on t
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from .. import bonds
 from ..errors import InputError
 from ..model import Model, build
 from ..model.schema import ModelSpec
+from ..model.values import Param
 from .cost import Windows
 from .lsq import LinearProblem, compress, least_squares, linear_problem, solve
 
@@ -229,6 +231,44 @@ def _gene_key(name: str, model: Model) -> str:
     return kind + ":" + "*".join(model.layout.genes[g].name for g in _genes(name))
 
 
+def _held(bond) -> bool:
+    """A bond of a kind the exact least squares does not solve, with a known reach."""
+    kind = bonds.get(bond.kind)
+    return kind.linear is None and kind.reach is not None and not bond.absent
+
+
+def _fixed(value):
+    if isinstance(value, Param):
+        return value.model_copy(update={"fixed": True})
+    if isinstance(value, list):
+        return [_fixed(v) for v in value]
+    return value
+
+
+def held_out_of_reach(model: Model, windows: Windows) -> tuple[Model, Windows]:
+    """The model with the parameters of the bonds the least squares does not solve but whose
+    reach is known (contacts: :attr:`~activebonds.bonds.BondKind.reach`) held at their file
+    values, and the windows without the predictions of their particles from the states where
+    they may act for any value in their bounds: there they exert no force, so the held values
+    never enter and the structure is decided on the rest (a hoof in swing, not in stance)."""
+    held = [i for i, b in enumerate(model.spec.bond) if _held(b)]
+    if not held:
+        return model, windows
+    names = {n: k for k, n in enumerate(model.particle_names)}
+    weight = np.array(windows.weight, copy=True)
+    new_bonds = list(model.spec.bond)
+    for i in held:
+        b = new_bonds[i]
+        keys = bonds.get(b.kind).keys
+        new_bonds[i] = b.model_copy(update={k: _fixed(getattr(b, k)) for k in keys})
+        for name in b.particles:
+            k = names[name]
+            acts = np.asarray(bonds.get(b.kind).reach(b, windows.x0[:, k]), bool)
+            weight[acts, :, k] = 0.0
+    spec = model.spec.model_copy(update={"bond": new_bonds})
+    return build(spec, disable=model.disabled), replace(windows, weight=weight)
+
+
 def identify_structure(model: Model, windows: Windows) -> Structure:
     """Backward elimination of the optional bonds of ``model`` under the BIC, each structure
     solved by exact least squares on ``windows`` (horizon 1). InputError when the model has
@@ -242,6 +282,8 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
             "structure identification needs fixed masses (it solves the linear parameters "
             "exactly); fix the masses or identify them first",
         )
+    original = model.spec
+    model, windows = held_out_of_reach(model, windows)
     score = _Scorer(model, windows, pool)
     present = frozenset(pool)
     rss_full, bic = score(present)
@@ -271,6 +313,10 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
             )
         )
     spec = final.with_genome(genome).spec
+    held = [i for i, b in enumerate(original.bond) if _held(b)]
+    spec = spec.model_copy(
+        update={"bond": [original.bond[i] if i in held else b for i, b in enumerate(spec.bond)]}
+    )
     n_terms = max(int(np.sum(windows.weight)), 1)
     return Structure(
         spec=spec,

@@ -1,0 +1,510 @@
+"""A candidate model written from a recording (``activebonds scaffold``): every number of it
+with a comment saying where it came from, every candidate bond ``optional = true`` for
+``activebonds structure``.
+
+What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` seconds):
+
+* **Particles**: one per marker, placed at the first frame of the window where every marker
+  is present (its velocity the backward difference there, the forward one at the window's
+  first frame). Masses are fixed, ``total_mass / P`` each (``--total-mass``, default
+  :data:`MASS_PER_MARKER` kg per marker); free them (as ratios of ``total_mass``) once the
+  structure is chosen, as ``structure`` needs fixed masses.
+* **Candidate bonds** (binary springs): the union of the ``k`` nearest neighbours of each
+  marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension), the near-rigid
+  pairs among each marker's ``2 k`` nearest (their distance's spread, 5th to 95th
+  percentile, at most :data:`RIGID` of its median) and, up to :data:`DELAUNAY_MAX` markers,
+  the edges of the Delaunay triangulation of the markers at the placement frame (braces that
+  nearest neighbours miss; beyond, their number and ``structure``'s time, which grows with
+  the square of the candidates, grow fast).
+* **Rest length**: the pair's median distance; bounds the observed range (minimum to maximum)
+  widened by half the range on each side and to at least :data:`REST_MARGIN` of the median
+  (a spring compressed under a load is never seen at its rest length).
+* **Stiffness** (N/m) and **damping** (N s/m), from the pair's reduced mass
+  ``mu = m_i m_j / (m_i + m_j)``, the rate and the window:
+
+  - bounds ``k in [mu (2 pi / T)^2 / 10, 10 mu (pi f)^2]``: from a tenth of the spring whose
+    oscillation takes the whole window to ten times the one oscillating at the Nyquist
+    frequency ``f / 2`` (no recording at ``f`` Hz over ``T`` s shows a softer or a stiffer
+    spring as anything but absent or rigid, so a fit does not sit on them);
+  - bounds ``c in [2 mu / (100 T), 20 mu f]``: from a damper whose decay takes a hundred
+    windows (invisible) to ten times the one that stops the relative motion within one frame;
+  - values from the amplitudes: ``k = mu rms(L'') / rms(L - median L)`` (the stiffness whose
+    force explains the pair's relative acceleration along it by its stretch; ``L''`` the
+    second difference of its length over ``dt^2``) and ``c`` = 10 % of the critical damping
+    ``2 sqrt(k mu)``, each clipped into its bounds.
+* **Gravity** (``-9.81`` m/s^2 along the vertical) only where the vertical is confident: the
+  ground guess is clear and the acceleration guess does not contradict it
+  (:mod:`activebonds.data.orientation`); otherwise none, and the summary says so (``--up``
+  names the vertical, ``--no-gravity`` leaves it out). A flat recording (2D, or with no
+  extent along an axis) has no vertical to guess.
+* **Ground contacts** (with gravity): one per marker within :data:`CONTACT_REACH` of the
+  ground in at least :data:`CONTACT_SHARE` of the frames, the plane at the guessed ground
+  (height free within :data:`HEIGHT_RANGE`); stiffness ``M g / (n delta)`` (the whole weight
+  ``M g`` shared by the ``n`` contacts at a penetration ``delta`` = :data:`PENETRATION`),
+  bounds a factor 100 either way; damping 10 % of critical for a mass ``M / n``, bounds a
+  factor 100 either way; friction 0.8 in ``[0, 2]``. On a treadmill (the contact markers
+  move along the ground at a median velocity over :data:`BELT_SPEED` while on it, and that
+  much faster than the markers' mean: a body sliding with its feet rides no belt) the belt's
+  velocity, that median, is the contacts' fixed ``surface_velocity``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import bonds
+from ..errors import InputError
+
+MASS_PER_MARKER = 1.0  # kg: the default total mass is this times the markers
+RIGID = 0.05  # a near-rigid pair's distance spread (5th-95th percentile) / its median
+NEIGHBOURS = {2: 3, 3: 4}  # nearest neighbours per marker, by dimension
+RIGID_REACH = 2  # near-rigid pairs are looked for among this many times k nearest neighbours
+DELAUNAY_MAX = 16  # markers: the Delaunay edges are candidates up to this many (they grow fast)
+REST_MARGIN = 0.2  # the rest length's bounds reach at least this share of the median
+G = 9.81  # m/s^2
+FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
+CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it
+CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at least this often
+HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
+PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
+BELT_SPEED = 0.1  # m/s: contact markers sliding faster than this ride a treadmill belt
+FRICTION = (0.8, 0.0, 2.0)  # Coulomb coefficient: value, min, max
+AXES = "XYZ"
+
+
+@dataclass
+class Scaffold:
+    """The candidate model's text and what it is made of, for people."""
+
+    text: str
+    particles: int
+    bonds: int
+    contacts: int
+    gravity: str  # "-Z" or "none"
+    notes: list[str] = field(default_factory=list)
+
+
+def parse_up(text: str, dimension: int) -> tuple[int, float]:
+    """'Z', '+Z', '-y' -> (axis, sign)."""
+    t = text.strip().upper()
+    sign = -1.0 if t.startswith("-") else 1.0
+    t = t.lstrip("+-")
+    axes = AXES[:dimension]
+    if len(t) != 1 or t not in axes:
+        raise InputError(
+            "--up", f"expected an axis {', '.join(axes)} (optionally + or -), got '{text}'"
+        )
+    return axes.index(t), sign
+
+
+def _f(x: float) -> str:
+    """A TOML float, six significant digits."""
+    s = f"{x:.6g}"
+    return s if any(c in s for c in ".en") else s + ".0"
+
+
+def _vec(xs) -> str:
+    return "[" + ", ".join(_f(x) for x in xs) + "]"
+
+
+def _q(s: str) -> str:
+    return json.dumps(s)
+
+
+def _param(value: float, lo: float, hi: float) -> str:
+    return f"{{ value = {_f(value)}, min = {_f(lo)}, max = {_f(hi)} }}"
+
+
+def _window(traj, markers, frames):
+    if markers is not None:
+        unknown = [m for m in markers if m not in traj.markers]
+        if unknown:
+            raise InputError(
+                "--markers",
+                f"marker {unknown[0]!r} not found in {traj.source or 'the recording'}; "
+                f"available: {', '.join(traj.markers)}",
+            )
+        if len(set(markers)) != len(markers):
+            raise InputError("--markers", "a marker is named twice")
+        traj = traj.select(list(markers))
+    start, stop = frames
+    n = traj.n_frames
+    stop = n if stop is None else stop
+    if not (0 <= start < stop <= n):
+        raise InputError("--frames", f"{start}:{stop} is not a window of the {n} frames")
+    if stop - start < 3:
+        raise InputError("--frames", f"{start}:{stop} holds fewer than 3 frames")
+    return traj.window(start, stop), start
+
+
+def _flat_axes(x: np.ndarray) -> list[int]:
+    extent = np.nanmax(x, axis=(0, 1)) - np.nanmin(x, axis=(0, 1))
+    return [a for a in range(x.shape[2]) if not extent[a] >= FLAT]
+
+
+def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
+    """(axis, sign, ground height along up or None) of the gravity, or None for none."""
+    from ..data.orientation import agree, guess_gravity, guess_ground
+
+    x = np.asarray(traj.positions)
+    d = x.shape[2]
+    flat = _flat_axes(x)
+    source = traj.source or "the recording"
+    asked = gravity is True or up is not None
+    if gravity is False:
+        notes.append("gravity: none (--no-gravity)")
+        return None
+    if up is not None:
+        axis, sign = parse_up(up, d)
+        if axis in flat:
+            raise InputError(
+                source,
+                f"the recording is flat along {AXES[axis]} (its markers span less than "
+                f"{FLAT * 1000:g} mm there): no vertical for gravity along --up {up}",
+            )
+        down = ("-" if sign > 0 else "+") + AXES[axis]
+        notes.append(f"gravity: along {down} (--up {up})")
+        return axis, sign
+    if d == 2 or flat:
+        why = (
+            "a 2D recording"
+            if d == 2
+            else f"a flat recording (no extent along {', '.join(AXES[a] for a in flat)})"
+        )
+        if asked:
+            raise InputError(
+                source,
+                f"{why}: its plane may be horizontal, so the vertical cannot be guessed for "
+                "gravity; give --up AXIS or --no-gravity",
+            )
+        notes.append(f"gravity: none ({why}: give --up AXIS to add it)")
+        return None
+    ground = guess_ground(traj)
+    fall = guess_gravity(traj)
+    sure = ground is not None and ground.clear and agree(ground, fall) is not False
+    if not sure:
+        said = "no guess" if ground is None else ground.describe()
+        if ground is not None and agree(ground, fall) is False:
+            said += f", but the acceleration in flight says {fall.describe()}"
+        elif ground is not None and not ground.clear:
+            said += " (not clearly flatter than another axis)"
+        if asked:
+            raise InputError(
+                source, f"the vertical is uncertain ({said}); give --up AXIS or --no-gravity"
+            )
+        notes.append(f"gravity: none (the vertical is uncertain: {said}; give --up AXIS)")
+        return None
+    notes.append(f"gravity: the vertical guessed from the recording, {ground.describe()}")
+    return ground.axis, ground.up
+
+
+def _ground(x: np.ndarray, axis: int, sign: float) -> float:
+    """The ground along up: the 5th percentile of the per-frame lowest marker."""
+    h = sign * x[:, :, axis]
+    some = ~np.isnan(h).all(axis=1)
+    return float(np.percentile(np.nanmin(h[some], axis=1), 5))
+
+
+def _delaunay(x: np.ndarray) -> set[tuple[int, int]]:
+    """The edges (i < j) of the Delaunay triangulation of the points x [P, D] (none where
+    the points are too few or flat: no simplex of full dimension)."""
+    from scipy.spatial import Delaunay, QhullError
+
+    if x.shape[0] <= x.shape[1]:
+        return set()
+    try:
+        simplices = Delaunay(x).simplices
+    except (QhullError, ValueError):
+        return set()
+    edges = set()
+    for simplex in simplices:
+        for a in range(len(simplex)):
+            for b in range(a + 1, len(simplex)):
+                i, j = sorted((int(simplex[a]), int(simplex[b])))
+                edges.add((i, j))
+    return edges
+
+
+def _pairs(
+    dist: np.ndarray, spread: np.ndarray, k: int, placed: np.ndarray
+) -> dict[tuple[int, int], list[str]]:
+    """Candidate pairs (i < j) and why each is one."""
+    p = dist.shape[0]
+    why: dict[tuple[int, int], list[str]] = {}
+    if p <= DELAUNAY_MAX:
+        for i, j in sorted(_delaunay(placed)):
+            why.setdefault((i, j), []).append("a Delaunay edge at the placement frame")
+    order = np.argsort(np.where(np.eye(p, dtype=bool), np.inf, dist), axis=1)
+    local = np.zeros((p, p), bool)
+    for i in range(p):
+        local[i, order[i, : RIGID_REACH * k]] = True
+    for i in range(p):
+        for j in range(i + 1, p):
+            if spread[i, j] <= RIGID and (local[i, j] or local[j, i]):
+                why.setdefault((i, j), []).append(
+                    f"near-rigid (distance spread {100 * spread[i, j]:.2g} % of its median)"
+                )
+    for i in range(p):
+        for rank, j in enumerate(order[i, : min(k, p - 1)]):
+            if not np.isfinite(dist[i, j]):
+                continue
+            a, b = sorted((i, int(j)))
+            why.setdefault((a, b), []).append(f"neighbour {rank + 1} of particle {i}")
+    return dict(sorted(why.items()))
+
+
+def scaffold(
+    traj,
+    markers: list[str] | None = None,
+    frames: tuple[int, int | None] = (0, None),
+    total_mass: float | None = None,
+    up: str | None = None,
+    gravity: bool | None = None,
+    neighbours: int | None = None,
+    name: str | None = None,
+) -> Scaffold:
+    """The candidate model of a recording (see the module's docstring); InputError (one
+    line) for one marker, no frame with every marker, a flat recording asked for gravity, a
+    total mass <= 0 or unknown markers."""
+    source = traj.source or "the recording"
+    if total_mass is not None and not (math.isfinite(total_mass) and total_mass > 0):
+        raise InputError("--total-mass", f"must be a number of kg > 0, got {total_mass:g}")
+    if neighbours is not None and neighbours < 1:
+        raise InputError("--neighbours", f"must be at least 1, got {neighbours}")
+    data, offset = _window(traj, markers, frames)
+    names = list(data.markers)
+    p = len(names)
+    if p < 2:
+        raise InputError(
+            "--markers" if markers is not None else source,
+            f"one marker ({names[0]}): a model needs at least two to bond",
+        )
+    x = np.asarray(data.positions, np.float64)  # [F, P, D]
+    mask = np.asarray(data.mask, bool)
+    f_count, _, d = x.shape
+    complete = np.flatnonzero(mask.all(axis=1))
+    if complete.size == 0:
+        raise InputError(
+            source,
+            f"no frame of {offset}:{offset + f_count} holds every one of the {p} markers; "
+            "choose --markers or --frames where they are all present (activebonds info)",
+        )
+    notes: list[str] = []
+    vertical = _vertical(data, up, gravity, notes)
+
+    rate, dt = data.rate, data.dt
+    duration = (f_count - 1) * dt
+    if total_mass is None:
+        total, mass_note = p * MASS_PER_MARKER, f"{MASS_PER_MARKER:g} kg per marker (default)"
+    else:
+        total, mass_note = float(total_mass), "--total-mass"
+    m = total / p
+    mu = m / 2.0  # the reduced mass of a pair of equal masses
+
+    # placement: the first complete frame; its velocity by a backward (else forward) difference
+    t0 = int(complete[0])
+    if t0 > 0 and mask[t0 - 1].all():
+        v0, how = (x[t0] - x[t0 - 1]) / dt, "backward difference"
+    elif t0 + 1 < f_count and mask[t0 + 1].all():
+        v0, how = (x[t0 + 1] - x[t0]) / dt, "forward difference"
+    else:
+        v0, how = np.zeros((p, d)), "none measurable (no complete neighbour frame): zero"
+
+    # the pairs' distances over the frames where both are present
+    diff = x[:, :, None, :] - x[:, None, :, :]
+    length = np.sqrt(np.sum(diff**2, axis=-1))  # [F, P, P], NaN where one is missing
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(length, axis=0)
+        lo5, hi95 = np.nanpercentile(length, [5, 95], axis=0)
+        spread = (hi95 - lo5) / med
+    k_nn = neighbours or NEIGHBOURS[d]
+    pairs = _pairs(med, np.nan_to_num(spread, nan=np.inf), k_nn, x[t0])
+
+    k_lo = mu * (2 * math.pi / duration) ** 2 / 10
+    k_hi = 10 * mu * (math.pi * rate) ** 2
+    c_lo = 2 * mu / (100 * duration)
+    c_hi = 20 * mu * rate
+
+    lines = [
+        f"# Candidate model of {source}, written by activebonds scaffold.",
+        f"# Frames {offset}:{offset + f_count} ({f_count} frames at {rate:g} Hz, T = "
+        f"{duration:.4g} s), {p} markers.",
+        "# Every candidate bond is optional: `activebonds structure` decides which the recording",
+        "# needs. The rules behind every number: activebonds.model.scaffold's docstring.",
+        f"name = {_q(name or 'scaffold')}",
+        f"dimension = {d}  # the recording's",
+    ]
+    bond_blocks: list[str] = []
+    contacts = 0
+    up_text = "none"
+    if vertical is not None:
+        axis, sign = vertical
+        g = [0.0] * d
+        g[axis] = -sign * G
+        up_text = ("-" if sign > 0 else "+") + AXES[axis]
+        lines.append(f"gravity = {_vec(g)}  # m/s^2: {notes[-1]}")
+        bond_blocks += _contacts(x, mask, names, axis, sign, total, dt, notes)
+        contacts = len(bond_blocks)
+    lines.append(
+        f"total_mass = {_f(total)}  # kg: {mass_note}, split equally over the {p} particles"
+    )
+    for i, n in enumerate(names):
+        lines += [
+            "",
+            "[[particle]]",
+            f"name = {_q(n)}",
+            f"mass = {m!r}  # kg: total_mass / {p} (fixed: structure needs fixed masses)",
+            f"position = {_vec(x[t0, i])}  # m: frame {offset + t0}, the first with every marker",
+            f"velocity = {_vec(v0[i])}  # m/s: at frame {offset + t0}, {how}",
+        ]
+    binary = bonds.binary.KIND.name
+    for (i, j), why in pairs.items():
+        series = length[:, i, j]
+        seen = np.isfinite(series)
+        dmin, dmax = float(np.nanmin(series)), float(np.nanmax(series))
+        l0 = float(med[i, j])
+        half = 0.5 * (dmax - dmin)
+        rl_lo = max(0.0, min(dmin - half, (1 - REST_MARGIN) * l0))
+        rl_hi = max(dmax + half, (1 + REST_MARGIN) * l0)
+        stretch = series - l0
+        acc = (series[2:] - 2 * series[1:-1] + series[:-2]) / dt**2
+        acc = acc[np.isfinite(acc)]
+        rms_s = float(np.sqrt(np.nanmean(stretch**2)))
+        rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
+        k_raw = mu * rms_a / rms_s if rms_s > 0 else k_hi
+        k0 = float(np.clip(k_raw, k_lo, k_hi))
+        c0 = float(np.clip(0.1 * 2 * math.sqrt(k0 * mu), c_lo, c_hi))
+        bond_blocks.append(
+            "\n".join(
+                [
+                    "",
+                    f"# {names[i]}-{names[j]}: {'; '.join(why)}".replace(
+                        f"particle {i}", names[i]
+                    ).replace(f"particle {j}", names[j]),
+                    "[[bond]]",
+                    f"kind = {_q(binary)}",
+                    f"particles = [{_q(names[i])}, {_q(names[j])}]",
+                    "optional = true",
+                    f"rest_length = {_param(l0, rl_lo, rl_hi)}  # m: median distance over "
+                    f"{int(seen.sum())} frames; observed {dmin:.4g}..{dmax:.4g}, widened by half "
+                    f"the range and to +-{100 * REST_MARGIN:g} % of the median",
+                    f"stiffness = {_param(k0, k_lo, k_hi)}  # N/m: mu {mu:.4g} kg x rms "
+                    f"acceleration {rms_a:.3g} m/s^2 / rms stretch {1000 * rms_s:.3g} mm; "
+                    f"bounds mu (2 pi / {duration:.4g} s)^2 / 10 .. 10 mu (pi {rate:g} Hz)^2",
+                    f"damping = {_param(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
+                    f"2 sqrt(k mu); bounds 2 mu / (100 T) .. 20 mu f",
+                ]
+            )
+        )
+    text = "\n".join(lines) + "\n" + "\n".join(bond_blocks) + "\n"
+    return Scaffold(
+        text=text,
+        particles=p,
+        bonds=len(pairs),
+        contacts=contacts,
+        gravity=up_text,
+        notes=notes,
+    )
+
+
+def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
+    """The ground contacts' [[bond]] blocks (the markers that reach the guessed ground)."""
+    h = sign * x[:, :, axis]  # [F, P] height along up, NaN where missing
+    ground = _ground(x, axis, sign)
+    near = (h - ground) < CONTACT_REACH  # False where missing (NaN compares False)
+    share = near.sum(axis=0) / np.maximum(mask.sum(axis=0), 1)
+    touching = [i for i in range(len(names)) if share[i] >= CONTACT_SHARE]
+    if not touching:
+        notes.append(f"contacts: none (no marker within {CONTACT_REACH * 100:g} cm of the ground)")
+        return []
+    d = x.shape[2]
+    normal = [0.0] * d
+    normal[axis] = sign
+    # the belt: the contact markers' median velocity along the ground while on it
+    vel = (x[1:] - x[:-1]) / dt  # [F-1, P, D]
+    on = near[1:] & near[:-1]
+    tangential = [vel[on[:, i], i] for i in touching]
+    tangential = np.concatenate(tangential) if tangential else np.zeros((0, d))
+    body = np.nanmean(vel, axis=1)  # [F-1, D] the markers' mean velocity
+    with_body = [body[on[:, i]] for i in touching]
+    with_body = np.concatenate(with_body) if with_body else np.zeros((0, d))
+    belt = None
+    if len(tangential):
+        med = np.median(tangential, axis=0)
+        med[axis] = 0.0
+        along = np.median(with_body, axis=0)
+        along[axis] = 0.0
+        # a belt carries the feet, not the body: a body sliding with its feet rides none
+        if np.linalg.norm(med) > BELT_SPEED and np.linalg.norm(med - along) > BELT_SPEED:
+            belt = med
+    n = len(touching)
+    k = total * G / (n * PENETRATION)
+    c = 0.1 * 2 * math.sqrt(k * total / n)
+    height = sign * ground  # the plane's offset along the normal is the ground along up
+    contact = bonds.contact.KIND.name
+    notes.append(
+        f"contacts: {n} marker(s) within {CONTACT_REACH * 100:g} cm of the ground "
+        f"(at {ground:.4g} m along up) in at least {100 * CONTACT_SHARE:g} % of the frames"
+        + (f"; a treadmill belt at {_vec(belt)} m/s" if belt is not None else "")
+    )
+    out = []
+    for i in touching:
+        block = [
+            "",
+            f"# {names[i]} on the ground: within {CONTACT_REACH * 100:g} cm of it in "
+            f"{100 * share[i]:.3g} % of the frames",
+            "[[bond]]",
+            f"kind = {_q(contact)}",
+            'type = "ground"',
+            f"particles = [{_q(names[i])}]",
+            f"normal = {_vec(normal)}  # up, as guessed (or --up)",
+            f"height = {_param(height, height - HEIGHT_RANGE, height + HEIGHT_RANGE)}  # m: the "
+            f"5th percentile of the lowest marker of each frame, +-{HEIGHT_RANGE * 100:g} cm",
+            f"stiffness = {_param(k, k / 100, k * 100)}  # N/m: the weight {total:.4g} kg x g "
+            f"over {n} contacts at {PENETRATION * 1000:g} mm; bounds x/100 .. x100",
+            f"damping = {_param(c, c / 100, c * 100)}  # N s/m: 10 % of critical for "
+            f"{total / n:.4g} kg; bounds x/100 .. x100",
+            f"friction = {_param(*FRICTION)}  # Coulomb coefficient: a common guess",
+        ]
+        if belt is not None:
+            block.append(
+                f"surface_velocity = {_vec(belt)}  # m/s: the contact markers' median velocity "
+                "along the ground while on it (a treadmill belt)"
+            )
+        out.append("\n".join(block))
+    return out
+
+
+def neural_text(found, recording=None) -> str:
+    """The model file of a structure result (``FOUND.toml``) with its present springs as
+    mechanical-neural bonds (``fit --bonds neural``'s defaults for the neural parameters) and
+    its absent candidates dropped: neural bonds cannot be optional. With ``recording``, its
+    markers must hold the model's (InputError otherwise)."""
+    from ..model import dumps_model, load_model
+    from ..model.variants import as_neural
+
+    model = load_model(found)
+    if recording is not None:
+        missing = [m for m in model.markers if m not in recording.markers]
+        if missing:
+            raise InputError(
+                recording.source or "the recording",
+                f"has no marker {missing[0]!r} of {found}",
+            )
+    kept = [
+        b.model_copy(update={"optional": None, "present": None})
+        for b in model.spec.bond
+        if not b.absent
+    ]
+    spec = model.spec.model_copy(update={"bond": kept})
+    from ..model import build
+
+    neural = as_neural(build(spec))
+    return (
+        f"# {found}'s present bonds as mechanical-neural bonds (activebonds scaffold --neural);\n"
+        "# its absent candidates dropped.\n" + dumps_model(neural)
+    )

@@ -1,0 +1,211 @@
+"""``activebonds scaffold`` (a candidate model from a recording) and the fitted model's start
+(``best_model.toml`` with positions and velocities; ``export --from TRAJ --frame N``)."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+
+import numpy as np
+import pytest
+
+from activebonds.data import read_trajectory
+from activebonds.data.trajectory import Trajectory
+from activebonds.data.writers import write_trajectory
+from activebonds.identify.scaffold import scaffold
+from activebonds.model import load_model, loads_model
+from helpers import EXAMPLES, HORSE_TROT, cli_in_process
+
+TRIANGLE_DATA = EXAMPLES / "triangle.csv"
+
+
+def _recording(tmp_path, positions, mask=None, name="rec.csv", markers=None):
+    positions = np.asarray(positions, float)
+    if mask is None:
+        mask = np.ones(positions.shape[:2], bool)
+    positions = np.where(mask[..., None], positions, np.nan)
+    markers = markers or tuple(f"M{i}" for i in range(positions.shape[1]))
+    traj = Trajectory(positions=positions, mask=mask, markers=markers, rate=100.0)
+    path = tmp_path / name
+    write_trajectory(traj, path)
+    return path
+
+
+def _wobble(frames=60, particles=4, dimension=3, seed=0):
+    rng = np.random.default_rng(seed)
+    base = rng.uniform(-0.3, 0.3, (particles, dimension))
+    if dimension == 3:
+        base[:, 2] += 0.5
+    t = np.arange(frames)[:, None, None] / 100.0
+    return base[None] + 0.01 * np.sin(2 * np.pi * 1.5 * t + rng.uniform(0, 6, (particles, 1)))
+
+
+def _bad(tmp_path, data, *options):
+    out = tmp_path / "model.toml"
+    proc = cli_in_process("scaffold", data, "--out", out, *options)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert not out.exists() and not list(tmp_path.glob("*.toml"))
+    return lines[0]
+
+
+def test_one_marker_is_refused(tmp_path):
+    data = _recording(tmp_path, _wobble(particles=3))
+    line = _bad(tmp_path, data, "--markers", "M1")
+    assert "one marker (M1)" in line and "--markers" in line
+
+
+def test_no_complete_frame_is_refused(tmp_path):
+    x = _wobble(particles=3)
+    mask = np.ones(x.shape[:2], bool)
+    mask[::2, 0] = False
+    mask[1::2, 1] = False  # M0 and M1 are never seen together
+    data = _recording(tmp_path, x, mask)
+    line = _bad(tmp_path, data)
+    assert "no frame of 0:60 holds every one of the 3 markers" in line
+
+
+def test_a_flat_recording_asked_for_gravity_is_refused(tmp_path):
+    planar = _recording(tmp_path, _wobble(dimension=2), name="planar.csv")
+    line = _bad(tmp_path, planar, "--gravity")
+    assert "a 2D recording" in line and "--up" in line
+    x = _wobble()
+    x[:, :, 2] = 0.25  # every marker at one height: flat along Z
+    flat = _recording(tmp_path, x, name="flat.csv")
+    line = _bad(tmp_path, flat, "--up", "Z")
+    assert "flat along Z" in line
+    line = _bad(tmp_path, flat, "--gravity")
+    assert "a flat recording (no extent along Z)" in line
+
+
+@pytest.mark.parametrize("mass", ["0", "-3"])
+def test_a_total_mass_not_above_zero_is_refused(tmp_path, mass):
+    data = _recording(tmp_path, _wobble())
+    line = _bad(tmp_path, data, f"--total-mass={mass}")
+    assert "--total-mass" in line and "> 0" in line
+
+
+def test_unknown_markers_are_refused(tmp_path):
+    data = _recording(tmp_path, _wobble())
+    line = _bad(tmp_path, data, "--markers", "M0,Nope")
+    assert "'Nope' not found" in line and "M0, M1, M2, M3" in line
+
+
+def test_the_scaffold_of_the_trot_loads_and_says_where_every_number_comes_from(tmp_path):
+    out = tmp_path / "trot.toml"
+    proc = cli_in_process("scaffold", HORSE_TROT, "--out", out, "--total-mass", "500")
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    model = load_model(out)  # loads as written
+    spec = tomllib.loads(text)
+    assert [p["name"] for p in spec["particle"]] == list(read_trajectory(HORSE_TROT).markers)
+    # the vertical is +Z (clear ground guess), the four hooves touch the ground, on a belt
+    assert spec["gravity"] == [0.0, 0.0, -9.81]
+    contacts = [b for b in spec["bond"] if "normal" in b]
+    assert sorted(b["particles"][0] for b in contacts) == ["HFL", "HFR", "HHL", "HHR"]
+    belt = contacts[0]["surface_velocity"]
+    assert belt[0] == pytest.approx(-2.89, abs=0.02) and belt[2] == 0.0
+    springs = [b for b in spec["bond"] if "rest_length" in b]
+    assert springs and all(b["optional"] is True for b in springs)
+    assert sum(p["mass"] for p in spec["particle"]) == pytest.approx(500.0)
+    for b in springs:
+        r, k, c = b["rest_length"], b["stiffness"], b["damping"]
+        assert r["min"] < r["value"] < r["max"]
+        assert k["min"] < k["value"] < k["max"] and k["max"] / k["min"] > 1e4
+        assert c["min"] < c["value"] < c["max"]
+    # every line that sets a number carries a comment saying where it came from
+    numeric = [line for line in text.splitlines() if re.match(r"^\w+ = [\[{\-0-9]", line)]
+    numeric = [line for line in numeric if not line.startswith("particles")]
+    assert len(numeric) > 50 and all("  # " in line for line in numeric), numeric
+    # the placement: frame 0 of the recording
+    np.testing.assert_allclose(
+        model.initial_state()[0], read_trajectory(HORSE_TROT).positions[0], atol=1e-5
+    )
+
+
+def test_candidates_are_near_rigid_pairs_and_nearest_neighbours():
+    rng = np.random.default_rng(1)
+    base = np.array([[0, 0, 0], [0.1, 0, 0], [2, 0, 0], [2, 1, 0], [5, 5, 5.0]])
+    x = base[None] + 0.02 * rng.standard_normal((80, 5, 3))
+    x[:, 1] = x[:, 0] + [0.1, 0, 0]  # M0-M1 rigid
+    x[:, 4] = x[:, 0] + [5, 5, 5]  # M0-M4 rigid, though far
+    traj = Trajectory(x, np.ones((80, 5), bool), tuple(f"M{i}" for i in range(5)), 100.0)
+    made = scaffold(traj, neighbours=2, gravity=False)
+    spec = loads_model(made.text).spec
+    pairs = {tuple(b.particles) for b in spec.bond}
+    assert ("M0", "M4") in pairs and ("M0", "M1") in pairs  # near-rigid
+    line = next(t for t in made.text.splitlines() if t.startswith("# M0-M4: "))
+    assert "near-rigid (distance spread 0 % of its median)" in line
+    assert ("M2", "M3") in pairs  # each other's nearest neighbour
+    assert made.gravity == "none" and made.contacts == 0
+
+
+def test_an_uncertain_vertical_gets_no_gravity_unless_named(tmp_path):
+    x = _wobble(frames=80, particles=5)  # small wobbles about random points: no clear ground
+    traj = Trajectory(x, np.ones(x.shape[:2], bool), tuple(f"M{i}" for i in range(5)), 100.0)
+    made = scaffold(traj)
+    assert made.gravity == "none" and any("uncertain" in n for n in made.notes)
+    named = scaffold(traj, up="-Y")
+    assert named.gravity == "+Y" and "gravity = [0.0, 9.81, 0.0]" in named.text
+
+
+def test_best_model_carries_its_start_and_exports_as_is(tmp_path):
+    """A fit's best_model.toml holds the positions at the fitted window's first frame and the
+    velocity from which the model's step lands on the next one: export and simulate take it
+    without edits; export --from TRAJ --frame N starts any model elsewhere."""
+    run = tmp_path / "run"
+    proc = cli_in_process(
+        "fit", EXAMPLES / "triangle.toml", TRIANGLE_DATA, "--out", run, "--frames", "5:40",
+        "--population", "8", "--generations", "3", "--refine", "none",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    best = load_model(run / "best_model.toml")
+    data = read_trajectory(TRIANGLE_DATA)
+    x0, v0 = best.initial_state()
+    np.testing.assert_allclose(x0, data.positions[5], atol=1e-12)
+    xml = tmp_path / "best.xml"
+    proc = cli_in_process("export", run / "best_model.toml", "--out", xml, "--rate", "60")
+    assert proc.returncode == 0, proc.stderr
+    sim = tmp_path / "sim.csv"
+    proc = cli_in_process(
+        "simulate", run / "best_model.toml", "--frames", "3", "--rate", "60", "--out", sim
+    )
+    assert proc.returncode == 0, proc.stderr
+    # the model's first step lands on the recording's next frame (to the file's 0.001 mm)
+    np.testing.assert_allclose(read_trajectory(sim).positions[1], data.positions[6], atol=2e-6)
+
+    xml2 = tmp_path / "from.xml"
+    proc = cli_in_process(
+        "export", EXAMPLES / "triangle.toml", "--out", xml2, "--from", TRIANGLE_DATA,
+        "--frame", "12",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    body = xml2.read_text()
+    first = " ".join(repr(float(a)) for a in data.positions[12, 0])
+    assert f'pos="{first}"' in body or all(repr(float(a)) in body for a in data.positions[12, 0])
+    proc = cli_in_process(
+        "export", EXAMPLES / "triangle.toml", "--out", tmp_path / "no.xml", "--from",
+        TRIANGLE_DATA, "--frame", "99999",
+    )  # fmt: skip
+    assert proc.returncode == 2 and "--frame" in proc.stderr
+    assert not (tmp_path / "no.xml").exists()
+
+
+def test_neural_turns_the_present_springs_of_a_structure_result_into_neural_bonds(tmp_path):
+    x = _wobble(particles=3)
+    data = _recording(tmp_path, x)
+    cand = tmp_path / "cand.toml"
+    assert cli_in_process("scaffold", data, "--out", cand, "--no-gravity").returncode == 0
+    spec = tomllib.loads(cand.read_text())
+    first, *rest = cand.read_text().split("optional = true")
+    absent, present = "optional = true\npresent = false", "optional = true\npresent = true"
+    found = first + absent + present.join(rest)  # the first candidate absent, the others present
+    found_path = tmp_path / "found.toml"
+    found_path.write_text(found)
+    out = tmp_path / "neural.toml"
+    proc = cli_in_process("scaffold", data, "--neural", found_path, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    neural = load_model(out).spec
+    assert len(neural.bond) == len(spec["bond"]) - 1
+    assert all(b.neural and not b.optional for b in neural.bond)
