@@ -491,6 +491,7 @@ from . import (  # noqa: E402,F401
     datasets_cmd,
     evaluate_cmd,
     export_cmd,
+    fill_cmd,
     structure_cmd,
     sweep_cmd,
 )
