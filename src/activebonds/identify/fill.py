@@ -24,6 +24,7 @@ model's own error is not in it.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import jax
@@ -36,7 +37,13 @@ from ..model.model import Model
 from ..physics.integrate import rollout_states
 from ..runtime import float64
 from .lm import levenberg_marquardt
-from .shooting import ShootingWindows, frame_states, make_shooting, shooting_windows, start_states
+from .shooting import (
+    ShootingWindows,
+    frame_states,
+    make_shooting,
+    shooting_windows,
+    start_states,
+)
 from .shooting_normal import block_tridiagonal_solve, make_normal
 
 MAX_STEPS = 200
@@ -175,6 +182,59 @@ def model_fill(
     return ModelFill(values, [sigma[g.start : g.stop, g.column] for g in gaps], segments)
 
 
+class _Programs:
+    """A segment's compiled functions, with its data (start frames, targets, weights, as
+    :class:`.shooting.ShootingWindows` holds them) as arguments: compiled once per shape, not
+    once per gap."""
+
+    def __init__(self, model: Model, horizon: int, dt: float, substeps: int, integrator: str):
+        self.model, self.horizon, self.dt = model, horizon, dt
+
+        def windows(starts, target, weight):
+            k = target.shape[0]
+            link = np.ones(k - 1)
+            return ShootingWindows(starts, target, weight, dt, link=link, segments=((0, k, 0),))
+
+        def split(z, target):
+            half = z.shape[1] // 2
+            shape = target.shape[0], target.shape[2], target.shape[3]
+            return z[:, :half].reshape(shape), z[:, half:].reshape(shape)
+
+        def residual(z, genome, starts, target, weight):
+            res, _ = make_shooting(model, windows(starts, target, weight), substeps, integrator)
+            return jnp.concatenate([r.ravel() for r in res(genome, split(z, target))])
+
+        def normal(z, genome, starts, target, weight):
+            w = windows(starts, target, weight)
+            build = make_normal(model, w, substeps, integrator, lambda u: genome + 0.0 * u[0])
+            return build(jnp.zeros(1), z)
+
+        def window_positions(z, genome, starts, target):
+            """Positions [K, H + 1, M D] of every window and their Jacobians [.., n]."""
+            params = model.layout.decode(genome)
+            n_particles, dim = target.shape[2], target.shape[3]
+            half = n_particles * dim
+
+            def run(s, t):
+                x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
+                xs, _ = rollout_states(
+                    params, model.topology, x, v, dt, horizon, substeps, integrator, t
+                )
+                return jnp.concatenate([x[None], xs]).reshape(horizon + 1, -1)
+
+            t0 = starts * dt
+            return jax.vmap(run)(z, t0), jax.vmap(jax.jacfwd(run))(z, t0)
+
+        self.residual = jax.jit(residual)
+        self.normal = jax.jit(normal)
+        self.positions = jax.jit(window_positions)
+
+
+@functools.lru_cache(maxsize=4)
+def _programs(model, horizon, dt, substeps, integrator) -> _Programs:
+    return _Programs(model, horizon, dt, substeps, integrator)
+
+
 def _fit_segment(
     model, genome, positions, mask, states, dt, first, horizon, substeps, integrator, max_steps
 ):
@@ -182,79 +242,52 @@ def _fit_segment(
     n_frames, n_markers, dim = positions.shape
     local = shooting_windows(positions, mask, dt, horizon)
     x0, v0 = start_states(local, [states])
-    windows = ShootingWindows(
-        local.starts + first,  # frames of the recording: time-dependent forces see its time
-        local.target,
-        local.weight,
-        dt,
-        link=local.link,
-        segments=local.segments,
+    k, h = len(local.starts), local.horizon
+    programs = _programs(model, h, dt, substeps, integrator)
+    # frames of the recording: time-dependent forces see its time
+    data = (
+        jnp.asarray(local.starts + first, jnp.float64),
+        jnp.asarray(local.target),
+        jnp.asarray(local.weight),
     )
-    residuals, trajectory = make_shooting(model, windows, substeps, integrator)
-    k = len(windows.starts)
-    shape = x0.shape
-    half = n_markers * dim
 
-    def split(z):
-        return z[:, :half].reshape(shape), z[:, half:].reshape(shape)
-
-    flat = jax.jit(lambda z: jnp.concatenate([r.ravel() for r in residuals(genome, split(z))]))
-    fixed = jnp.zeros(1)
-    normal = jax.jit(
-        make_normal(model, windows, substeps, integrator, lambda u: genome + 0.0 * jnp.sum(u))
-    )
-    z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
-    if not np.all(np.isfinite(np.asarray(flat(z0)))):
-        raise InputError(
-            "--method model",
-            f"the model's trajectory goes non-finite from the record's states around frames "
-            f"{first}:{first + n_frames}; try a shorter --horizon",
-        )
+    def flat(z):
+        return programs.residual(z, genome, *data)
 
     def linearize(z, _):
-        system = normal(fixed, z)
+        system = programs.normal(z, genome, *data)
         return system, system.grad_s
 
     def scale(system):
         return jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2)))
 
+    z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
+    r0 = np.asarray(flat(z0))
+    if not np.all(np.isfinite(r0)):
+        raise InputError(
+            "--method model",
+            f"the model's trajectory goes non-finite from the record's states around frames "
+            f"{first}:{first + n_frames}; try a shorter --horizon",
+        )
     z, steps, message = levenberg_marquardt(
         flat, linearize, _states_step_jit, z0, max_steps, RTOL, ATOL, scale=scale
     )
-    ((xs, _),) = trajectory(genome, split(z))
-    measured = np.asarray(residuals(genome, split(z))[0])
-    terms = int(windows.weight.sum())
-    rms_mm = float(np.sqrt(np.sum(measured**2) / max(1, terms))) * 1000.0
-    # the standard errors of the fitted positions
+    pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1]))
+    frames = np.arange(n_frames)
+    kk = np.minimum(frames // h, k - 1)
+    jj = frames - kk * h
+    xs = pos[kk, jj].reshape(n_frames, n_markers, dim)
     r = np.asarray(flat(z))
-    dof = max(1, terms * dim - z.shape[1])
-    variance = float(np.sum(r**2)) / dof
-    system = normal(fixed, z)
+    terms = int(local.weight.sum())
+    measured = r[: k * (h + 1) * n_markers * dim]
+    rms_mm = float(np.sqrt(np.sum(measured**2) / max(1, terms))) * 1000.0
+    # the standard errors of the fitted positions: sigma^2 G T^-1 G^T
+    variance = float(np.sum(r**2)) / max(1, terms * dim - z.shape[1])
+    system = programs.normal(z, genome, *data)
     diag = np.asarray(system.diag)
     jitter = 1e-12 * float(np.max(np.abs(np.diagonal(diag, axis1=1, axis2=2))))
     cov = inverse_diagonal_blocks(diag + jitter * np.eye(diag.shape[1]), np.asarray(system.off))
-    jac = _position_jacobians(model, genome, windows, z, substeps, integrator)  # [K, H+1, MD, n]
-    frames = np.arange(n_frames)
-    kk = np.minimum(frames // windows.horizon, k - 1)
-    jj = frames - (windows.starts[kk] - first)
-    g = jac[kk, jj]  # [S, MD, n]
+    g = jac[kk, jj]  # [S, M D, n]
     var = np.einsum("smn,snp,smp->sm", g, cov[kk], g)  # per coordinate
     sd = np.sqrt(np.maximum(variance * var.reshape(n_frames, n_markers, dim).sum(-1), 0.0))
-    return np.asarray(xs), sd, (steps, message, rms_mm)
-
-
-def _position_jacobians(model, genome, windows, z, substeps, integrator):
-    """d positions / d start state of every window: [K, H + 1, M D, n]."""
-    params = model.layout.decode(genome)
-    topo = model.topology
-    h, dt = windows.horizon, windows.dt
-    n_particles, dim = windows.target.shape[2], windows.target.shape[3]
-    half = n_particles * dim
-
-    def positions(s, t):
-        x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
-        xs, _ = rollout_states(params, topo, x, v, dt, h, substeps, integrator, t)
-        return jnp.concatenate([x[None], xs]).reshape(h + 1, -1)
-
-    jac = jax.jit(jax.vmap(jax.jacfwd(positions)))
-    return np.asarray(jac(z, jnp.asarray(windows.times)))
+    return xs, sd, (steps, message, rms_mm)
