@@ -492,6 +492,7 @@ from . import (  # noqa: E402,F401
     datasets_cmd,
     evaluate_cmd,
     export_cmd,
+    fill_cmd,
     scaffold_cmd,
     structure_cmd,
     sweep_cmd,

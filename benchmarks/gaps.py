@@ -1,0 +1,279 @@
+"""The gap benchmark: a marker removed for 10, 30 and 60 frames, filled by a fitted model and by
+the fills labs use (linear, cubic spline, Gløersen & Federolf's PCA), against the removed
+samples.
+
+    python benchmarks/gaps.py --json gaps.json                       # the full run
+    python benchmarks/gaps.py --positions 2 --lengths 10,30 --recordings horse-trot --json small.json
+
+On each bundled recording (``activebonds datasets``: horse-trot, horse-walk, human-walk), for
+each gap length, ``--positions`` gaps (default 20) are drawn (seed ``--seed``): a marker and a
+start where that marker is present over the gap and one frame either side, half of them in the
+first half of the recording and half in the second. Every method fills the same gaps, one at a
+time, each from the recording with only that gap removed (the recording's own gaps stay as they
+are and are not filled). The error of a gap: the RMS of the 3-D distance between the filled and
+the removed samples, in mm.
+
+The model: a spring body of the recording's markers (``benchmarks/body_model.py``: every pair of
+the 7 horse markers, or each of the 41 human markers to its 6 nearest; mass 1 each, no
+gravity), its stiffness, rest lengths and dampings identified by the exact one-step least
+squares (``identify.lsq.least_squares``) on the half of the recording that does not hold the
+gap: two fits per recording, each filling the other half's gaps. The model fill is
+``activebonds fill --method model`` (``identify.fill.model_fill``, ``--context`` 30 frames,
+``--horizon`` 10).
+
+JSON out: the settings, per recording the two fits (frames, one-step RMS mm), every gap
+(marker, start, length, error per method), and summaries: per method and length the median,
+mean and 90th percentile error, and per marker the median.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent
+sys.path.insert(0, str(ROOT))
+
+METHODS = ("model", "spline", "linear", "pca")
+
+
+def recording(name: str):
+    from activebonds.data import read_trajectory
+    from activebonds.data.bundled import dataset
+
+    return read_trajectory(dataset(name).path)
+
+
+def spring_model(name: str, traj):
+    from activebonds.model import loads_model
+    from body_model import body_model_toml, horse_toml
+
+    text = body_model_toml(traj) if name == "human-walk" else horse_toml(traj)
+    return loads_model(text, f"<{name} springs>")
+
+
+def fit_half(model, traj, frames: tuple[int, int]):
+    """The model's linear genes by exact least squares on ``frames`` (one step, horizon 1)."""
+    from activebonds.identify.cost import make_windows
+    from activebonds.identify.lsq import least_squares
+
+    part = traj.select(list(model.markers)).window(*frames)
+    fit = least_squares(model, make_windows(part.positions, part.mask, part.dt, 1))
+    return model.with_genome(fit.genome), fit.rms_mm
+
+
+def draw_gaps(traj, length: int, count: int, rng) -> list[tuple[int, int, int]]:
+    """(half, marker, start): ``count`` gaps, half in each half of the recording."""
+    n = traj.n_frames
+    mid = n // 2
+    out = []
+    for half, (lo, hi) in enumerate(((0, mid), (mid, n))):
+        choices = [
+            (m, s)
+            for m in range(traj.n_markers)
+            for s in range(max(lo, 1), min(hi, n - 1) - length + 1)
+            if traj.mask[s - 1 : s + length + 1, m].all()
+        ]
+        want = count // 2 + (count % 2 if half == 0 else 0)
+        if not choices:
+            continue
+        picks = rng.choice(len(choices), size=min(want, len(choices)), replace=False)
+        out += [(half, *choices[i]) for i in sorted(picks)]
+    return out
+
+
+def fill_one(method, model, traj, marker: int, start: int, length: int, context, horizon):
+    """The filled samples [length, D] of one removed gap."""
+    from activebonds.data.fill import Gap, fill_baseline, plan_fill
+
+    positions = np.array(traj.positions)
+    mask = np.array(traj.mask)
+    mask[start : start + length, marker] = False
+    positions[~mask] = np.nan
+    gappy = traj.with_positions(positions, mask)
+    names = list(model.markers)
+    plan = plan_fill(gappy, names)
+    column = names.index(traj.markers[marker])
+    gap = Gap(column, traj.markers[marker], start, start + length)
+    others = tuple(
+        dataclasses.replace(g, reason=g.reason or "not tested")
+        for g in plan.gaps
+        if (g.column, g.start) != (column, start)
+    )
+    plan = dataclasses.replace(plan, gaps=(gap, *others))
+    if method == "model":
+        from activebonds.identify.fill import model_fill
+
+        values = model_fill(model, plan, context=context, horizon=horizon).values
+    else:
+        values = fill_baseline(method, plan.positions, plan.mask, plan.local())
+    return values[start : start + length, column]
+
+
+def summary(errors: list[float]) -> dict:
+    e = np.asarray(errors, np.float64)
+    e = e[np.isfinite(e)]
+    if not e.size:
+        return {"n": 0}
+    return {
+        "n": int(e.size),
+        "median_mm": float(np.median(e)),
+        "mean_mm": float(np.mean(e)),
+        "p90_mm": float(np.percentile(e, 90)),
+    }
+
+
+def run(args) -> dict:
+    out = {
+        "settings": {
+            "recordings": args.recordings,
+            "lengths": args.lengths,
+            "positions": args.positions,
+            "methods": args.methods,
+            "seed": args.seed,
+            "context": args.context,
+            "horizon": args.horizon,
+            "command": " ".join(sys.argv),
+        },
+        "recordings": {},
+    }
+    for r_index, name in enumerate(args.recordings):
+        traj = recording(name)
+        base = spring_model(name, traj)
+        mid = traj.n_frames // 2
+        halves = ((0, mid), (mid, traj.n_frames))
+        models, fits = [], []
+        for h, frames in enumerate(halves):
+            started = time.time()
+            # the model fitted on the other half: it never saw the gaps of this one
+            other = halves[1 - h]
+            model, rms = fit_half(base, traj, other)
+            models.append(model)
+            fits.append(
+                {
+                    "fills_frames": f"{frames[0]}:{frames[1]}",
+                    "fitted_on": f"{other[0]}:{other[1]}",
+                    "one_step_rms_mm": rms,
+                    "seconds": round(time.time() - started, 2),
+                }
+            )
+        gaps = []
+        for length in args.lengths:
+            rng = np.random.default_rng([args.seed, r_index, length])
+            for half, marker, start in draw_gaps(traj, length, args.positions, rng):
+                truth = traj.positions[start : start + length, marker]
+                row = {
+                    "marker": traj.markers[marker],
+                    "start": start,
+                    "length": length,
+                    "error_mm": {},
+                    "seconds": {},
+                }
+                for method in args.methods:
+                    t0 = time.time()
+                    got = fill_one(
+                        method,
+                        models[half],
+                        traj,
+                        marker,
+                        start,
+                        length,
+                        args.context,
+                        args.horizon,
+                    )
+                    err = np.sqrt(np.mean(np.sum((got - truth) ** 2, axis=-1))) * 1000.0
+                    row["error_mm"][method] = float(err)
+                    row["seconds"][method] = round(time.time() - t0, 3)
+                gaps.append(row)
+                print(
+                    f"{name} {row['marker']} {start}:{start + length} "
+                    + " ".join(f"{m} {e:.3g}" for m, e in row["error_mm"].items()),
+                    flush=True,
+                )
+        by_length = {
+            str(length): {
+                m: summary([g["error_mm"][m] for g in gaps if g["length"] == length])
+                for m in args.methods
+            }
+            for length in args.lengths
+        }
+        by_marker = {
+            str(length): {
+                marker: {
+                    m: float(
+                        np.median(
+                            [
+                                g["error_mm"][m]
+                                for g in gaps
+                                if g["length"] == length and g["marker"] == marker
+                            ]
+                        )
+                    )
+                    for m in args.methods
+                }
+                for marker in sorted({g["marker"] for g in gaps if g["length"] == length})
+            }
+            for length in args.lengths
+        }
+        out["recordings"][name] = {
+            "frames": traj.n_frames,
+            "markers": list(traj.markers),
+            "fits": fits,
+            "by_length": by_length,
+            "by_marker": by_marker,
+            "gaps": gaps,
+        }
+    return out
+
+
+def table(result: dict) -> str:
+    lines = ["| recording | gap (frames) | " + " | ".join(result["settings"]["methods"]) + " |"]
+    lines.append("|" + " --- |" * (2 + len(result["settings"]["methods"])))
+    for name, rec in result["recordings"].items():
+        for length, per in rec["by_length"].items():
+            cells = [
+                f"{per[m]['median_mm']:.3g}" if per[m].get("n") else "—"
+                for m in result["settings"]["methods"]
+            ]
+            lines.append(f"| {name} | {length} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    from activebonds.runtime import fast_cpu_flags
+
+    fast_cpu_flags()
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--recordings", default="horse-trot,horse-walk,human-walk")
+    p.add_argument("--lengths", default="10,30,60")
+    p.add_argument("--positions", type=int, default=20)
+    p.add_argument("--methods", default=",".join(METHODS))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--context", type=int, default=30)
+    p.add_argument("--horizon", type=int, default=10)
+    p.add_argument("--json", type=Path, default=None)
+    args = p.parse_args()
+    args.recordings = args.recordings.split(",")
+    args.lengths = [int(x) for x in args.lengths.split(",")]
+    args.methods = args.methods.split(",")
+    started = time.time()
+    result = run(args)
+    result["seconds"] = round(time.time() - started, 1)
+    print("median RMS error of the removed samples (mm):")
+    print(table(result))
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,216 @@
+"""``activebonds fill``: fill a recording's marker gaps with a model's physics or a lab's
+interpolation, and list every sample filled or left."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import InputError
+from .app import app, fail, out, parse_option_frames
+
+METHODS = ("model", "spline", "linear", "pca")
+
+
+def record_path(out_path: Path) -> Path:
+    """The sidecar CSV beside the filled file: ``filled.trc`` -> ``filled.gaps.csv``."""
+    return out_path.with_name(out_path.stem + ".gaps.csv")
+
+
+@app.command()
+def fill(
+    model: Annotated[
+        Path,
+        typer.Argument(help="Model file (TOML), e.g. a fit's RUN/best_model.toml."),
+    ],
+    traj: Annotated[Path, typer.Argument(help="Recorded trajectory with gaps.")],
+    out_path: Annotated[
+        Path,
+        typer.Option(
+            "--out", help="File to write (.csv, .trc, .c3d, .npz), every marker and frame."
+        ),
+    ] = ...,
+    method: Annotated[
+        str,
+        typer.Option(
+            help="model (the model's trajectory, fitted to the markers present around the "
+            "gap), spline (cubic), linear, or pca (Gløersen & Federolf 2016)."
+        ),
+    ] = "model",
+    markers: Annotated[
+        str | None,
+        typer.Option(
+            help="Markers followed by the particles, in order: A,B,C (default: the model's). "
+            "Only their gaps are filled."
+        ),
+    ] = None,
+    frames: Annotated[
+        str, typer.Option(help="Frame window START:STOP filled and fitted to.")
+    ] = "0:",
+    max_gap: Annotated[
+        int | None,
+        typer.Option(help="Leave gaps longer than this many frames (listed in the record)."),
+    ] = None,
+    denoise: Annotated[
+        bool,
+        typer.Option(
+            help="With --method model: write the model's smoothed trajectory for every sample "
+            "of the model's markers in the window, not only in the gaps."
+        ),
+    ] = False,
+    context: Annotated[
+        int,
+        typer.Option(
+            min=2, help="Frames on each side of a gap that the model's trajectory is fitted to."
+        ),
+    ] = 30,
+    horizon: Annotated[
+        int, typer.Option(min=1, help="Frames per shooting window of the model's fit.")
+    ] = 10,
+    substeps: Annotated[
+        int, typer.Option(min=1, help="Integration substeps per frame (as the model was fitted).")
+    ] = 1,
+    integrator: Annotated[
+        str, typer.Option(help="euler or verlet (as the model was fitted).")
+    ] = "euler",
+    record: Annotated[
+        Path | None,
+        typer.Option(
+            help="The sidecar CSV listing every sample of every gap: frame, marker, filled or "
+            "left, method, estimated uncertainty (default: OUT's name with .gaps.csv)."
+        ),
+    ] = None,
+):
+    """Fill the gaps of the model's markers: with the model's parameters fixed, its
+    trajectory fitted (multiple shooting, the missing samples masked) to the markers present
+    around each gap, or with a baseline. Gaps at the start or end of the window and gaps
+    longer than --max-gap are left and listed."""
+    from ..data import read_trajectory
+    from ..data._common import check_output_path
+    from ..data.fill import plan_fill
+    from ..data.writers import WRITERS
+    from ..identify.settings import parse_frames, parse_markers
+    from ..model import load_model
+
+    try:
+        if method not in METHODS:
+            raise InputError("--method", f"expected {', '.join(METHODS)}, got '{method}'")
+        if denoise and method != "model":
+            raise InputError("--denoise", f"needs --method model, not {method}")
+        if integrator not in ("euler", "verlet"):
+            raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
+        render = WRITERS.get(out_path.suffix.lower())
+        if render is None:
+            raise InputError(
+                out_path,
+                f"unknown trajectory file extension {out_path.suffix or '(none)'!r}; "
+                f"expected one of {', '.join(WRITERS)}",
+            )
+        sidecar = record if record is not None else record_path(out_path)
+        if sidecar.resolve() == out_path.resolve():
+            raise InputError("--record", f"is the filled file itself ({out_path})")
+        check_output_path(out_path)
+        check_output_path(sidecar)
+        window = parse_option_frames(frames, parse_frames)
+        m = load_model(model)
+        chosen = parse_markers(markers) or m.markers
+        if len(chosen) != len(m.particle_names):
+            raise InputError(
+                "--markers",
+                f"{len(chosen)} markers given for a model of {len(m.particle_names)} particles "
+                f"({', '.join(m.particle_names)}); give one marker per particle, in order",
+            )
+        data = read_trajectory(traj)
+        if data.dimension != m.dimension:
+            raise InputError(
+                traj, f"the data are {data.dimension}D but the model is {m.dimension}D"
+            )
+        plan = plan_fill(data, chosen, window, max_gap)
+        values, uncertainty, note = _fill_values(
+            m, plan, method, denoise, context, horizon, substeps, integrator
+        )
+        from ..data.fill import apply_fill, record_csv
+
+        filled, records = apply_fill(plan, values, uncertainty, method, denoised=denoise)
+        text = render(filled, out_path)  # every check of the format before anything is written
+        _write_both(out_path, text, sidecar, record_csv(records))
+    except InputError as e:
+        fail(e)
+    _summary(plan, records, method, out_path, sidecar, denoise, note)
+
+
+def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrator):
+    """(values [F, M, D] of the window, per gap to fill its uncertainty in metres, a note)."""
+    if method == "model":
+        from ..identify.fill import model_fill
+
+        found = model_fill(
+            m,
+            plan,
+            context=context,
+            horizon=horizon,
+            substeps=substeps,
+            integrator=integrator,
+            denoise=denoise,
+        )
+        return found.values, found.uncertainty, found.note()
+    from ..data.fill import baseline_uncertainty, fill_baseline
+
+    gaps = plan.local()
+    positions, mask = plan.positions, plan.mask
+    values = fill_baseline(method, positions, mask, gaps)
+    return values, baseline_uncertainty(method, positions, mask, gaps), None
+
+
+def _write_both(out_path: Path, data: bytes, sidecar: Path, listing: bytes) -> None:
+    """The sidecar, then the filled file, each atomically; a failure of the second removes
+    the first unless it was there before."""
+    from ..data.writers import atomic_write
+
+    existed = sidecar.exists()
+    atomic_write(sidecar, listing)
+    try:
+        atomic_write(out_path, data)
+    except BaseException:
+        if not existed:
+            sidecar.unlink(missing_ok=True)
+        raise
+
+
+def _summary(plan, records, method, out_path, sidecar, denoise, note) -> None:
+    filled = plan.to_fill
+    left = plan.left
+    samples = sum(g.length for g in filled)
+    line = f"wrote {out_path}: {len(filled)} gap(s) filled by {method} ({samples} samples)"
+    if denoise:
+        line += "; every present sample of the model's markers replaced by the model's trajectory"
+    say(line)
+    done = [
+        r.uncertainty_mm
+        for r in records
+        if r.status == "filled" and r.uncertainty_mm == r.uncertainty_mm
+    ]
+    if done:
+        import numpy as np
+
+        say(
+            f"estimated uncertainty of the filled samples: median {np.median(done):.3g} mm, "
+            f"largest {np.max(done):.3g} mm"
+        )
+    if note:
+        say(note)
+    reasons: dict[str, list] = {}
+    for g in left:
+        reasons.setdefault(g.reason.split(" (")[0], []).append(g)
+    for reason, gaps in reasons.items():
+        shown = ", ".join(f"{g.marker} {g.frames}" for g in gaps[:4])
+        more = f" and {len(gaps) - 4} more" if len(gaps) > 4 else ""
+        extra = " (extrapolation: not filled)" if reason.startswith("at the") else ""
+        say(f"left {len(gaps)} gap(s) {reason}{extra}: {shown}{more}")
+    say(f"every sample of every gap of the chosen markers: {sidecar}")
+
+
+def say(line: str) -> None:
+    out.print(line, markup=False, highlight=False, emoji=False)

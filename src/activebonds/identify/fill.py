@@ -1,0 +1,293 @@
+"""The model's fill of marker gaps: its trajectory, with its parameters fixed, fitted to the
+markers present around each gap by multiple shooting with the missing samples masked.
+
+Each gap to fill (:func:`activebonds.data.fill.plan_fill`) is given ``context`` frames on each
+side; gaps whose stretches overlap are fitted together, as one segment. A segment is cut into
+shooting windows of ``horizon`` frames (:func:`.shooting.shooting_windows`); the windows' start
+states are the unknowns, the model's parameters are the model file's values (a fit's
+``best_model.toml``). The residuals are those of :func:`.shooting.make_shooting`: every present
+sample of every chosen marker, and the continuity defects that make the windows one trajectory
+of the model. The states are solved by Levenberg-Marquardt (:func:`.lm.levenberg_marquardt`)
+on the structured normal equations of :mod:`.shooting_normal`, the parameters held fixed (their
+block is never solved: only the block-tridiagonal state system is), from the record's states
+(gaps linearly interpolated, central-difference velocities). The model's positions are written
+into the gaps; with ``denoise`` the whole window is one segment and its positions are written
+everywhere.
+
+The uncertainty of a filled sample is the Gauss-Newton standard error of the fitted position
+(3-D, the square root of the trace of its covariance): ``sigma^2 G T^-1 G^T``, with ``T`` the
+states' J^T J at the solution, ``G`` the position's derivative with respect to its window's
+start state and ``sigma^2`` the residuals' variance (sum of squares over the residuals less the
+unknowns). It measures what the markers present leave undetermined and the marker noise; the
+model's own error is not in it.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..data.fill import FillPlan
+from ..errors import InputError
+from ..model.model import Model
+from ..physics.integrate import rollout_states
+from ..runtime import float64
+from .lm import levenberg_marquardt
+from .shooting import (
+    ShootingWindows,
+    frame_states,
+    make_shooting,
+    shooting_windows,
+    start_states,
+)
+from .shooting_normal import block_tridiagonal_solve, make_normal
+
+MAX_STEPS = 200
+RTOL, ATOL = 1e-10, 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """One fitted stretch of the window: frames ``start:stop`` (window frames)."""
+
+    start: int
+    stop: int
+    steps: int
+    message: str
+    rms_mm: float  # of the present samples, at the solution
+
+    def record(self) -> dict:
+        return {
+            "frames": f"{self.start}:{self.stop}",
+            "steps": self.steps,
+            "message": self.message,
+            "rms_mm": self.rms_mm,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ModelFill:
+    values: np.ndarray  # [F, M, D] window positions: the model's where fitted, else the record's
+    uncertainty: list  # per gap to fill (the plan's order): metres per sample
+    segments: list[Segment] = field(default_factory=list)
+
+    def note(self) -> str | None:
+        if not self.segments:
+            return None
+        steps = sum(s.steps for s in self.segments)
+        worst = max((s.rms_mm for s in self.segments), default=float("nan"))
+        unconverged = [s for s in self.segments if not s.message.startswith("converged")]
+        text = (
+            f"the model's trajectory fitted on {len(self.segments)} stretch(es) "
+            f"({steps} Levenberg-Marquardt steps); RMS error at the markers present: "
+            f"{worst:.3g} mm at most"
+        )
+        if unconverged:
+            text += f"; {len(unconverged)} not converged ({unconverged[0].message})"
+        return text
+
+
+def segments_of(gaps, n_frames: int, context: int) -> list[tuple[int, int]]:
+    """The stretches fitted: each gap with ``context`` frames on each side (clipped to the
+    window), overlapping ones merged; in order."""
+    spans = sorted((max(0, g.start - context), min(n_frames, g.stop + context)) for g in gaps)
+    merged: list[list[int]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
+def _states_step(system, damping):
+    """The damped Gauss-Newton step of the states alone: (T + damping I) d = -g_s."""
+    n = system.diag.shape[1]
+    rhs = -system.grad_s[..., None]
+    return block_tridiagonal_solve(system.diag + damping * jnp.eye(n), system.off, rhs)[..., 0]
+
+
+_states_step_jit = jax.jit(_states_step)
+
+
+def inverse_diagonal_blocks(diag: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """The diagonal blocks of T^-1 for a symmetric positive definite block-tridiagonal T
+    (``diag`` [K, n, n], ``off`` [K - 1, n, n] = T_k,k+1): (L_k + R_k - T_kk)^-1 with L_k, R_k
+    the Schur complements of the blocks before and after k."""
+    k = len(diag)
+    left, right = np.empty_like(diag), np.empty_like(diag)
+    left[0] = diag[0]
+    for i in range(1, k):
+        left[i] = diag[i] - off[i - 1].T @ np.linalg.solve(left[i - 1], off[i - 1])
+    right[-1] = diag[-1]
+    for i in range(k - 2, -1, -1):
+        right[i] = diag[i] - off[i] @ np.linalg.solve(right[i + 1], off[i].T)
+    return np.linalg.inv(left + right - diag)
+
+
+@float64
+def model_fill(
+    model: Model,
+    plan: FillPlan,
+    context: int = 30,
+    horizon: int = 10,
+    substeps: int = 1,
+    integrator: str = "euler",
+    denoise: bool = False,
+    max_steps: int = MAX_STEPS,
+) -> ModelFill:
+    """The model's fill of the plan's gaps (see the module docstring).
+
+    Raises:
+        InputError: the model's trajectory goes non-finite from the record's states.
+    """
+    positions, mask = plan.positions, plan.mask
+    n_frames, n_markers, dim = positions.shape
+    dt = plan.traj.dt
+    gaps = plan.local()
+    values = np.array(positions)
+    if not gaps and not denoise:
+        return ModelFill(values, [])
+    spans = [(0, n_frames)] if denoise else segments_of(gaps, n_frames, context)
+    x_all, v_all = frame_states(positions, mask, dt)  # every marker is present somewhere
+    genome = jnp.asarray(model.layout.initial())
+    sigma = np.zeros((n_frames, n_markers))
+    segments = []
+    for a, b in spans:
+        xs, sd, seg = _fit_segment(
+            model,
+            genome,
+            positions[a:b],
+            mask[a:b],
+            (x_all[a:b], v_all[a:b]),
+            dt,
+            plan.window[0] + a,
+            horizon,
+            substeps,
+            integrator,
+            max_steps,
+        )
+        seg = Segment(a, b, *seg)
+        segments.append(seg)
+        values[a:b] = xs
+        sigma[a:b] = sd
+    if not denoise:
+        # only the gaps are the model's: elsewhere the record stays as it was
+        keep = mask.copy()
+        values[keep] = positions[keep]
+    return ModelFill(values, [sigma[g.start : g.stop, g.column] for g in gaps], segments)
+
+
+class _Programs:
+    """A segment's compiled functions, with its data (start frames, targets, weights, as
+    :class:`.shooting.ShootingWindows` holds them) as arguments: compiled once per shape, not
+    once per gap."""
+
+    def __init__(self, model: Model, horizon: int, dt: float, substeps: int, integrator: str):
+        self.model, self.horizon, self.dt = model, horizon, dt
+
+        def windows(starts, target, weight):
+            k = target.shape[0]
+            link = np.ones(k - 1)
+            return ShootingWindows(starts, target, weight, dt, link=link, segments=((0, k, 0),))
+
+        def split(z, target):
+            half = z.shape[1] // 2
+            shape = target.shape[0], target.shape[2], target.shape[3]
+            return z[:, :half].reshape(shape), z[:, half:].reshape(shape)
+
+        def residual(z, genome, starts, target, weight):
+            res, _ = make_shooting(model, windows(starts, target, weight), substeps, integrator)
+            return jnp.concatenate([r.ravel() for r in res(genome, split(z, target))])
+
+        def normal(z, genome, starts, target, weight):
+            w = windows(starts, target, weight)
+            build = make_normal(model, w, substeps, integrator, lambda u: genome + 0.0 * u[0])
+            return build(jnp.zeros(1), z)
+
+        def window_positions(z, genome, starts, target):
+            """Positions [K, H + 1, M D] of every window and their Jacobians [.., n]."""
+            params = model.layout.decode(genome)
+            n_particles, dim = target.shape[2], target.shape[3]
+            half = n_particles * dim
+
+            def run(s, t):
+                x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
+                xs, _ = rollout_states(
+                    params, model.topology, x, v, dt, horizon, substeps, integrator, t
+                )
+                return jnp.concatenate([x[None], xs]).reshape(horizon + 1, -1)
+
+            t0 = starts * dt
+            return jax.vmap(run)(z, t0), jax.vmap(jax.jacfwd(run))(z, t0)
+
+        self.residual = jax.jit(residual)
+        self.normal = jax.jit(normal)
+        self.positions = jax.jit(window_positions)
+
+
+@functools.lru_cache(maxsize=4)
+def _programs(model, horizon, dt, substeps, integrator) -> _Programs:
+    return _Programs(model, horizon, dt, substeps, integrator)
+
+
+def _fit_segment(
+    model, genome, positions, mask, states, dt, first, horizon, substeps, integrator, max_steps
+):
+    """(positions [S, M, D], their standard errors [S, M], (steps, message, RMS mm))."""
+    n_frames, n_markers, dim = positions.shape
+    local = shooting_windows(positions, mask, dt, horizon)
+    x0, v0 = start_states(local, [states])
+    k, h = len(local.starts), local.horizon
+    programs = _programs(model, h, dt, substeps, integrator)
+    # frames of the recording: time-dependent forces see its time
+    data = (
+        jnp.asarray(local.starts + first, jnp.float64),
+        jnp.asarray(local.target),
+        jnp.asarray(local.weight),
+    )
+
+    def flat(z):
+        return programs.residual(z, genome, *data)
+
+    def linearize(z, _):
+        system = programs.normal(z, genome, *data)
+        return system, system.grad_s
+
+    def scale(system):
+        return jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2)))
+
+    z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
+    r0 = np.asarray(flat(z0))
+    if not np.all(np.isfinite(r0)):
+        raise InputError(
+            "--method model",
+            f"the model's trajectory goes non-finite from the record's states around frames "
+            f"{first}:{first + n_frames}; try a shorter --horizon",
+        )
+    z, steps, message = levenberg_marquardt(
+        flat, linearize, _states_step_jit, z0, max_steps, RTOL, ATOL, scale=scale
+    )
+    pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1]))
+    frames = np.arange(n_frames)
+    kk = np.minimum(frames // h, k - 1)
+    jj = frames - kk * h
+    xs = pos[kk, jj].reshape(n_frames, n_markers, dim)
+    r = np.asarray(flat(z))
+    terms = int(local.weight.sum())
+    measured = r[: k * (h + 1) * n_markers * dim]
+    rms_mm = float(np.sqrt(np.sum(measured**2) / max(1, terms))) * 1000.0
+    # the standard errors of the fitted positions: sigma^2 G T^-1 G^T
+    variance = float(np.sum(r**2)) / max(1, terms * dim - z.shape[1])
+    system = programs.normal(z, genome, *data)
+    diag = np.asarray(system.diag)
+    jitter = 1e-12 * float(np.max(np.abs(np.diagonal(diag, axis1=1, axis2=2))))
+    cov = inverse_diagonal_blocks(diag + jitter * np.eye(diag.shape[1]), np.asarray(system.off))
+    g = jac[kk, jj]  # [S, M D, n]
+    var = np.einsum("smn,snp,smp->sm", g, cov[kk], g)  # per coordinate
+    sd = np.sqrt(np.maximum(variance * var.reshape(n_frames, n_markers, dim).sum(-1), 0.0))
+    return xs, sd, (steps, message, rms_mm)

@@ -1,0 +1,248 @@
+"""``activebonds fill``: which gaps are filled or left, the baselines (linear, cubic spline,
+Gløersen & Federolf's PCA) exact where they should be, the model's fill of a simulated
+recording (exact without noise, within the noise with it), the hard cases as one line, and
+the filled files read back."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from activebonds.data import Trajectory, read_trajectory, write_trajectory
+from activebonds.data.fill import (
+    apply_fill,
+    baseline_uncertainty,
+    fill_baseline,
+    plan_fill,
+    record_csv,
+)
+from activebonds.errors import InputError
+from activebonds.model import load_model
+from activebonds.simulation import simulate
+from helpers import TRIANGLE, cli_in_process
+
+
+def _traj(positions, missing=(), markers=None, rate=60.0):
+    """A trajectory of positions [F, M, D] with ``missing`` (marker, start, stop) removed."""
+    p = np.array(positions, dtype=np.float64)
+    mask = np.ones(p.shape[:2], bool)
+    for m, a, b in missing:
+        mask[a:b, m] = False
+    p[~mask] = np.nan
+    names = markers or tuple("ABCDEFGH"[: p.shape[1]])
+    return Trajectory(p, mask, names, rate)
+
+
+def _truth(n_frames=120):
+    return simulate(load_model(TRIANGLE), n_frames, 60.0)
+
+
+# ----------------------------------------------------------------------------- the plan
+
+
+def test_plan_fills_inner_gaps_and_leaves_edges_long_ones_and_outside():
+    t = _traj(
+        np.zeros((100, 3, 3)),
+        missing=[(0, 0, 5), (0, 20, 30), (1, 40, 80), (2, 95, 100), (2, 10, 12)],
+    )
+    plan = plan_fill(t, ("A", "B", "C"), (0, None), max_gap=20)
+    got = {(g.marker, g.start, g.stop): g.reason for g in plan.gaps}
+    assert got == {
+        ("A", 0, 5): "at the start (filling it would be extrapolation)",
+        ("C", 10, 12): None,
+        ("A", 20, 30): None,
+        ("B", 40, 80): "longer than --max-gap 20",
+        ("C", 95, 100): "at the end (filling it would be extrapolation)",
+    }
+    windowed = plan_fill(t, ("A", "C"), (15, 90))
+    got = {(g.marker, g.start): g.reason for g in windowed.gaps}
+    assert got == {
+        ("A", 0): "outside --frames",
+        ("C", 10): "outside --frames",
+        ("A", 20): None,
+        ("C", 95): "outside --frames",
+    }
+    assert [(g.start, g.stop) for g in windowed.local()] == [(5, 15)]
+
+
+def test_plan_refuses_absent_and_never_present_markers_naming_them():
+    t = _traj(np.zeros((50, 3, 3)), missing=[(1, 0, 50)])
+    with pytest.raises(InputError, match="marker\\(s\\) X, Y are not in the recording"):
+        plan_fill(t, ("A", "X", "Y"))
+    with pytest.raises(InputError, match="marker\\(s\\) B never present in frames 0:50"):
+        plan_fill(t, ("A", "B"))
+
+
+# ----------------------------------------------------------------------------- baselines
+
+
+def test_linear_and_spline_are_exact_on_lines_and_cubics():
+    f = np.arange(60.0)
+    line = np.stack([0.01 * f, -0.02 * f + 1.0, np.full_like(f, 0.5)], -1)
+    cubic = np.stack([1e-5 * f**3 - 1e-3 * f**2, 1e-4 * f**2, 0.01 * f], -1)
+    t = _traj(np.stack([line, cubic], 1), missing=[(0, 10, 20), (1, 15, 45)])
+    plan = plan_fill(t, ("A", "B"))
+    lin = fill_baseline("linear", plan.positions, plan.mask, plan.local())
+    spl = fill_baseline("spline", plan.positions, plan.mask, plan.local())
+    assert np.max(np.abs(lin[10:20, 0] - line[10:20])) < 1e-12
+    assert np.max(np.abs(spl[15:45, 1] - cubic[15:45])) < 1e-12
+    # the self-test's uncertainty: exact fills, zero error
+    sigma = baseline_uncertainty("linear", plan.positions, plan.mask, plan.local()[:1])
+    assert sigma[0].shape == (10,) and np.max(sigma[0]) < 1e-12
+
+
+def test_pca_reconstructs_a_marker_from_a_low_dimensional_motion():
+    """Six markers moving as a body that translates (any way) and bends in two modes: the
+    missing marker is the combination of the modes the present ones show (to rounding)."""
+    rng = np.random.default_rng(3)
+    f = np.arange(200.0)
+    modes = rng.normal(size=(2, 6, 3)) * 0.05
+    base = rng.normal(size=(6, 3)) * 0.3
+    weights = np.stack([np.sin(f / 9.0), np.cos(f / 13.0)], -1)
+    drift = np.stack([0.01 * f, np.sin(f / 30.0), 0.002 * f**1.5], -1)
+    x = base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+    t = _traj(x, missing=[(2, 50, 110)])
+    plan = plan_fill(t, tuple("ABCDEF"))
+    pca = fill_baseline("pca", plan.positions, plan.mask, plan.local())
+    spl = fill_baseline("spline", plan.positions, plan.mask, plan.local())
+    assert np.max(np.abs(pca[50:110, 2] - x[50:110, 2])) < 1e-9
+    assert np.max(np.abs(spl[50:110, 2] - x[50:110, 2])) > 1e-3  # a spline cannot know it
+
+
+def test_pca_refuses_a_window_without_complete_frames():
+    t = _traj(np.zeros((20, 2, 3)), missing=[(0, 1, 10), (1, 9, 19)])
+    plan = plan_fill(t, ("A", "B"))
+    with pytest.raises(InputError, match="--method pca: needs frames where every chosen"):
+        fill_baseline("pca", plan.positions, plan.mask, plan.local())
+
+
+def test_apply_fill_writes_the_gaps_and_lists_every_sample():
+    t = _traj(np.ones((30, 2, 3)), missing=[(0, 10, 13), (1, 0, 2)])
+    plan = plan_fill(t, ("A", "B"))
+    values = plan.positions.copy()
+    values[10:13, 0] = 2.0
+    filled, records = apply_fill(plan, values, [np.full(3, 1e-3)], "linear")
+    assert filled.mask[10:13, 0].all() and not filled.mask[0:2, 1].any()
+    assert np.all(filled.positions[10:13, 0] == 2.0)
+    rows = list(csv.DictReader(record_csv(records).decode().splitlines()))
+    assert [(r["frame"], r["marker"], r["status"]) for r in rows] == [
+        ("0", "B", "left"),
+        ("1", "B", "left"),
+        ("10", "A", "filled"),
+        ("11", "A", "filled"),
+        ("12", "A", "filled"),
+    ]
+    assert rows[2]["uncertainty_mm"] == "1" and rows[2]["gap"] == "10:13"
+
+
+# ----------------------------------------------------------------------------- the model
+
+
+def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly():
+    from activebonds.identify.fill import model_fill
+
+    model = load_model(TRIANGLE)
+    truth = _truth()
+    t = _traj(truth.positions, missing=[(1, 40, 70)], markers=model.markers)
+    found = model_fill(model, plan_fill(t, model.markers))
+    err = np.linalg.norm(found.values[40:70, 1] - truth.positions[40:70, 1], axis=-1)
+    assert err.max() < 1e-6
+    assert found.uncertainty[0].shape == (30,) and found.uncertainty[0].max() < 1e-6
+    assert np.array_equal(found.values[t.mask], t.positions[t.mask])  # the record kept
+
+
+def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
+    from activebonds.identify.fill import model_fill
+
+    model = load_model(TRIANGLE)
+    truth = _truth()
+    noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
+    t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
+    found = model_fill(model, plan_fill(t, model.markers))
+    err = np.linalg.norm(found.values[40:70, 1] - truth.positions[40:70, 1], axis=-1)
+    assert np.sqrt(np.mean(err**2)) < 5e-4  # measured 0.09 mm
+    # the spline does not get there
+    plan = plan_fill(t, model.markers)
+    spl = fill_baseline("spline", plan.positions, plan.mask, plan.local())
+    assert np.linalg.norm(spl[40:70, 1] - truth.positions[40:70, 1], axis=-1).max() > 2e-3
+    # the estimated uncertainty is of the error's order (measured 0.16 mm mean)
+    assert 2e-5 < found.uncertainty[0].mean() < 2e-3
+    # denoise: every sample the model's, closer to the truth than the record
+    smooth = model_fill(model, plan_fill(t, model.markers), denoise=True)
+    seen = t.mask
+    before = np.sqrt(np.mean(np.square(t.positions[seen] - truth.positions[seen])))
+    after = np.sqrt(np.mean(np.square(smooth.values[seen] - truth.positions[seen])))
+    assert after < 0.5 * before
+
+
+# ----------------------------------------------------------------------------- the command
+
+
+def _gappy(tmp_path, ext=".trc"):
+    truth = _truth()
+    t = _traj(
+        truth.positions,
+        missing=[(1, 40, 70), (0, 0, 5), (2, 80, 115)],
+        markers=("A", "B", "C"),
+    )
+    path = tmp_path / f"gappy{ext}"
+    write_trajectory(t, path)
+    return path, truth
+
+
+@pytest.mark.parametrize("ext", [".c3d", ".trc"])
+def test_filled_file_reads_back_without_the_filled_gaps(tmp_path, ext):
+    src, truth = _gappy(tmp_path, ext)
+    out = tmp_path / f"filled{ext}"
+    res = cli_in_process("fill", TRIANGLE, src, "--out", out, "--max-gap", "30")
+    assert res.returncode == 0, res.stderr
+    assert "1 gap(s) filled by model (30 samples)" in res.stdout
+    assert "left 1 gap(s) at the start (extrapolation: not filled): A 0:5" in res.stdout
+    back = read_trajectory(out)
+    rows = list(csv.DictReader((tmp_path / "filled.gaps.csv").read_text().splitlines()))
+    left = {(int(r["frame"]), r["marker"]) for r in rows if r["status"] == "left"}
+    filled = {(int(r["frame"]), r["marker"]) for r in rows if r["status"] == "filled"}
+    missing = {(int(f), back.markers[m]) for f, m in zip(*np.nonzero(~back.mask), strict=True)}
+    assert missing == left and not (missing & filled)
+    assert len(filled) == 30 and len(left) == 5 + 35
+    assert all(r["reason"] == "longer than --max-gap 30" for r in rows if r["marker"] == "C")
+    err = np.abs(back.positions[40:70, 1] - truth.positions[40:70, 1]).max()
+    assert err < (1e-6 if ext == ".trc" else 1e-6 + 1e-4)  # C3D holds float32 millimetres
+    info = cli_in_process("info", out, "--json")
+    assert json.loads(info.stdout)["gaps"] == {"A": 5, "B": 0, "C": 35}
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (
+            ["--markers", "A,X,Y"],
+            "the model's marker(s) X, Y are not in the recording",
+        ),
+        (["--method", "cubic"], "--method: expected model, spline, linear, pca, got 'cubic'"),
+        (["--method", "spline", "--denoise"], "--denoise: needs --method model, not spline"),
+        (["--frames", "10:4"], "--frames: 10:4 is not a window of 120 frames"),
+        (["--max-gap", "0"], "--max-gap: expected a positive number of frames, got 0"),
+    ],
+)
+def test_hard_cases_are_one_line_and_write_nothing(tmp_path, args, line):
+    src, _ = _gappy(tmp_path)
+    out = tmp_path / "filled.trc"
+    res = cli_in_process("fill", TRIANGLE, src, "--out", out, *args)
+    assert res.returncode == 2
+    assert res.stderr.count("\n") == 1 and line in res.stderr, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gappy.trc"]
+
+
+def test_a_marker_never_present_is_refused_by_name(tmp_path):
+    truth = _truth(60)
+    t = _traj(truth.positions, missing=[(2, 0, 60)], markers=("A", "B", "C"))
+    src = tmp_path / "never.csv"
+    write_trajectory(t, src)
+    res = cli_in_process("fill", TRIANGLE, src, "--out", tmp_path / "f.csv", "--method", "linear")
+    assert res.returncode == 2
+    assert "marker(s) C never present in frames 0:60: nothing to fill from" in res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["never.csv"]
