@@ -8,7 +8,8 @@ Each (case, path) runs in its own process, one after another, so its peak memory
 its own. One shooting stage from the same start (the one-step optimum, solved exactly) on
 the same data; per path: the stage's seconds (the warm start on the restart cost, then the
 shooting solve, compilation included), its Levenberg-Marquardt steps, peak RSS, the final
-objective and RMS; per case: the largest relative difference of a parameter between paths.
+objective and RMS; per case: the largest difference of a parameter between paths, relative
+and in the structured fit's standard errors (its Gauss-Newton uncertainty, the states eliminated).
 A dense path whose Jacobian alone would need more than ``--max-gb`` is not run: the record
 says what it would need (forming it takes one forward pass per unknown over the whole
 recording, QR-factored at every step).
@@ -109,9 +110,20 @@ def child(name: str, path: str) -> dict:
     ident = identification(model, traj, settings)
     start = least_squares(ident.model, make_windows(traj.positions, traj.mask, traj.dt, 1))
     t = time.perf_counter()
-    stage = Refinement(ident, settings, solver=path).stage(horizon, start.genome)
+    refinement = Refinement(ident, settings, solver=path)
+    stage = refinement.stage(horizon, start.genome)
     seconds = time.perf_counter() - t
+    natural = ident.model.layout.natural(np.asarray(stage.genome))
+    errors = None
+    if path == "structured" and stage.cost == "shooting" and stage.accepted:
+        from activebonds.identify.uncertainty import estimate
+
+        report = estimate(ident, settings, stage.genome, horizon, "shooting", refinement.states)
+        errors = [e.std_error for e in report.estimates]
     return {
+        "natural": [float(v) for v in natural],
+        "std_errors": errors,
+        "cost": stage.cost,
         "seconds": round(seconds, 2),
         "steps": stage.steps,
         "accepted": stage.accepted,
@@ -162,14 +174,22 @@ def main() -> None:
                 row[path] = {"failed": out.stderr.strip().splitlines()[-1:]}
             else:
                 row[path] = json.loads(line[0][7:])
-            shown = {k: v for k, v in row[path].items() if k != "genome"}
+            hidden = ("genome", "natural", "std_errors")
+            shown = {k: v for k, v in row[path].items() if k not in hidden}
             print(f"{name} {path}: {shown}", flush=True)
         a, b = row.get("dense", {}), row.get("structured", {})
         if "genome" in a and "genome" in b:
             ga, gb = np.asarray(a["genome"]), np.asarray(b["genome"])
             row["max_rel_param_diff"] = float(np.max(np.abs(ga - gb) / np.abs(ga)))
+            se = b.get("std_errors")
+            if se and all(e is not None for e in se):  # in the structured fit's standard errors
+                na, nb = np.asarray(a["natural"]), np.asarray(b["natural"])
+                row["max_param_diff_sd"] = float(np.max(np.abs(na - nb) / np.asarray(se)))
             row["speedup"] = round(a["seconds"] / b["seconds"], 2)
-            print(f"{name}: {row['speedup']}x, max rel diff {row['max_rel_param_diff']:.2e}")
+            print(
+                f"{name}: {row['speedup']}x, max rel diff {row['max_rel_param_diff']:.2e}, "
+                f"{row.get('max_param_diff_sd', float('nan')):.3g} standard deviations"
+            )
         record["cases"][name] = row
         if args.json:  # after every case: a long run keeps what it measured
             args.json.write_text(json.dumps(record, indent=1) + "\n")

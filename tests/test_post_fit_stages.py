@@ -113,10 +113,12 @@ def _without_clock(value):
 
 
 def test_python_and_the_command_line_write_the_same_run_directory(tmp_path):
-    """Same settings, defaults included (refine lm, validation frames): the same history,
-    best model and stage records, file by file."""
+    """Same settings, defaults included (refine lm, validation frames; the cost named, the
+    command line's default being auto): the same history, best model and stage records,
+    file by file."""
     shell, python = tmp_path / "shell", tmp_path / "python"
     args = ["--frames", "0:40", "--population", "10", "--generations", "8", "--seed", "3"]
+    args += ["--cost", "restart"]
     printed = _invoke("fit", TRIANGLE, DATA, "--out", shell, *args, "--validate", "60:100")
     result = fit(
         TRIANGLE,

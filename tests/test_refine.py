@@ -108,7 +108,7 @@ def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
     activebonds.data.write_trajectory(traj, data)
     model_path = EXAMPLES / "triangle.toml"
 
-    def diverge(residual, y0, max_steps):
+    def diverge(residual, y0, max_steps, *_):
         return (
             type(y0)(np.full_like(np.asarray(leaf), np.nan) for leaf in y0)
             if isinstance(y0, tuple)
@@ -145,7 +145,7 @@ def test_the_cli_says_a_divergent_stage_in_one_line(triangle, tmp_path, monkeypa
     data = tmp_path / "tri.npz"
     activebonds.data.write_trajectory(traj, data)
 
-    def diverge(residual, y0, max_steps):
+    def diverge(residual, y0, max_steps, *_):
         return np.full_like(np.asarray(y0), np.nan), 3, "converged"
 
     monkeypatch.setattr(refine_mod, "_solve", diverge)

@@ -117,4 +117,5 @@ KIND = BondKind(
     noun="contact",
     mujoco=MujocoForm(why="MuJoCo's contacts are solver constraints, not this penalty law"),
     reach=reach,
+    stiff_in_velocity=True,
 )

@@ -162,6 +162,9 @@ class BondKind:
     # bounds (structure identification leaves its particle's predictions there out); None:
     # it may act anywhere
     reach: Callable | None = None
+    # forces stiff in the velocity for an integrator step (a contact's friction near sticking:
+    # a drag of mu Fn / eps); with substeps the integrator takes them implicitly
+    stiff_in_velocity: bool = False
 
     def __post_init__(self):
         if not self.noun:

@@ -22,23 +22,25 @@ from .forces import total_force
 Integrator = Literal["euler", "verlet"]
 
 
-# Kinds whose forces can be stiff in the velocity for a step: a contact's friction near
-# sticking is a drag of ``mu Fn / eps`` (eps = 1e-3 m/s), ``h mu Fn / (m eps)`` = 1-500 for
-# steps of 0.05-5 ms. With substeps, their velocity dependence is taken implicitly (see
-# :func:`kick`), and the start velocity is solved by Newton's method.
-STIFF_KINDS = frozenset({"contact"})
+def stiff_kinds() -> frozenset[str]:
+    """Kinds whose forces can be stiff in the velocity for a step (``stiff_in_velocity``: a
+    contact's friction near sticking is a drag of ``mu Fn / eps``, eps = 1e-3 m/s,
+    ``h mu Fn / (m eps)`` = 1-500 for steps of 0.05-5 ms). With substeps, their velocity
+    dependence is taken implicitly (see :func:`kick`), and the start velocity is solved by
+    Newton's method."""
+    return frozenset(k.name for k in bonds.kinds() if k.stiff_in_velocity)
 
 
 def stiff(topo: Topology) -> bool:
-    """Whether a kind of :data:`STIFF_KINDS` is active in this topology."""
-    return any(k in STIFF_KINDS for k in topo.active())
+    """Whether a kind of :func:`stiff_kinds` is active in this topology."""
+    return bool(stiff_kinds() & set(topo.active()))
 
 
 def _stiff_jacobian(params: Params, topo: Topology, x, v, t):
     """[P, D, D] d F / d v_p of the stiff kinds on each particle: each of their bonds acts on
     one particle and depends on its velocity only, so the Jacobian is block-diagonal and D
     forward-mode directions (one velocity axis of every particle at once) give its blocks."""
-    kinds = [k for k in topo.active() if k in STIFF_KINDS]
+    kinds = [k for k in topo.active() if k in stiff_kinds()]
 
     def f(v):
         out = jnp.zeros_like(x)
@@ -100,7 +102,7 @@ def advance(
 ):
     """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``.
 
-    With substeps (> 1) and a stiff kind (:data:`STIFF_KINDS`), every substep's kick is
+    With substeps (> 1) and a stiff kind (:func:`stiff_kinds`), every substep's kick is
     linearly implicit in that kind's velocity dependence (:func:`kick`): substeps exist to
     resolve fast dynamics, and an explicit kick cannot resolve a sticking contact's drag
     (stable only below ``h = 2 m eps / (mu Fn)``, about 20 us at a hopper's landing). One
@@ -166,7 +168,7 @@ def start_velocity(
       true state to ``~ contraction^(iterations+1)``. Where a force is stiff in the velocity
       for the frame interval, that contraction exceeds 1 and the iteration diverges: a
       contact's friction near sticking is a drag of ``mu Fn / eps`` (``dt mu Fn / (m eps)``
-      is 10-500 at 100-200 Hz). With a kind of :data:`STIFF_KINDS` the solve is therefore
+      is 10-500 at 100-200 Hz). With a kind of :func:`stiff_kinds` the solve is therefore
       Newton's method on the exact Jacobian (forward mode over the P D velocity
       coordinates: about P D + 1 times a step's cost per round, quadratic convergence), the
       substeps' kicks being linearly implicit in that kind's drag (:func:`advance`).
