@@ -8,7 +8,11 @@ The steps, each one's output in the output folder ``OUT``:
    (about ``n^2 / 2`` exact least squares for ``n`` candidates, each dearer with more of
    them: on the 41-marker human walk's 110 candidates, a second a solve, hours in all), so
    above :data:`MAX_DECIDED` candidates nothing is eliminated: every candidate is kept,
-   its linear parameters at their exact least-squares optimum, and the run says so;
+   its linear parameters at their exact least-squares optimum, and the run says so. Where
+   the scaffold guessed gravity (no ``--up``, no ``--gravity``) and the springs' exact
+   optimum is still worse than zero force (nothing found holds the body up: the contacts'
+   reach leaves out too little), the scaffold is written again without gravity (the first
+   kept in ``OUT/scaffold-gravity.toml``) and decided again, and the run says so;
 3. **fit** (:func:`~.driver.fit`) from the structure's values (``init = "model"``), the
    refinement's cost chosen as ``fit --cost auto`` does (:func:`~.cost_choice.choose_cost`:
    multiple shooting where a window has at most 300 unknowns, else the restart cost):
@@ -105,6 +109,7 @@ class Folder:
     path: Path
 
     scaffold = property(lambda self: self.path / "scaffold.toml")
+    scaffold_gravity = property(lambda self: self.path / "scaffold-gravity.toml")
     structure = property(lambda self: self.path / "structure.toml")
     structure_record = property(lambda self: self.path / "structure.json")
     run = property(lambda self: self.path / "run")
@@ -265,7 +270,7 @@ def run(
         2,
         "structure",
         "which candidate springs the fitted frames need (BIC, exact least squares)",
-        lambda: _structure(folder, recording, split, say),
+        lambda: _structure(folder, recording, split, options, say),
     )
     step(
         3,
@@ -294,22 +299,32 @@ def run(
     return Outcome(folder, state, _Scored(record["held_out"]), _Scored(record["fitted"]))
 
 
-def _structure(folder: Folder, recording, split: Windows, say) -> str:
+def _structure(folder: Folder, recording, split: Windows, options: Options, say) -> str:
     from ..atomic import write_text_atomic
-    from ..model import load_model, save_model
-    from .settings import FitSettings
-    from .structure import candidates, structure_of
+    from ..model import load_model, loads_model, save_model
+    from .scaffold import scaffold
 
-    model = load_model(folder.scaffold)
-    n = len(candidates(model.spec))
-    eliminate = n <= MAX_DECIDED
-    if not eliminate:
+    result, eliminate, n = _decide(load_model(folder.scaffold), recording, split, say)
+    guessed = options.gravity is None and options.up is None
+    if guessed and result.spec.gravity is not None and result.rms_mm >= result.zero_force_rms_mm:
         say(
-            f"      structure: {n} candidate springs, more than {MAX_DECIDED}: no elimination "
-            f"(its exact least squares grow with the square of the candidates, hours here); "
-            "every candidate kept, at its exact least-squares optimum"
+            f"      structure: with the guessed gravity the springs' exact optimum is worse than "
+            f"zero force ({result.rms_mm:.4g} vs {result.zero_force_rms_mm:.4g} mm: nothing "
+            "found holds the body up); scaffolding again without gravity, the first candidate "
+            f"kept in {folder.scaffold_gravity} (--up AXIS or --gravity insists on it)"
         )
-    result = structure_of(model, recording, FitSettings(frames=split.fitted), 0, eliminate)
+        found = scaffold(
+            recording,
+            markers=list(options.markers) if options.markers else None,
+            frames=split.fitted,
+            total_mass=options.total_mass,
+            gravity=False,
+            name=recording_name(recording),
+        )
+        loads_model(found.text, str(folder.scaffold))
+        write_text_atomic(folder.scaffold_gravity, folder.scaffold.read_text(encoding="utf-8"))
+        write_text_atomic(folder.scaffold, found.text)
+        result, eliminate, n = _decide(load_model(folder.scaffold), recording, split, say)
     save_model(result.spec, folder.structure)
     record = {"eliminated": eliminate, "candidates": n, "max_decided": MAX_DECIDED}
     write_text_atomic(
@@ -321,6 +336,28 @@ def _structure(folder: Folder, recording, split: Windows, say) -> str:
         f"{result.rms_mm:.4g} mm (zero force {result.zero_force_rms_mm:.4g} mm): "
         f"{folder.structure}"
     )
+
+
+def recording_name(recording) -> str:
+    """The model's name: the recording file's stem."""
+    return Path(str(recording.source or "scaffold")).stem
+
+
+def _decide(model, recording, split: Windows, say):
+    """(structure_of's result, whether it eliminated, the candidates) of a scaffold."""
+    from .settings import FitSettings
+    from .structure import candidates, structure_of
+
+    n = len(candidates(model.spec))
+    eliminate = n <= MAX_DECIDED
+    if not eliminate:
+        say(
+            f"      structure: {n} candidate springs, more than {MAX_DECIDED}: no elimination "
+            f"(its exact least squares grow with the square of the candidates, hours here); "
+            "every candidate kept, at its exact least-squares optimum"
+        )
+    result = structure_of(model, recording, FitSettings(frames=split.fitted), 0, eliminate)
+    return result, eliminate, n
 
 
 def _fit(folder, recording_path, recording, split, options, say, fit_progress) -> str:
