@@ -128,7 +128,7 @@ def advance(
     return x, v
 
 
-UNROLLED = 2  # substeps written out in the program; more run as a loop
+UNROLLED = 8  # substeps written out in the program (fastest to run); more run as a loop
 START_ITERATIONS = 3  # fixed-point (or Newton) iterations of start_velocity (substeps > 1)
 START_TOLERANCE = 1e-6  # largest last residual, relative to the frame's displacement
 START_ATOL = 1e-10  # m: ... plus this (a particle at rest has no displacement to be relative to)
