@@ -28,7 +28,7 @@ INPUTS = (".toml", ".csv", ".trc", ".c3d", ".npz", ".mat")
 # Run as written (the long ones shortened): these; the others are checked for options only.
 RUN = ("datasets", "info", "simulate", "structure", "export", "fit", "baselines", "evaluate")
 SHORTER = {
-    "--frames": ("simulate", "200"),
+    "--n-frames": ("simulate", "200"),
     "--population": ("fit", "8"),
     "--generations": ("fit", "3"),
 }
