@@ -497,6 +497,7 @@ from .report_cmd import report  # noqa: E402
 app.command(name="report")(report)
 
 from . import (  # noqa: E402,F401
+    auto_cmd,
     baselines_cmd,
     datasets_cmd,
     evaluate_cmd,

@@ -269,10 +269,14 @@ def held_out_of_reach(model: Model, windows: Windows) -> tuple[Model, Windows]:
     return build(spec, disable=model.disabled), replace(windows, weight=weight)
 
 
-def identify_structure(model: Model, windows: Windows) -> Structure:
+def identify_structure(model: Model, windows: Windows, eliminate: bool = True) -> Structure:
     """Backward elimination of the optional bonds of ``model`` under the BIC, each structure
     solved by exact least squares on ``windows`` (horizon 1). InputError when the model has
-    no optional bond or is outside the families the exact least squares solves."""
+    no optional bond or is outside the families the exact least squares solves.
+
+    ``eliminate=False``: no elimination and no decisions (each costs a solve per candidate):
+    every candidate present, the linear parameters at their exact least-squares optimum (for
+    candidates too many to decide, ``activebonds auto``)."""
     pool = candidates(model.spec)
     if not pool:
         raise InputError(model.name, "no bond is optional (add optional = true to candidates)")
@@ -288,7 +292,7 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
     present = frozenset(pool)
     rss_full, bic = score(present)
     removed: list[int] = []
-    while present:
+    while present and eliminate:
         trials = {i: score(present - {i})[1] for i in sorted(present)}
         best = min(trials, key=trials.get)
         if not trials[best] < bic:
@@ -298,7 +302,7 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
     rss, bic = score(present)
     _, final, genome = score.fitted(present)
     decisions = []
-    for i in pool:
+    for i in pool if eliminate else ():
         other = present - {i} if i in present else present | {i}
         rss_o, bic_o = score(other)
         with_rss, without_rss = (rss, rss_o) if i in present else (rss_o, rss)
@@ -329,7 +333,9 @@ def identify_structure(model: Model, windows: Windows) -> Structure:
     )
 
 
-def structure_of(model: Model, recording, settings, smooth: int = 0) -> Structure:
+def structure_of(
+    model: Model, recording, settings, smooth: int = 0, eliminate: bool = True
+) -> Structure:
     """:func:`identify_structure` on the frames and markers of ``settings`` of ``recording``
     (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
     the pipeline of ``activebonds structure``."""
@@ -339,4 +345,4 @@ def structure_of(model: Model, recording, settings, smooth: int = 0) -> Structur
 
     data = select_data(model, recording, settings)
     positions = smooth_positions(data.positions, data.mask, smooth) if smooth else data.positions
-    return identify_structure(model, make_windows(positions, data.mask, data.dt, 1))
+    return identify_structure(model, make_windows(positions, data.mask, data.dt, 1), eliminate)

@@ -1,0 +1,101 @@
+"""``activebonds auto``: from a recording to an evaluated model in one command
+(identify/pipeline.py: scaffold, structure, fit, evaluate on a held-out tail, report)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import InputError
+from .app import app, fail, out, parse_option_frames
+
+
+@app.command()
+def auto(
+    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    out_dir: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="Output folder: scaffold.toml, structure.toml/.json, run/, "
+            "evaluation.json, report.html, auto.json.",
+        ),
+    ] = ...,
+    markers: Annotated[
+        str | None, typer.Option(help="Markers to model, in order: A,B,C (default: all).")
+    ] = None,
+    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    held_out: Annotated[
+        float,
+        typer.Option(help="Share of the window's frames held out at its end, never fitted."),
+    ] = 0.2,
+    total_mass: Annotated[
+        float | None,
+        typer.Option(help="Total mass in kg, split equally (default: 1 kg per marker)."),
+    ] = None,
+    up: Annotated[
+        str | None,
+        typer.Option(help="The vertical axis, e.g. Z or -Y: gravity along minus it."),
+    ] = None,
+    gravity: Annotated[
+        bool | None,
+        typer.Option(
+            "--gravity/--no-gravity",
+            help="Gravity and ground contacts (default: where the vertical is confident).",
+        ),
+    ] = None,
+    population: Annotated[int, typer.Option(help="The fit's population size.")] = 40,
+    generations: Annotated[int, typer.Option(help="The fit's generations.")] = 200,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    ahead: Annotated[
+        int, typer.Option(help="Frames ahead of the multi-step verdict (evaluate --horizon).")
+    ] = 10,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace an earlier output folder of activebonds auto.")
+    ] = False,
+):
+    """From a recording to an evaluated model: scaffold a candidate model of the fitted frames,
+    decide its springs (structure), fit it (the cost as fit --cost auto), evaluate it on the
+    held-out tail and the fitted frames beside zero force, write the report; the verdict last.
+    Run again with the same recording and options, the finished steps are kept and an
+    interrupted fit resumes."""
+    from ..identify import pipeline
+    from ..identify.rundir import RunWriteError
+    from ..identify.settings import parse_frames, parse_markers
+    from .main import _progress, say
+    from .preflight import write_failure_line
+
+    try:
+        options = pipeline.Options(
+            markers=parse_markers(markers),
+            frames=parse_option_frames(frames, parse_frames),
+            held_out=held_out,
+            total_mass=total_mass,
+            up=up,
+            gravity=gravity,
+            population=population,
+            generations=generations,
+            seed=seed,
+            ahead=ahead,
+        )
+        outcome = pipeline.run(
+            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress
+        )
+    except InputError as e:
+        fail(e)
+    except RunWriteError as e:
+        fail(write_failure_line(out_dir / "run", e), code=1)
+    except RuntimeError as e:
+        fail(str(e), code=1)
+    except KeyboardInterrupt:
+        fail(
+            f"interrupted; the finished steps are kept in {out_dir}: run the same command "
+            "again to continue (an interrupted fit resumes from its checkpoint)",
+            code=130,
+        )
+    for line in outcome.verdict_lines():
+        say(line)
+    out.print(f"output: {out_dir} (report: {outcome.folder.report})", markup=False)
+    say(outcome.verdict())

@@ -1,0 +1,124 @@
+"""``activebonds auto``: from a recording to an evaluated model in one command
+(identify/pipeline.py)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from activebonds.data.bundled import dataset
+from activebonds.identify import pipeline
+from activebonds.model import load_model
+from activebonds.simulation import simulate_to_file
+from helpers import cli_in_process
+
+FILES = ("scaffold.toml", "structure.toml", "structure.json", "evaluation.json", "report.html")
+
+
+@pytest.fixture(scope="module")
+def triangle(tmp_path_factory):
+    """The triangle example simulated: 300 frames at 60 Hz (no gravity: a free body)."""
+    path = tmp_path_factory.mktemp("auto") / "triangle.csv"
+    simulate_to_file(dataset("triangle.toml").path, 300, 60.0, path, None, 1, "euler")
+    return path
+
+
+def test_the_window_split_and_its_limits():
+    split = pipeline.windows(600, (0, None), 0.2)
+    assert split.fitted == (0, 480) and split.held_out == (480, 600)
+    assert pipeline.windows(600, (100, 300), 0.25).held_out == (250, 300)
+    for frames, share, option in [
+        ((0, None), 1.5, "--held-out"),
+        ((0, None), 0.0, "--held-out"),
+        ((0, 15), 0.2, "--frames"),  # 12 fitted, 3 held out
+        ((700, None), 0.2, "--frames"),
+    ]:
+        with pytest.raises(Exception) as err:
+            pipeline.windows(600, frames, share)
+        assert option in str(err.value)
+
+
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
+def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
+    out = tmp_path / "out"
+    args = ("auto", triangle, "--out", out, "--no-gravity", "--generations", "20")
+    args += ("--population", "16")
+    proc = cli_in_process(*args)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    for k, step in enumerate(pipeline.STEPS, 1):
+        assert any(line.startswith(f"[{k}/5] {step}: ") for line in lines), step
+    last = lines[-1]
+    assert last.startswith("verdict, held-out frames 240:300: one step: better than zero force")
+    assert "10 frames ahead: better than zero force" in last
+    for name in FILES:
+        assert (out / name).is_file(), name
+    assert (out / "run" / "best_model.toml").is_file()
+    # the three springs of the truth are found, and beat zero force on the held-out frames
+    # (not to rounding: the scaffold's masses are equal, the truth's 1, 1.5 and 2 kg)
+    found = load_model(out / "structure.toml")
+    assert [b.present for b in found.spec.bond] == [True, True, True]
+    held = json.loads((out / "evaluation.json").read_text())["held_out"]
+    assert held["frames"] == [240, 300]
+    one, ahead = held["comparisons"]
+    assert one["model_mm"] < 0.5 * one["zero_force_mm"]
+    assert ahead["horizon"] == 10 and ahead["model_mm"] < 0.5 * ahead["zero_force_mm"]
+    state = json.loads((out / "auto.json").read_text())
+    assert set(state["steps"]) == set(pipeline.STEPS)
+    assert state["fitted_frames"] == [0, 240] and state["held_out_frames"] == [240, 300]
+
+    # the same command again: every step kept, the same verdict
+    again = cli_in_process(*args)
+    assert again.returncode == 0, again.stderr
+    assert "continuing" in again.stdout and again.stdout.count("done before") == 3 + 2
+    assert again.stdout.strip().splitlines()[-1] == last
+    # other options: refused in one line, the folder as it was
+    other = cli_in_process(*args, "--seed", "1")
+    assert other.returncode == 2 and "--overwrite" in other.stderr
+    assert len(other.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
+def test_too_many_candidates_are_kept_undecided(triangle, tmp_path, monkeypatch):
+    monkeypatch.setattr(pipeline, "MAX_DECIDED", 2)
+    out = tmp_path / "out"
+    proc = cli_in_process(
+        "auto", triangle, "--out", out, "--no-gravity", "--generations", "5",
+        "--population", "8", "--ahead", "5",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "3 candidate springs, more than 2: no elimination" in proc.stdout
+    record = json.loads((out / "structure.json").read_text())
+    assert record["eliminated"] is False and record["decisions"] == []
+    assert all(b.present for b in load_model(out / "structure.toml").spec.bond)
+    assert "5 frames ahead" in proc.stdout.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--held-out", "1.5"], "--held-out"),
+        (["--markers", "A,Nope"], "Nope"),
+        (["--total-mass", "-1"], "--total-mass"),
+        (["--population", "2"], "--population"),
+        (["--ahead", "0"], "--ahead"),
+        (["--frames", "0:12"], "--frames"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(triangle, tmp_path, options, message):
+    out = tmp_path / "out"
+    proc = cli_in_process("auto", triangle, "--out", out, "--no-gravity", *options)
+    assert proc.returncode == 2, proc.stdout
+    assert proc.stderr.startswith("error: ") and len(proc.stderr.strip().splitlines()) == 1
+    assert message in proc.stderr
+    assert not out.exists()
+
+
+def test_a_folder_of_something_else_is_refused(triangle, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep")
+    proc = cli_in_process("auto", triangle, "--out", out, "--no-gravity", "--overwrite")
+    assert proc.returncode == 2 and "not a folder of activebonds auto" in proc.stderr
+    assert [p.name for p in out.iterdir()] == ["mine.txt"]
