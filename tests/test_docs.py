@@ -108,7 +108,9 @@ def test_the_pages_name_existing_commands_and_state_no_suite_size():
         assert counted is None, f"docs/{name} states a count the code owns: {counted.group(0)}"
 
 
-@pytest.mark.parametrize("page", ["tutorial.md", "howto/sweeps.md", "howto/gap-filling.md"])
+@pytest.mark.parametrize(
+    "page", ["tutorial.md", "howto/auto.md", "howto/sweeps.md", "howto/gap-filling.md"]
+)
 def test_the_pages_commands_use_existing_options(page):
     commands = gen.commands()
     text = (DOCS / page).read_text()
