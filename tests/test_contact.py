@@ -386,7 +386,7 @@ def test_bad_contact_bonds_are_refused_by_the_cli(tmp_path, old, new, message):
     path = tmp_path / "bad.toml"
     path.write_text(text.replace(old, new), encoding="utf-8")
     out = tmp_path / "out.csv"
-    proc = cli("simulate", path, "--frames", "5", "--rate", "100", "--out", out)
+    proc = cli("simulate", path, "--n-frames", "5", "--rate", "100", "--out", out)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
@@ -476,7 +476,7 @@ def test_simulate_fit_and_report_a_contact_model_on_the_command_line(tmp_path):
     model = tmp_path / "hopper.toml"
     model.write_text(hopper(**TRUTH), encoding="utf-8")
     data, run = tmp_path / "hop.csv", tmp_path / "RUN"
-    proc = cli("simulate", model, "--frames", "200", "--rate", "200", "--out", data)
+    proc = cli("simulate", model, "--n-frames", "200", "--rate", "200", "--out", data)
     assert proc.returncode == 0, proc.stderr
     proc = cli("fit", model, data, "--out", run, "--population", "20", "--generations", "20")
     assert proc.returncode == 0, proc.stderr

@@ -421,7 +421,7 @@ def test_bad_model_through_the_cli_is_one_line_and_exit_2(tmp_path):
     for n, (text, message) in enumerate(BAD[:1] + BAD[-1:]):
         path = tmp_path / f"bad{n}.toml"
         path.write_text(text)
-        proc = cli("simulate", path, "--frames", "3", "--rate", "10", "--out", tmp_path / "o.csv")
+        proc = cli("simulate", path, "--n-frames", "3", "--rate", "10", "--out", tmp_path / "o.csv")
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and str(path.name) in lines[0] and message in lines[0], lines

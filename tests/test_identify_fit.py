@@ -349,7 +349,7 @@ def test_run_directory_contents(cli_ref, tmp_path):
     assert history[-1, 4] == pytest.approx(status["best_rms_mm"], rel=1e-12)
 
     out = tmp_path / "x.csv"
-    sim = cli("simulate", ref / "best_model.toml", "--frames", "20", "--rate", "60", "--out", out)
+    sim = cli("simulate", ref / "best_model.toml", "--n-frames", "20", "--rate", "60", "--out", out)
     assert sim.returncode == 0, sim.stderr
     assert read_trajectory(out).n_frames == 20
 

@@ -28,7 +28,7 @@ INPUTS = (".toml", ".csv", ".trc", ".c3d", ".npz", ".mat")
 # Run as written (the long ones shortened): these; the others are checked for options only.
 RUN = ("datasets", "info", "simulate", "structure", "export", "fit", "baselines", "evaluate")
 SHORTER = {
-    "--frames": ("simulate", "200"),
+    "--n-frames": ("simulate", "200"),
     "--population": ("fit", "8"),
     "--generations": ("fit", "3"),
 }
@@ -113,7 +113,7 @@ def _check_output(args: list[str], out: str) -> None:
     elif command == "info":
         assert re.search(r"frames\s+│\s+600\b", out) and "Head,Withers,HFL present" in out
     elif command == "simulate":
-        n = int(args[args.index("--frames") + 1])
+        n = int(args[args.index("--n-frames") + 1])
         path = args[args.index("--out") + 1]
         assert f"wrote {n} frames to {path}" in out
         assert read_trajectory(path).n_frames == n

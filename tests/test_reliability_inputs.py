@@ -7,7 +7,7 @@
   Each either loads, and then dumps and reloads to the identical text, or raises InputError
   with ONE line containing the file's name. Anything else is a failure. Both outcomes must
   be common, so the fuzzer is not trivially rejected. Seeds are fixed.
-* ``activebonds simulate BAD.toml --frames 5 --rate 60 --out x.csv`` on a sample of the
+* ``activebonds simulate BAD.toml --n-frames 5 --rate 60 --out x.csv`` on a sample of the
   refused files in subprocesses (8 by default, 30 with ``-m slow``): exit 2, one line on
   stderr naming the file, no traceback, no x.csv (nor any temporary file).
 * ``activebonds info --json``: every missing-marker convention (blank CSV fields, "NaN" in

@@ -223,7 +223,7 @@ def test_all_failed_fit_and_diverging_simulation(tmp_path, tmp_path_factory):
             *("fit", model, ws["base"] / "triangle.csv", "--out", run, "--horizon", "10"),
             *("--population", "16", "--generations", "20"),
         ),
-        ("simulate", model, "--frames", "50", "--rate", "60", "--out", tmp_path / "x.npz"),
+        ("simulate", model, "--n-frames", "50", "--rate", "60", "--out", tmp_path / "x.npz"),
     ]
     fit, sim = cli_many(commands, ws["cache"])
 
@@ -249,7 +249,7 @@ def test_all_failed_fit_and_diverging_simulation(tmp_path, tmp_path_factory):
 
     # the frames before it are written as computed: finite, astronomically large (no clamp)
     ok = cli(
-        *("simulate", model, "--frames", frame, "--rate", "60", "--out", tmp_path / "ok.npz"),
+        *("simulate", model, "--n-frames", frame, "--rate", "60", "--out", tmp_path / "ok.npz"),
         cache=ws["cache"],
     )
     assert ok.returncode == 0, ok.stderr

@@ -282,7 +282,7 @@ def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
     (proc,) = cli_many(
         [
             (
-                *("simulate", EXAMPLES / "triangle.toml", "--frames", "3", "--rate", "60"),
+                *("simulate", EXAMPLES / "triangle.toml", "--n-frames", "3", "--rate", "60"),
                 *("--out", "sub/../x.csv", {"cwd": tmp_path}),
             )
         ],

@@ -169,7 +169,7 @@ def test_best_model_carries_its_start_and_exports_as_is(tmp_path):
     assert proc.returncode == 0, proc.stderr
     sim = tmp_path / "sim.csv"
     proc = cli_in_process(
-        "simulate", run / "best_model.toml", "--frames", "3", "--rate", "60", "--out", sim
+        "simulate", run / "best_model.toml", "--n-frames", "3", "--rate", "60", "--out", sim
     )
     assert proc.returncode == 0, proc.stderr
     # the model's first step lands on the recording's next frame (to the file's 0.001 mm)

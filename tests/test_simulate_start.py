@@ -37,7 +37,7 @@ def test_a_model_without_positions_is_refused_with_the_ways_to_start(tmp_path):
     model = tmp_path / "nopos.toml"
     model.write_text(_without_start(TRIANGLE.read_text()))
     out = tmp_path / "x.csv"
-    res = _invoke("simulate", model, "--frames", "10", "--rate", "60", "--out", out)
+    res = _invoke("simulate", model, "--n-frames", "10", "--rate", "60", "--out", out)
     assert res.exit_code == 2, res.output
     lines = [line for line in res.output.splitlines() if line.strip()]
     assert len(lines) == 1, res.output
@@ -70,7 +70,7 @@ def test_from_a_recording_retraces_the_truth(tmp_path):
     model.write_text(_without_start(TRIANGLE.read_text()))
     out = tmp_path / "again.csv"
     res = _invoke(
-        "simulate", model, "--frames", "60", "--rate", "60", "--from", recording, "--out", out
+        "simulate", model, "--n-frames", "60", "--rate", "60", "--from", recording, "--out", out
     )
     assert res.exit_code == 0, res.output
     again = read_trajectory(out)

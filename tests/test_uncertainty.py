@@ -91,7 +91,7 @@ def test_fit_writes_uncertainty_csv(tmp_path):
     data = tmp_path / "tri.csv"
     assert (
         cli_in_process(
-            "simulate", TRIANGLE, "--frames", "120", "--rate", "100", "--out", data
+            "simulate", TRIANGLE, "--n-frames", "120", "--rate", "100", "--out", data
         ).returncode
         == 0
     )
@@ -131,7 +131,7 @@ def test_a_parameter_without_effect_is_not_determined_in_a_fit(tmp_path):
     data = tmp_path / "tri.csv"
     assert (
         cli_in_process(
-            "simulate", TRIANGLE, "--frames", "80", "--rate", "100", "--out", data
+            "simulate", TRIANGLE, "--n-frames", "80", "--rate", "100", "--out", data
         ).returncode
         == 0
     )

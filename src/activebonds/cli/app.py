@@ -25,12 +25,22 @@ app = typer.Typer(
     "from motion capture with a self-adaptive evolution strategy.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: wrapped, never cut with "…" at 80 columns
     add_completion=False,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def console(**options) -> Console:
+    """A console that prints text as given: the terminal library's markup (``[bold]``), emoji
+    codes (``:100:``) and highlighting are never applied, so file names, marker names and
+    ranges such as ``0:100:`` print verbatim (tables included)."""
+    return Console(markup=False, emoji=False, highlight=False, **options)
+
+
 # Not a terminal (a log, a pipe): no 80-column wrapping of paths and summaries.
-out = Console() if sys.stdout.isatty() else Console(width=160, soft_wrap=True)
-err = Console(stderr=True, width=10_000, soft_wrap=True)
+out = console() if sys.stdout.isatty() else console(width=160, soft_wrap=True)
+err = console(stderr=True, width=10_000, soft_wrap=True)
 
 
 def fail(error: InputError | str, code: int = 2):
@@ -109,7 +119,16 @@ def command_line(setup: Callable[[], None]):
     group = get_command(app)
     for command in group.commands.values():
         command.callback = _after(setup, command.callback)
+        command.short_help = command.short_help or first_sentence(command.help or "")
     return group
+
+
+def first_sentence(text: str) -> str:
+    """A command's help up to its first full stop: its line in ``activebonds --help``, whole
+    (the parser's own short help is cut with '...' at the terminal's width)."""
+    words = " ".join(text.split())
+    end = words.find(". ")
+    return words if end < 0 else words[: end + 1]
 
 
 def _after(setup: Callable[[], None], body: Callable) -> Callable:

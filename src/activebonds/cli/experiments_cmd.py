@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from ..errors import InputError
-from .app import app, fail, out
+from .app import app, console, fail, out
 
 
 def _parse_seeds(seeds: int) -> list[int]:
@@ -44,12 +44,10 @@ def _progress_runner(experiments: list[str], scale: str, seeds: list[int], folde
 
 
 def _finish(summaries: dict, folder: Path, started: float) -> Path:
-    from rich.console import Console
-
     from ..experiments.report import write_experiments_report
     from .progress import status_line
 
-    with status_line(Console(stderr=True), "writing the report"):  # figures: tens of seconds
+    with status_line(console(stderr=True), "writing the report"):  # figures: tens of seconds
         report = write_experiments_report(summaries, folder)
     for name, s in summaries.items():
         for config, c in s["configs"].items():
@@ -70,7 +68,7 @@ def _finish(summaries: dict, folder: Path, started: float) -> Path:
             )
     for line in verdict_lines(summaries):
         out.print(line, markup=False, highlight=False, emoji=False)
-    out.print(f"done in {time.time() - started:.0f} s; report: [bold]{report}[/]")
+    out.print(f"done in {time.time() - started:.0f} s; report: {report}")
     return report
 
 

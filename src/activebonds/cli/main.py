@@ -28,7 +28,7 @@ from ..identify.settings import (  # noqa: E402
     parse_frames,
     parse_markers,
 )
-from .app import app, fail, out, parse_option_frames  # noqa: E402
+from .app import app, console, fail, out, parse_option_frames  # noqa: E402
 
 
 @app.command()
@@ -116,7 +116,9 @@ def _windows_text(record: dict) -> str:
 @app.command()
 def simulate(
     model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
-    frames: Annotated[int, typer.Option(help="Number of frames to write.", min=2)] = ...,
+    frames: Annotated[
+        int, typer.Option("--n-frames", help="Number of frames to write.", min=2)
+    ] = ...,
     rate: Annotated[float, typer.Option(help="Frame rate in Hz.")] = ...,
     out_path: Annotated[Path, typer.Option("--out", help="Trajectory to write.")] = ...,
     start: Annotated[
@@ -179,6 +181,14 @@ def fit(
             "on the residuals of --cost, one stage per --horizon entry; none: the ES only."
         ),
     ] = DEFAULT["refine"],
+    max_steps: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Levenberg-Marquardt steps per refinement stage, at most (a stage that "
+            "stops there says so: raise it).",
+        ),
+    ] = DEFAULT["max_steps"],
     cost: Annotated[
         str,
         typer.Option(
@@ -263,6 +273,7 @@ def fit(
             seed=seed,
             horizon=parse_horizons(horizon or ",".join(map(str, DEFAULT["horizon"]))),
             refine=refine,
+            max_steps=max_steps,
             cost="restart" if cost == "auto" else cost,
             smooth=smooth,
             substeps=substeps,
@@ -356,11 +367,9 @@ def resume(
 def _progress(total: int, starting: str):
     """The fit's progress bar and status lines (cli/progress.py); each finished chunk is a
     point where an interrupt is acted on."""
-    from rich.console import Console
-
     from .progress import fit_progress
 
-    status_console = Console(stderr=True)
+    status_console = console(stderr=True)
     with fit_progress(total, out, status_console, on_update=interrupts.check) as progress:
         progress.begin(starting)
         yield progress

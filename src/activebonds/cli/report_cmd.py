@@ -23,6 +23,7 @@ def report(
     frames: Annotated[
         int | None,
         typer.Option(
+            "--n-frames",
             help="Frames of the original recording to predict from the fitted window's start "
             "(default: twice the window; beyond it tests generalisation).",
         ),

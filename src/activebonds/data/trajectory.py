@@ -89,6 +89,16 @@ class Trajectory:
         object.__setattr__(self, "source_units", str(self.source_units))
         object.__setattr__(self, "source", None if self.source is None else str(self.source))
 
+    def __repr__(self) -> str:
+        """One line for notebooks: sizes, rate and gaps, never the arrays."""
+        names = ", ".join(self.markers[:6]) + (", ..." if self.n_markers > 6 else "")
+        source = f", source={self.source!r}" if self.source else ""
+        return (
+            f"Trajectory({self.n_frames} frames x {self.n_markers} markers [{names}], "
+            f"{self.dimension}D, {self.rate:g} Hz, {self.duration:.4g} s, "
+            f"{self.n_gaps} missing marker-frames{source})"
+        )
+
     # ------------------------------------------------------------------ properties
     @property
     def dt(self) -> float:

@@ -56,6 +56,16 @@ class FitResult:
     # validation, ...), as RUN/NAME.json holds them
     records: dict[str, dict] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line for notebooks: the model, the error, the status, no arrays."""
+        stages = f", {len(self.refinement)} refinement stages" if self.refinement else ""
+        run = f", run={str(self.run)!r}" if self.run is not None else ""
+        return (
+            f"FitResult({self.model!r}, rms {self.rms_mm:.4g} mm, status {self.status!r}, "
+            f"{self.settings.optimizer} {self.settings.population} x "
+            f"{self.settings.generations}{stages}{run})"
+        )
+
     @property
     def comparisons(self) -> dict[str, list]:
         """The model beside zero force (:class:`~activebonds.identify.verdict.Comparison`:

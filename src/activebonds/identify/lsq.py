@@ -106,7 +106,9 @@ def _switched_off(model: Model) -> Params:
     }
     if _free(index.mass):
         raise InputError(
-            model.name, "least squares: free masses (use equation_error_fit) do not enter linearly"
+            model.name,
+            "least squares: free masses do not enter linearly; give every mass a number in "
+            "the model file, or fit without --init lsq (the search finds the masses)",
         )
     for name in topo.active():
         kind = bonds.get(name)

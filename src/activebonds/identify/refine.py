@@ -205,7 +205,11 @@ class Refinement:
         self.recordings = ident.all_data
         self.states = None  # per recording, per-frame states of the last shooting stage
 
-    def stage(self, horizon: int, genome: np.ndarray, max_steps: int = MAX_STEPS) -> Stage:
+    def stage(self, horizon: int, genome: np.ndarray, max_steps: int | None = None) -> Stage:
+        """One stage; ``max_steps`` Levenberg-Marquardt steps at most (default: the
+        settings' ``max_steps``, :data:`MAX_STEPS` without one)."""
+        if max_steps is None:
+            max_steps = getattr(self.settings, "max_steps", MAX_STEPS)
         started = time.time()
         genome = np.asarray(genome, np.float64)
         if self.settings.cost == "shooting":
@@ -333,7 +337,7 @@ class Refinement:
 
     def _one_step_instead(self, why: str, genome) -> Stage:
         """The one-step refinement from ``genome``, its message saying ``why`` not shooting."""
-        stage = self._restart(1, genome, MAX_STEPS)
+        stage = self._restart(1, genome, getattr(self.settings, "max_steps", MAX_STEPS))
         stage.cost = "restart"
         stage.message = f"{why}; refined on the one-step cost instead: {stage.message}"
         return stage

@@ -22,6 +22,8 @@ class FitSettings(BaseModel):
     horizon: tuple[int, ...] = (1,)
     cost: Literal["restart", "shooting"] = "restart"  # the refinement's cost (ES: restart)
     refine: Literal["none", "lm"] = "lm"
+    # Levenberg-Marquardt steps per refinement stage, at most (``fit --max-steps``)
+    max_steps: int = Field(500, ge=1, le=1_000_000)
     smooth: int = Field(0, ge=0, le=1001)  # Savitzky-Golay window of the restart states, 0: off
     substeps: int = Field(1, ge=1, le=1000)
     integrator: Literal["euler", "verlet"] = "euler"
@@ -134,6 +136,8 @@ class FitSettings(BaseModel):
         """The settings that define the result (chunking, checkpoint frequency and the
         validation frames do not)."""
         exclude = {"chunk", "checkpoint_every", "generations", "validation"}
+        if self.max_steps == FitSettings.model_fields["max_steps"].default:
+            exclude.add("max_steps")  # runs from before the option resume as they were
         return self.model_dump(mode="json", exclude=exclude)
 
 

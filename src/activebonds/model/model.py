@@ -24,6 +24,17 @@ class Model:
     topology: Topology
     layout: Layout
 
+    def __repr__(self) -> str:
+        """One line for notebooks: particles, bonds by kind and free parameters, no arrays."""
+        from collections import Counter
+
+        kinds = Counter(b.kind for b in self.spec.bond)
+        listed = ", ".join(f"{n} {k}" for k, n in kinds.items()) or "no bonds"
+        return (
+            f"Model({self.name!r}, {self.dimension}D, {len(self.spec.particle)} particles, "
+            f"bonds: {listed}, {self.layout.n_genes} free parameters)"
+        )
+
     @property
     def name(self) -> str:
         return self.spec.name

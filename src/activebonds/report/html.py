@@ -459,7 +459,7 @@ def write_report(
     run = Path(run_dir)
     record = load_run(run)
     if frames is not None and frames < 1:
-        raise InputError("--frames", "must be at least 1")
+        raise InputError("--n-frames", "must be at least 1")
     html_path, fig_dir = _report_paths(run, out)
     if not html_path.absolute().parent.is_dir():
         raise InputError(html_path, "the folder does not exist")

@@ -105,6 +105,11 @@ class RefinementStage:
                 f"refinement {i}/{len(stages)} ({st['cost']}, horizon {st['horizon']}): "
                 f"{st['start_rms_mm']:.4g} -> {st['end_rms_mm']:.4g} mm in {st['steps']} steps, "
                 f"{st['seconds']:.3g} s{joined}; {st['message']}"
+                + (
+                    "; raise the limit with fit --max-steps"
+                    if "step limit" in st["message"]
+                    else ""
+                )
             )
         return out
 
