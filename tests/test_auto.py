@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(identify/pipeline.py)."""
+(pipeline.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import json
 
 import pytest
 
+from activebonds import pipeline
 from activebonds.data.bundled import dataset
-from activebonds.identify import pipeline
 from activebonds.model import load_model
 from activebonds.simulation import simulate_to_file
 from helpers import cli_in_process

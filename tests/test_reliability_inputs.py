@@ -273,7 +273,7 @@ def _cli_sample(fuzzed, tmp_path, n: int):
             (
                 "simulate",
                 bad.name,
-                "--frames",
+                "--n-frames",
                 "5",
                 "--rate",
                 "60",

@@ -43,6 +43,11 @@ out = console() if sys.stdout.isatty() else console(width=160, soft_wrap=True)
 err = console(stderr=True, width=10_000, soft_wrap=True)
 
 
+def say(line: str) -> None:
+    """One line of plain text on stdout (no markup: names and ranges printed verbatim)."""
+    out.print(line, markup=False, highlight=False, emoji=False)
+
+
 def fail(error: InputError | str, code: int = 2):
     text = error.line() if isinstance(error, InputError) else str(error)
     err.print(f"error: {text}", markup=False, highlight=False, soft_wrap=True)

@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(identify/pipeline.py: scaffold, structure, fit, evaluate on a held-out tail, report)."""
+(pipeline.py: scaffold, structure, fit, evaluate on a held-out tail, report)."""
 
 from __future__ import annotations
 
@@ -61,11 +61,12 @@ def auto(
     held-out tail and the fitted frames beside zero force, write the report; the verdict last.
     Run again with the same recording and options, the finished steps are kept and an
     interrupted fit resumes."""
-    from ..identify import pipeline
+    from .. import pipeline
     from ..identify.rundir import RunWriteError
     from ..identify.settings import parse_frames, parse_markers
-    from .main import _progress, say
+    from .app import say
     from .preflight import write_failure_line
+    from .progress_bar import run_progress as _progress
 
     try:
         options = pipeline.Options(

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -28,7 +27,8 @@ from ..identify.settings import (  # noqa: E402
     parse_frames,
     parse_markers,
 )
-from .app import app, console, fail, out, parse_option_frames  # noqa: E402
+from .app import app, fail, out, parse_option_frames, say  # noqa: E402
+from .progress_bar import run_progress as _progress  # noqa: E402
 
 
 @app.command()
@@ -363,18 +363,6 @@ def resume(
     _summary(result)
 
 
-@contextmanager
-def _progress(total: int, starting: str):
-    """The fit's progress bar and status lines (cli/progress.py); each finished chunk is a
-    point where an interrupt is acted on."""
-    from .progress import fit_progress
-
-    status_console = console(stderr=True)
-    with fit_progress(total, out, status_console, on_update=interrupts.check) as progress:
-        progress.begin(starting)
-        yield progress
-
-
 def parse_horizons(text: str) -> tuple[int, ...]:
     """'1,5,20' -> (1, 5, 20), or a one-line error."""
     try:
@@ -457,11 +445,6 @@ def _summary(result) -> None:
 
         best = RunDir(result.run).best_model_path
         say(f"run directory: {result.run}  (best model: {best})")
-
-
-def say(line: str) -> None:
-    """One line of plain text on stdout (no markup: names and ranges printed verbatim)."""
-    out.print(line, markup=False, highlight=False, emoji=False)
 
 
 def main() -> None:

@@ -39,7 +39,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..errors import InputError
+from .errors import InputError
 
 HELD_OUT = 0.2  # the share of the frames held out at the end of the window
 MAX_DECIDED = 40  # candidate springs: above, structure keeps them all (no elimination)
@@ -124,7 +124,7 @@ class Folder:
             return None
 
     def write_state(self, state: dict) -> None:
-        from ..atomic import write_text_atomic
+        from .atomic import write_text_atomic
 
         write_text_atomic(self.state, json.dumps(state, indent=2) + "\n")
 
@@ -133,7 +133,7 @@ def prepare(out: Path, recording_path: Path, options: Options, overwrite: bool) 
     """The state of an earlier run of the same recording and options in ``out`` (to continue
     it), or None to start anew; InputError for a folder this cannot use. With ``overwrite``,
     an earlier ``auto`` folder is replaced (any other folder is refused)."""
-    from .rundir import sha256_file
+    from .identify.rundir import sha256_file
 
     folder = Folder(out)
     if not out.exists():
@@ -196,9 +196,9 @@ def run(
     ``say``; ``fit_progress(generations, starting)``: a context manager yielding the fit's
     progress (with a ``status``), or None. Bad input raises InputError before anything is
     written."""
-    from ..data import read_trajectory
-    from .rundir import sha256_file
-    from .scaffold import scaffold
+    from .data import read_trajectory
+    from .identify.rundir import sha256_file
+    from .identify.scaffold import scaffold
 
     recording = read_trajectory(recording_path)
     if options.ahead < 1:
@@ -253,8 +253,8 @@ def run(
         say(f"[{k}/5] {name}: {note} ({seconds:.0f} s)")
 
     def do_scaffold() -> str:
-        from ..atomic import write_text_atomic
-        from ..model import loads_model
+        from .atomic import write_text_atomic
+        from .model import loads_model
 
         loads_model(found.text, str(folder.scaffold))
         for note in found.notes:
@@ -300,9 +300,9 @@ def run(
 
 
 def _structure(folder: Folder, recording, split: Windows, options: Options, say) -> str:
-    from ..atomic import write_text_atomic
-    from ..model import load_model, loads_model, save_model
-    from .scaffold import scaffold
+    from .atomic import write_text_atomic
+    from .identify.scaffold import scaffold
+    from .model import load_model, loads_model, save_model
 
     result, eliminate, n = _decide(load_model(folder.scaffold), recording, split, say)
     guessed = options.gravity is None and options.up is None
@@ -345,8 +345,8 @@ def recording_name(recording) -> str:
 
 def _decide(model, recording, split: Windows, say):
     """(structure_of's result, whether it eliminated, the candidates) of a scaffold."""
-    from .settings import FitSettings
-    from .structure import candidates, structure_of
+    from .identify.settings import FitSettings
+    from .identify.structure import candidates, structure_of
 
     n = len(candidates(model.spec))
     eliminate = n <= MAX_DECIDED
@@ -363,11 +363,11 @@ def _decide(model, recording, split: Windows, say):
 def _fit(folder, recording_path, recording, split, options, say, fit_progress) -> str:
     from contextlib import nullcontext
 
-    from ..model import load_model
-    from .cost_choice import choose_cost
-    from .driver import fit, resume
-    from .problem import select_recordings, variant
-    from .rundir import RunDir, newest_checkpoint, read_status
+    from .identify.cost_choice import choose_cost
+    from .identify.driver import fit, resume
+    from .identify.problem import select_recordings, variant
+    from .identify.rundir import RunDir, newest_checkpoint, read_status
+    from .model import load_model
 
     settings = fit_settings(options, split)
     spec = variant(load_model(folder.structure), settings.bonds)
@@ -399,7 +399,7 @@ def fit_settings(options: Options, split: Windows):
     """The fit's settings (its cost still to choose); InputError naming a bad option."""
     from pydantic import ValidationError
 
-    from .settings import FitSettings
+    from .identify.settings import FitSettings
 
     try:
         return FitSettings(
@@ -420,7 +420,7 @@ class _Scored:
     """An evaluation's record (evaluation.json), read back, with its verdict lines."""
 
     def __init__(self, record: dict):
-        from .verdict import comparisons_from, free_run_advice
+        from .identify.verdict import comparisons_from, free_run_advice
 
         self.record = record
         self.frames = tuple(record["frames"])
@@ -438,9 +438,9 @@ def _evaluations(folder: Folder, recording, split: Windows, options: Options):
 
     def on(frames):
         def evaluate_there():
-            from ..model import load_model
-            from ..report.evaluate import evaluate
-            from .rundir import RunDir
+            from .identify.rundir import RunDir
+            from .model import load_model
+            from .report.evaluate import evaluate
 
             model = load_model(RunDir(folder.run).best_model_path)
             return evaluate(model, recording, frames=frames, horizon=options.ahead)
@@ -451,7 +451,7 @@ def _evaluations(folder: Folder, recording, split: Windows, options: Options):
 
 
 def _write_evaluation(folder: Folder, held, fitted) -> str:
-    from ..atomic import write_text_atomic
+    from .atomic import write_text_atomic
 
     record = {"held_out": held.record(), "fitted": fitted.record()}
     write_text_atomic(folder.evaluation, json.dumps(record, indent=2) + "\n")
@@ -463,6 +463,6 @@ def _write_evaluation(folder: Folder, held, fitted) -> str:
 
 
 def _report(folder: Folder, frames: int) -> str:
-    from ..report import write_report
+    from .report import write_report
 
     return str(write_report(folder.run, folder.report, frames=frames))
