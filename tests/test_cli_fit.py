@@ -24,6 +24,7 @@ def test_fit_horse_limb_on_the_trot_tiny(tmp_path):
         "fit", HORSE_LIMB, HORSE_TROT,
         "--markers", "Head,Withers,HFL", "--frames", "0:10", "--bonds", "neural",
         "--population", "50", "--generations", "300", "--out", run,
+        "--cost", "restart",  # the one-step refinement from the ES's best (default: auto)
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
 
