@@ -222,6 +222,7 @@ def test_all_failed_fit_and_diverging_simulation(tmp_path, tmp_path_factory):
         (
             *("fit", model, ws["base"] / "triangle.csv", "--out", run, "--horizon", "10"),
             *("--population", "16", "--generations", "20"),
+            *("--cost", "restart"),  # the ES on 10-frame predictions (auto: on one step)
         ),
         ("simulate", model, "--n-frames", "50", "--rate", "60", "--out", tmp_path / "x.npz"),
     ]
