@@ -35,31 +35,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT.parent / "tests"))
 
+SHOOTING = ["--init", "lsq", "--cost", "shooting", "--horizon", "10", "--integrator", "verlet"]
 COMMANDS = {
-    "recommended": [
-        "--init",
-        "lsq",
-        "--cost",
-        "shooting",
-        "--horizon",
-        "10",
-        "--substeps",
-        "20",
-        "--integrator",
-        "verlet",
-    ],  # fmt: skip
-    "five": [
-        "--init",
-        "lsq",
-        "--cost",
-        "shooting",
-        "--horizon",
-        "10",
-        "--substeps",
-        "5",
-        "--integrator",
-        "verlet",
-    ],  # fmt: skip
+    "recommended": [*SHOOTING, "--substeps", "20"],
+    "five": [*SHOOTING, "--substeps", "5"],
     "default": [],
 }
 KINDS = ("stiffness", "rest_length", "damping")

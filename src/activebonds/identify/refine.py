@@ -260,8 +260,9 @@ class Refinement:
         warm = self._restart(horizon, genome, max_steps)
         if warm.accepted:
             genome = np.asarray(warm.genome)
-            # the restart cost's optimum at this horizon: shooting cannot do better there
-            unfit = self._versus_constant_velocity(genome, (horizon,))
+            # the restart cost's optimum at this horizon (its RMS already measured by the
+            # warm start): shooting cannot do better there
+            unfit = self._versus_constant_velocity(genome, (horizon,), warm.end_rms_mm)
             if unfit:
                 return self._one_step_instead(f"not shot: the model's best {unfit[4:]}", original)
         windows = join_shooting(
@@ -314,7 +315,7 @@ class Refinement:
             self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
         return stage
 
-    def _versus_constant_velocity(self, genome, horizons) -> str | None:
+    def _versus_constant_velocity(self, genome, horizons, known_mm=None) -> str | None:
         """Why ``genome`` loses to the zero-force predictor, or None: its restart predictions
         ``h`` frames ahead (from every recorded state, each h of ``horizons``) against
         constant velocity's on the same terms. Shooting fits free runs of H frames joined
@@ -325,8 +326,12 @@ class Refinement:
             windows = join_windows(
                 [make_windows(d.positions, d.mask, d.dt, h, s.smooth) for d in self.recordings]
             )
-            residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
-            model = float(rms_mm(_sum_squares(residuals(jnp.asarray(genome))), windows.n_terms))
+            if known_mm is not None:  # ``genome``'s RMS at this single horizon, measured
+                model = float(known_mm)
+            else:
+                residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+                cost = _sum_squares(residuals(jnp.asarray(genome)))
+                model = float(rms_mm(cost, windows.n_terms))
             baseline = float(rms_mm(constant_velocity_cost(windows), windows.n_terms))
             if not model < baseline:
                 return (
