@@ -1,5 +1,7 @@
-"""Process-wide settings, applied only by entry points (the command line, the benchmarks, the
-tests), never by importing the package or calling its functions.
+"""Process-wide settings, applied by entry points (the command line, the benchmarks, the
+tests), never by importing the package. The one exception is :func:`keep_compiled`, which
+``fit`` and ``resume`` call so that a notebook's second fit of the same shapes starts without
+compiling (it only turns on JAX's persistent cache where the process has none).
 
 XLA's CPU backend routes small reductions through YNNPACK fusions, which cost 2-3x more than
 its own loops on the tiny arrays of this problem (measured: ``benchmarks/profile.py``).
@@ -56,3 +58,20 @@ def compilation_cache() -> None:
     import jax
 
     jax.config.update("jax_compilation_cache_dir", str(folder))
+    if MIN_SECONDS_ENV not in os.environ:  # keep every program: a fit's small ones add up
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+MIN_SECONDS_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
+
+
+def keep_compiled() -> None:
+    """:func:`compilation_cache` unless the process already keeps compiled programs somewhere
+    (JAX's ``jax_compilation_cache_dir`` set) or ``ACTIVEBONDS_CACHE=off``: called by the
+    Python API's ``fit`` and ``resume``, so that a second fit of the same model and window in a
+    notebook loads the first one's programs instead of compiling them again (each fit builds
+    new closures over its data, which JAX's in-memory cache does not recognise)."""
+    import jax
+
+    if jax.config.jax_compilation_cache_dir is None:
+        compilation_cache()

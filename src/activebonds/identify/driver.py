@@ -22,6 +22,7 @@ from ..data import Trajectory, read_trajectory
 from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model
+from ..runtime import keep_compiled
 from . import rundir, stages, strategies
 from .cost import Display
 from .evolve import Evolution, history_columns, keys
@@ -132,6 +133,7 @@ def fit(
     the command line run.json records (default: this process's, ``sys.argv``).
     """
     settings = settings or FitSettings(**options)
+    keep_compiled()  # a second fit of the same shapes loads this one's programs
     with _precision(settings):
         return _fit(model, data, settings, out, overwrite, progress, status, command)
 
@@ -232,6 +234,7 @@ def resume(
         if generations < 1:
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
+    keep_compiled()
     with _precision(settings):
         return _resume(run, meta, settings, progress, status)
 
