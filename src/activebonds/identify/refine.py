@@ -46,9 +46,12 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import damped_step, make_normal
+from .shooting_normal import FLOOR, damped_step, make_normal, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
+INITIAL_DAMPING = (
+    1e-3  # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
+)
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
 EDGE = 1e-9  # a start on a bound is moved this far (of the span) inside, where sin' != 0
 
@@ -116,9 +119,17 @@ def _solve_dense(residual, y0, max_steps: int):
 
 
 @jax.jit
+def _dense_diagonal(system):
+    """J^T J's diagonal, floored (as :func:`.shooting_normal.marquardt_diagonal`)."""
+    diag = jnp.diagonal(system[0])
+    return jnp.maximum(diag, FLOOR * jnp.max(diag))
+
+
+@jax.jit
 def _dense_step(system, damping):
     jtj, grad = system
-    return jnp.linalg.solve(jtj + damping * jnp.eye(jtj.shape[0]), -grad)
+    damp = jnp.broadcast_to(damping, jtj.shape[:1])  # a number or a diagonal
+    return jnp.linalg.solve(jtj + jnp.diag(damp), -grad)
 
 
 def _solve(residual, y0, max_steps: int, interior=None):
@@ -144,6 +155,8 @@ def _solve(residual, y0, max_steps: int, interior=None):
         ATOL,
         scale=_dense_scale,
         linear_enough=interior,
+        diagonal=_dense_diagonal,
+        damping=INITIAL_DAMPING,
     )
 
 
@@ -188,6 +201,8 @@ def _solve_shooting(residual, normal, y0, max_steps: int, interior=None):
         ATOL,
         scale=_normal_scale,
         linear_enough=None if interior is None else (lambda z: interior(z[0])),
+        diagonal=marquardt_diagonal,
+        damping=INITIAL_DAMPING,
     )
     return split(z), steps, message
 
@@ -204,6 +219,7 @@ class Refinement:
         self.bounded = Bounded(ident.problem.lower, ident.problem.upper)
         self.recordings = ident.all_data
         self.states = None  # per recording, per-frame states of the last shooting stage
+        self._residuals: dict[int, tuple] = {}  # by horizon: (windows, jitted residuals)
 
     def stage(self, horizon: int, genome: np.ndarray, max_steps: int | None = None) -> Stage:
         """One stage; ``max_steps`` Levenberg-Marquardt steps at most (default: the
@@ -219,12 +235,24 @@ class Refinement:
         stage.seconds = round(time.time() - started, 3)
         return stage
 
+    def _restart_residuals(self, horizon: int):
+        """(windows, jitted ``genome -> residuals``) of the restart cost at ``horizon``,
+        built once per refinement: the warm start, the stage and the checks against constant
+        velocity share one compiled program."""
+        if horizon not in self._residuals:
+            s = self.settings
+            windows = join_windows(
+                [
+                    make_windows(d.positions, d.mask, d.dt, horizon, s.smooth)
+                    for d in self.recordings
+                ]
+            )
+            residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+            self._residuals[horizon] = (windows, jax.jit(residuals))
+        return self._residuals[horizon]
+
     def _restart(self, horizon, genome, max_steps) -> Stage:
-        s = self.settings
-        windows = join_windows(
-            [make_windows(d.positions, d.mask, d.dt, horizon, s.smooth) for d in self.recordings]
-        )
-        residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+        windows, residuals = self._restart_residuals(horizon)
         to_genome = self.bounded.to_genome
 
         def plain(u):
@@ -321,15 +349,11 @@ class Refinement:
         constant velocity's on the same terms. Shooting fits free runs of H frames joined
         into one continuous motion; a model that cannot follow the recording over a window
         only trades the markers for continuity there, and ends worse than doing nothing."""
-        s = self.settings
         for h in horizons:
-            windows = join_windows(
-                [make_windows(d.positions, d.mask, d.dt, h, s.smooth) for d in self.recordings]
-            )
+            windows, residuals = self._restart_residuals(h)
             if known_mm is not None:  # ``genome``'s RMS at this single horizon, measured
                 model = float(known_mm)
             else:
-                residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
                 cost = _sum_squares(residuals(jnp.asarray(genome)))
                 model = float(rms_mm(cost, windows.n_terms))
             baseline = float(rms_mm(constant_velocity_cost(windows), windows.n_terms))

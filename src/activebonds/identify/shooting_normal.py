@@ -154,20 +154,39 @@ def eliminate(normal: Normal, damping, state_damping=None):
     diagonal."""
     n, p = normal.diag.shape[1], normal.params.shape[0]
     state_damping = damping if state_damping is None else state_damping
-    t = normal.diag + state_damping * jnp.eye(n)
+    # scalars (times I) or vectors ([K, n] and [p]: a diagonal of their own)
+    t = normal.diag + jnp.asarray(state_damping)[..., None] * jnp.eye(n)
     z = block_tridiagonal_solve(
         t, normal.off, jnp.concatenate([normal.cross, normal.grad_s[..., None]], axis=-1)
     )
     zy, zg = z[..., :p], z[..., p]
-    reduced = normal.params + damping * jnp.eye(p) - jnp.einsum("knp,knq->pq", normal.cross, zy)
+    damp_u = jnp.asarray(damping)[..., None] * jnp.eye(p)
+    reduced = normal.params + damp_u - jnp.einsum("knp,knq->pq", normal.cross, zy)
     b = -normal.grad_u + jnp.einsum("knp,kn->p", normal.cross, zg)
     return reduced, b, (zy, zg)
 
 
+FLOOR = 1e-9  # of the largest diagonal entry: the least a variable's damping is scaled by
+
+
+@jax.jit
+def marquardt_diagonal(normal: Normal):
+    """J^T J's diagonal as (du [p], dS [K, n]), floored at :data:`FLOOR` of its largest entry
+    (a variable the data do not see is still damped): Marquardt's scaling of the damping."""
+    du = jnp.diagonal(normal.params)
+    ds = jnp.diagonal(normal.diag, axis1=1, axis2=2)
+    floor = FLOOR * jnp.maximum(jnp.max(du), jnp.max(ds))
+    return jnp.maximum(du, floor), jnp.maximum(ds, floor)
+
+
 @jax.jit
 def damped_step(normal: Normal, damping):
-    """The Levenberg-Marquardt step (du, dS) solving (J^T J + damping I) d = -J^T r."""
-    reduced, b, (zy, zg) = eliminate(normal, damping)
+    """The Levenberg-Marquardt step (du, dS) solving (J^T J + D) d = -J^T r, D = damping I
+    (a number) or diag(damping) (a pair ([p], [K, n]) like the step)."""
+    if isinstance(damping, tuple | list):
+        reduced, b, (zy, zg) = eliminate(normal, damping[0], damping[1])
+    else:
+        reduced, b, (zy, zg) = eliminate(normal, damping)
     du = jnp.linalg.solve(reduced, b)
     return du, -zg - jnp.einsum("knp,p->kn", zy, du)
 
