@@ -155,7 +155,8 @@ def cycles(positions: np.ndarray, period: float, bins: int = PHASE_BINS) -> np.n
 def best_shift(cycle: np.ndarray, template: np.ndarray) -> tuple[int, float]:
     """The circular shift ``s`` (bins) with ``np.roll(cycle, s, axis=0)`` closest to
     ``template`` (both [bins, P, D]) and its RMS distance (mm, over the bins and markers
-    known in both)."""
+    known in both) at the best fractional shift near it (the lowest value of the parabola
+    through the squared distances of ``s - 1``, ``s``, ``s + 1``)."""
     m = cycle.shape[0]
     index = (np.arange(m)[None, :] - np.arange(m)[:, None]) % m  # [shift, bin]
     d2 = np.sum((cycle[index] - template[None]) ** 2, axis=-1)  # [shift, bins, P]
@@ -164,7 +165,11 @@ def best_shift(cycle: np.ndarray, template: np.ndarray) -> tuple[int, float]:
     if not np.isfinite(mean).any():
         return 0, float("inf")
     s = int(np.nanargmin(mean))
-    return s, float(np.sqrt(mean[s]) * 1000.0)
+    a, b, c = mean[s - 1], mean[s], mean[(s + 1) % m]
+    curve = a - 2.0 * b + c
+    # the parabola's lowest value between the bins: the best fractional shift's distance
+    best = b - (a - c) ** 2 / (8.0 * curve) if curve > 0 else b
+    return s, float(np.sqrt(max(best, 0.0)) * 1000.0)
 
 
 def mean_gait(positions: np.ndarray, period: float, rounds: int = 3) -> tuple[np.ndarray, float]:
