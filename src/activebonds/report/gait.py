@@ -22,7 +22,10 @@ along the vertical axis (the up unit vector). Against the recording, each run gi
     average); after the best circular phase shift, its RMS (mm, all markers, 3-D distance)
     against the recording's mean gait (:func:`mean_gait`: the recorded cycles, each shifted to
     its best phase, averaged). Beside it the recording's own cycle-to-cycle spread: the RMS of
-    its aligned cycles against the mean gait. The summary is the median over runs.
+    its aligned cycles against the mean gait. The summary is the median over runs. Beside
+    it, for information (no target), the same with each marker's mean position over the
+    cycle removed from both (the cycle's shape, wherever the body is: a body that stands a
+    little off its recorded place shows in (iii), not here).
 
 A run that goes non-finite scores +inf on all four (a failure, not a gap). Each summary
 passes or fails against the thresholds below (issue 28's targets for a gait).
@@ -172,23 +175,29 @@ def best_shift(cycle: np.ndarray, template: np.ndarray) -> tuple[int, float]:
     return s, float(np.sqrt(max(best, 0.0)) * 1000.0)
 
 
-def mean_gait(positions: np.ndarray, period: float, rounds: int = 3) -> tuple[np.ndarray, float]:
-    """The recording's mean gait [bins, P, D] and its cycle-to-cycle spread (mm): the cycles
-    (:func:`cycles`) are averaged, each is shifted to its best phase against the average and
-    they are averaged again (``rounds`` times); the spread is the RMS of the shifted cycles
-    against the mean gait (NaN with fewer than two cycles)."""
+def mean_gait(
+    positions: np.ndarray, period: float, rounds: int = 3
+) -> tuple[np.ndarray, float, float]:
+    """The recording's mean gait [bins, P, D] and its cycle-to-cycle spread (mm), with each
+    marker's mean position over each cycle and over the mean gait kept and removed: the
+    cycles (:func:`cycles`) are averaged, each is shifted to its best phase against the
+    average and they are averaged again (``rounds`` times); the spread is the RMS of the
+    shifted cycles against the mean gait (NaN with fewer than two cycles)."""
     c = cycles(positions, period)
+    nan = float("nan")
     if c.shape[0] == 0:
-        return np.full((PHASE_BINS, *np.shape(positions)[1:]), np.nan), float("nan")
+        return np.full((PHASE_BINS, *np.shape(positions)[1:]), np.nan), nan, nan
     template = np.nanmean(c, axis=0)
     for _ in range(rounds):
         c = np.stack([np.roll(ci, best_shift(ci, template)[0], axis=0) for ci in c])
         template = np.nanmean(c, axis=0)
     if c.shape[0] < 2:
-        return template, float("nan")
+        return template, nan, nan
+    shape = (c - np.nanmean(c, axis=1, keepdims=True)) - (template - np.nanmean(template, 0))
     with np.errstate(invalid="ignore"):
         spread = np.sqrt(np.nanmean(np.sum((c - template) ** 2, axis=-1))) * 1000.0
-    return template, float(spread)
+        spread_shape = np.sqrt(np.nanmean(np.sum(shape**2, axis=-1))) * 1000.0
+    return template, float(spread), float(spread_shape)
 
 
 def cycle_average(positions: np.ndarray, period: float) -> np.ndarray:
@@ -214,6 +223,7 @@ class GaitFeatures:
     excursion_mm: tuple[float, ...]  # per foot
     body_distance_mm: float  # the recording's own largest distance from its mean positions
     spread_mm: float  # cycle-to-cycle RMS against the mean gait
+    spread_shape_mm: float  # the same, each marker's mean over each cycle removed
     mean_positions: np.ndarray  # [P, D] m
     gait: np.ndarray  # [bins, P, D] m, the mean gait
 
@@ -229,7 +239,7 @@ def features(
     h = vertical(x, up)[:, list(feet)]
     t = dominant_period(h) if period is None else float(period)
     mean = np.nanmean(x, axis=0)
-    gait, spread = mean_gait(x, t)
+    gait, spread, spread_shape = mean_gait(x, t)
     return GaitFeatures(
         up=tuple(float(u) for u in up),
         feet=feet,
@@ -238,6 +248,7 @@ def features(
         excursion_mm=tuple(float(e) * 1000.0 for e in _nan_excursions(h, t)),
         body_distance_mm=_distance_mm(x, mean, body),
         spread_mm=spread,
+        spread_shape_mm=spread_shape,
         mean_positions=mean,
         gait=gait,
     )
@@ -272,6 +283,7 @@ class RunScore:
     excursion_mm: tuple[float, ...]  # per foot
     body_distance_mm: float
     cycle_rms_mm: float
+    cycle_shape_rms_mm: float  # the same, each marker's mean over the cycle removed
 
 
 def score_run(run: np.ndarray, ref: GaitFeatures) -> RunScore:
@@ -279,14 +291,19 @@ def score_run(run: np.ndarray, ref: GaitFeatures) -> RunScore:
     x = np.asarray(run, np.float64)
     n_feet = len(ref.feet)
     if not np.isfinite(x).all():
-        return RunScore(float("inf"), (float("inf"),) * n_feet, float("inf"), float("inf"))
+        inf = float("inf")
+        return RunScore(inf, (inf,) * n_feet, inf, inf, inf)
     h = vertical(x, ref.up)[:, list(ref.feet)]
     t = dominant_period(h)
     ex = excursions(h, ref.period_frames) * 1000.0
     dist = _distance_mm(x, ref.mean_positions, ref.body)
     avg = cycle_average(x, t if np.isfinite(t) else ref.period_frames)
-    rms = best_shift(avg, ref.gait)[1] if np.isfinite(avg).all() else float("inf")
-    return RunScore(t, tuple(float(e) for e in ex), dist, rms)
+    if np.isfinite(avg).all():
+        rms = best_shift(avg, ref.gait)[1]
+        shape = best_shift(avg - avg.mean(axis=0), ref.gait - np.nanmean(ref.gait, axis=0))[1]
+    else:
+        rms = shape = float("inf")
+    return RunScore(t, tuple(float(e) for e in ex), dist, rms, shape)
 
 
 @dataclass(frozen=True)
@@ -298,6 +315,7 @@ class GaitScore:
     excursion_ratio: tuple[float, ...]  # per foot: median over runs / recorded
     body_distance_mm: float  # largest over runs
     cycle_rms_mm: float  # median over runs
+    cycle_shape_rms_mm: float  # median over runs (information: no target)
     runs: tuple[RunScore, ...]
 
     @property
@@ -336,7 +354,7 @@ def summarise(scores: Sequence[RunScore], ref: GaitFeatures) -> GaitScore:
     """The runs' scores against the recording's features."""
     if not scores:
         nan = float("nan")
-        return GaitScore(nan, nan, (nan,) * len(ref.feet), nan, nan, ())
+        return GaitScore(nan, nan, (nan,) * len(ref.feet), nan, nan, nan, ())
     periods = np.array([s.period_frames for s in scores], np.float64)
     period = float(np.median(np.where(np.isnan(periods), np.inf, periods)))
     with np.errstate(invalid="ignore"):
@@ -349,6 +367,7 @@ def summarise(scores: Sequence[RunScore], ref: GaitFeatures) -> GaitScore:
         excursion_ratio=tuple(float(r) for r in ratio),
         body_distance_mm=float(max(s.body_distance_mm for s in scores)),
         cycle_rms_mm=float(np.median([s.cycle_rms_mm for s in scores])),
+        cycle_shape_rms_mm=float(np.median([s.cycle_shape_rms_mm for s in scores])),
         runs=tuple(scores),
     )
 

@@ -73,6 +73,7 @@ class GaitEvaluation:
                     "excursion_mm": list(r.excursion_mm),
                     "body_distance_mm": r.body_distance_mm,
                     "spread_mm": r.spread_mm,
+                    "spread_shape_mm": r.spread_shape_mm,
                 },
                 "model": self.model.to_dict(),
                 "zero_force": self.zero_force.to_dict(),
@@ -137,6 +138,16 @@ class GaitEvaluation:
                 ok(z.cycle_ok),
                 yes(better["cycle"]),
                 f"<= {g.CYCLE_RMS_LIMIT_MM:g} mm",
+            ),
+            (
+                "  its shape, means removed (mm)",
+                _num(r.spread_shape_mm),
+                _num(m.cycle_shape_rms_mm),
+                "",
+                _num(z.cycle_shape_rms_mm),
+                "",
+                yes(_lt(m.cycle_shape_rms_mm, z.cycle_shape_rms_mm)),
+                "(information)",
             ),
         ]
         return rows
