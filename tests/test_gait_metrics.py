@@ -69,7 +69,7 @@ def test_a_phase_shifted_copy_scores_zero_on_the_cycle_average():
     assert ref.spread_mm < 1.0
     for shift in (0.0, 7.3, 20.7):
         run = g.score_run(gait_like(210, shift=shift), ref)
-        assert run.cycle_rms_mm < 1.0
+        assert run.cycle_rms_mm < 1.0 and run.cycle_shape_rms_mm < 1.0
         assert run.period_frames == pytest.approx(PERIOD, abs=0.2)
         assert np.array(run.excursion_mm) == pytest.approx(ref.excursion_mm, rel=0.01)
     # a copy 20 % larger is seen
@@ -86,6 +86,10 @@ def test_a_drifting_run_is_caught_by_the_body_distance():
     drifting = g.summarise([g.score_run(gait_like(210, shift=1.0, drift=0.001), ref)], ref)
     assert drifting.body_distance_mm > 200.0 and not drifting.body_ok
     assert drifting.period_ok and drifting.excursion_ok
+    # a body standing 80 mm off its place: (iii) and the cycle RMS see it, the shape does not
+    off = g.score_run(gait_like(210, shift=4.0) + np.array([0.08, 0.0, 0.0]), ref)
+    assert off.body_distance_mm > 80.0 and off.cycle_rms_mm == pytest.approx(80.0, abs=1.0)
+    assert off.cycle_shape_rms_mm < 1.0
     # a collapse: every marker to the ground
     fallen = gait_like(210) * np.array([1.0, 1.0, 0.0])
     assert not g.summarise([g.score_run(fallen, ref)], ref).body_ok
@@ -216,3 +220,41 @@ def test_a_model_on_its_own_periodic_simulation(tmp_path):
     assert named.exit_code == 0, named.output
     refused = runner.invoke(app, ["evaluate", str(model_path), str(path), "--gait", "--up", "Q"])
     assert refused.exit_code == 2 and "--up" in refused.output
+
+
+def test_the_report_of_a_run_with_feet_has_a_gait_section(tmp_path):
+    """The oscillators with gravity and the foot declared by a contact (a plane it never
+    reaches): a tiny fit on frames 0-99, the report over 300 frames judges the gait on frames
+    100-299 (after the fitted window), with its two figures; the section is the same numbers
+    as evaluate --gait on those frames."""
+    from activebonds.identify import fit
+    from activebonds.report import write_report
+
+    text = OSCILLATOR.replace("dimension = 3\n", "dimension = 3\ngravity = [0.0, 0.0, -9.81]\n")
+    text += '\n[[bond]]\nkind = "contact"\nparticles = ["foot"]\nnormal = [0.0, 0.0, 1.0]\n'
+    text += "height = -1.0\nstiffness = 10000.0\n"
+    model = loads_model(text)
+    traj = simulate(model, 300, 100.0)
+    write_trajectory(traj, tmp_path / "oscillators.csv")
+    free = text.replace(
+        "stiffness = 246.74", "stiffness = { value = 246.74, min = 200, max = 300 }"
+    )
+    (tmp_path / "model.toml").write_text(free)
+    fit(
+        tmp_path / "model.toml",
+        tmp_path / "oscillators.csv",
+        out=tmp_path / "run",
+        frames=(0, 100),
+        population=8,
+        generations=2,
+        refine="none",
+    )
+    page = write_report(tmp_path / "run", frames=300).read_text()
+    assert 'id="gait"' in page
+    assert "Gait: 10 free runs of 5 strides" in page and "from frames 101, " in page
+    assert (
+        "feet foot (the model&#x27;s contacts)" in page
+        or "feet foot (the model's contacts)" in page
+    )
+    for name in ("gait_heights", "gait_cycle"):
+        assert (tmp_path / "run" / "figures" / f"{name}.png").is_file()

@@ -43,6 +43,8 @@ class GaitEvaluation:
     zero_force: g.GaitScore
     model_runs: np.ndarray  # [S, N, P, D]
     zero_force_runs: np.ndarray
+    recorded: np.ndarray  # [F, P, D] the window
+    particles: tuple[str, ...]
     first_frame: int = 0  # the window's first frame in the recording (for the text)
 
     def better(self) -> dict[str, bool]:
@@ -324,5 +326,7 @@ def gait_evaluation(
         zero_force=g.summarise([g.score_run(r, ref) for r in zero], ref),
         model_runs=runs,
         zero_force_runs=zero,
+        recorded=rec,
+        particles=tuple(model.particle_names),
         first_frame=int(first_frame),
     )
