@@ -198,9 +198,9 @@ def main() -> None:
     results = [one_gait(name, file) for name, file in GAITS.items()]
     for result in results:
         show(result)
-    from activebonds.report.gait import _plain
+    from activebonds.report.gait import plain
 
-    Path(args.json).write_text(json.dumps(_plain(results), indent=1) + "\n")
+    Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
     print(f"\nwritten: {args.json}")
 
 

@@ -258,3 +258,19 @@ def test_the_report_of_a_run_with_feet_has_a_gait_section(tmp_path):
     )
     for name in ("gait_heights", "gait_cycle"):
         assert (tmp_path / "run" / "figures" / f"{name}.png").is_file()
+
+
+def test_gaps_in_the_recording_are_gaps():
+    """30 frames of the feet missing and one marker missing in every 7th frame: the same
+    period, excursions and mean gait as without."""
+    full = gait_like(300)
+    x = full.copy()
+    x[100:130, 3:] = np.nan
+    x[::7, 0] = np.nan
+    ref, gappy = g.features(full, UP, FEET), g.features(x, UP, FEET)
+    assert gappy.period_frames == pytest.approx(ref.period_frames, abs=0.1)
+    assert gappy.excursion_mm == pytest.approx(ref.excursion_mm, rel=0.01)
+    assert g.best_shift(gappy.gait, ref.gait)[1] < 1.0
+    assert np.isfinite(gappy.body_distance_mm) and np.isfinite(gappy.spread_mm)
+    every = g.gait_starts(x, 300)  # s - 1 and s complete
+    assert every[0] == 2 and not any(100 <= s <= 130 or s % 7 in (0, 1) for s in every)

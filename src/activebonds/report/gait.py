@@ -124,7 +124,8 @@ def dominant_period(heights: np.ndarray, max_lag: int | None = None) -> float:
 def excursions(heights: np.ndarray, stride: float) -> np.ndarray:
     """Each column's peak-to-peak (same unit as ``heights`` [F, H]): the median over
     consecutive windows of ``round(stride)`` frames of max - min (the whole signal when it is
-    shorter than one window); +inf for a column with a non-finite value."""
+    shorter than one window, or ``stride`` is not finite); NaN frames left out (a gap in a
+    recording), NaN for a column with none."""
     h = np.asarray(heights, np.float64)
     if h.ndim == 1:
         h = h[:, None]
@@ -132,10 +133,9 @@ def excursions(heights: np.ndarray, stride: float) -> np.ndarray:
     n = max(h.shape[0] // w, 1)
     w = min(w, h.shape[0])
     blocks = h[: n * w].reshape(n, w, h.shape[1])
-    with np.errstate(invalid="ignore"):
-        ptp = blocks.max(axis=1) - blocks.min(axis=1)  # [n, H]
-    out = np.median(ptp, axis=0)
-    return np.where(np.isfinite(h).all(axis=0), out, np.inf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN window: NaN
+        return np.nanmedian(np.nanmax(blocks, axis=1) - np.nanmin(blocks, axis=1), axis=0)
 
 
 # ----------------------------------------------------------------------------- cycles
@@ -245,24 +245,13 @@ def features(
         feet=feet,
         body=body,
         period_frames=t,
-        excursion_mm=tuple(float(e) * 1000.0 for e in _nan_excursions(h, t)),
+        excursion_mm=tuple(float(e) * 1000.0 for e in excursions(h, t)),
         body_distance_mm=_distance_mm(x, mean, body),
         spread_mm=spread,
         spread_shape_mm=spread_shape,
         mean_positions=mean,
         gait=gait,
     )
-
-
-def _nan_excursions(h: np.ndarray, stride: float) -> np.ndarray:
-    """:func:`excursions` of a recording, whose gaps are gaps (not failures)."""
-    w = max(int(round(stride)), 2) if np.isfinite(stride) else h.shape[0]
-    n = max(h.shape[0] // w, 1)
-    w = min(w, h.shape[0])
-    blocks = h[: n * w].reshape(n, w, h.shape[1])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN window: NaN
-        return np.nanmedian(np.nanmax(blocks, axis=1) - np.nanmin(blocks, axis=1), axis=0)
 
 
 def _distance_mm(x: np.ndarray, mean: np.ndarray, body: Sequence[int]) -> float:
@@ -347,7 +336,7 @@ class GaitScore:
     def to_dict(self) -> dict:
         out = asdict(self)
         out["passes"] = self.passes
-        return _plain(out)
+        return plain(out)
 
 
 def summarise(scores: Sequence[RunScore], ref: GaitFeatures) -> GaitScore:
@@ -397,14 +386,14 @@ def constant_velocity_runs(positions: np.ndarray, starts: Sequence[int], n: int)
     return x[s][:, None] + k * (x[s] - x[s - 1])[:, None]
 
 
-def _plain(value):
+def plain(value):
     """JSON values: tuples as lists, non-finite floats as 'inf', '-inf' or 'nan'."""
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
+        return plain(value.tolist())
     if isinstance(value, float | np.floating):
         return float(value) if np.isfinite(value) else str(float(value))
     return value

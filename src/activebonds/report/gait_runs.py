@@ -60,7 +60,7 @@ class GaitEvaluation:
     def record(self) -> dict:
         """Plain JSON values (non-finite floats as 'inf', '-inf' or 'nan')."""
         r = self.recording
-        return g._plain(
+        return g.plain(
             {
                 "feet": list(self.feet),
                 "feet_from": self.feet_from,
