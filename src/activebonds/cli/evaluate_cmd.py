@@ -42,6 +42,30 @@ def evaluate(
             "step only)."
         ),
     ] = 10,
+    gait: Annotated[
+        bool,
+        typer.Option(
+            "--gait",
+            help="Also score free runs as a gait, whatever their phase: 10 runs of 5 strides "
+            "from frames spread over the window; the feet's period and excursions, the body's "
+            "largest distance from its mean position and the cycle-average RMS against the "
+            "recording's mean gait, each beside zero force's and its target.",
+        ),
+    ] = False,
+    feet: Annotated[
+        str | None,
+        typer.Option(
+            help="With --gait: the feet, particles A,B,... (default: the particles of the "
+            "model's contacts, else the lowest markers)."
+        ),
+    ] = None,
+    up: Annotated[
+        str | None,
+        typer.Option(
+            help="With --gait: the vertical, +Z, -Y or x,y,z (default: against the model's "
+            "gravity, else the recording's guess)."
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
@@ -52,18 +76,23 @@ def evaluate(
     from ..identify.settings import parse_frames, parse_markers
     from ..model import load_model
     from ..report.evaluate import evaluate as run_evaluate
+    from ..report.gait_runs import parse_up
 
     try:
         window = parse_option_frames(frames, parse_frames)
         chosen = parse_markers(markers)
+        loaded = load_model(model)
         found = run_evaluate(
-            load_model(model),
+            loaded,
             read_trajectory(traj),
             markers=chosen,
             frames=window,
             substeps=substeps,
             integrator=integrator,
             horizon=horizon,
+            gait=gait,
+            feet=[f.strip() for f in feet.split(",") if f.strip()] if feet else None,
+            up=parse_up(up, loaded.dimension) if up else None,
         )
     except InputError as e:
         fail(e)
@@ -115,6 +144,19 @@ def evaluate(
     out.print(per)
     for line in found.lines():
         out.print(line, markup=False, highlight=False, emoji=False)
+    if found.gait is not None:
+        _print_gait(found.gait)
+
+
+def _print_gait(found) -> None:
+    from ..report.gait_runs import COLUMNS
+
+    table = Table(title="gait (free runs, whatever their phase)", caption=found.caption)
+    for i, col in enumerate(COLUMNS):
+        table.add_column(col, justify="left" if i in (0, 7) else "right")
+    for row in found.rows():
+        table.add_row(*(Text(c, style="bold red") if c == "FAIL" else c for c in row))
+    out.print(table)
 
 
 def _mm(x: float) -> str:

@@ -251,15 +251,35 @@ def free_run_metrics(
     one = one_step(model, timed, dt, substeps, method)[pad:]
 
     def run_from(s: int) -> np.ndarray:
-        # the recording hidden before frame s - 1, so the free run starts at its first
-        # complete pair, frames s - 1 and s, at the frames' own time; always n - 2 steps
-        # (one compiled program for every start), of which frames s + 1 ... n - 1 are kept
-        hidden = timed.copy()
-        hidden[: pad + s - 1] = np.nan
-        xs, _ = free_run(model, hidden, dt, pad + s + n - 1, substeps, method)
-        return xs[pad + s + 1 : pad + n]
+        # always n - 2 steps (one compiled program for every start), of which frames
+        # s + 1 ... n - 1 are kept
+        return free_run_from(model, rec, dt, s, n - 2, substeps, method, offset)[: n - s - 1]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
+
+
+def free_run_from(
+    model: Model,
+    positions: np.ndarray,
+    dt: float,
+    start: int,
+    n_steps: int,
+    substeps: int = 1,
+    method: str = "euler",
+    offset: int = 0,
+) -> np.ndarray:
+    """The model's free run from the recorded frames ``start - 1`` and ``start`` of
+    ``positions`` [F, P, D] (complete), at their own time (``offset``: see
+    :func:`free_run_metrics`): the ``n_steps`` frames after ``start`` [n_steps, P, D], which
+    may run past the recording's end; NaN once the run went non-finite. Runs of the same
+    ``n_steps`` share one compiled program, whatever their start."""
+    x = np.asarray(positions, np.float64)
+    s = max(int(offset), 0) + int(start)
+    # the recording hidden but for the start pair: the run starts there, at its time
+    hidden = np.full((s + 1, *x.shape[1:]), np.nan)
+    hidden[s - 1 :] = x[start - 1 : start + 1]
+    xs, _ = free_run(model, hidden, dt, s + 1 + int(n_steps), substeps, method)
+    return xs[s + 1 :]
 
 
 def zero_force_metrics(

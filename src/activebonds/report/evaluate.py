@@ -12,6 +12,8 @@ for the model and for the zero-force (constant-velocity) predictor:
   :func:`~activebonds.report.predict.rms_mm` of the constant-velocity predictions for the
   zero force). Squared and averaged with each particle's count of terms, they give the
   overall numbers back;
+* asked for (``gait``), the free runs scored as a gait, insensitive to their phase
+  (:mod:`activebonds.report.gait`): period, feet excursions, body distance, cycle RMS;
 * one step and ``horizon`` frames ahead (the model's free run from each recorded state, beside
   the zero-force predictor's: :func:`~activebonds.identify.ahead.comparisons`), overall and per
   marker, each with its verdict (:mod:`activebonds.identify.verdict`: better than zero force by
@@ -44,6 +46,7 @@ from ..identify.metrics import (
 from ..identify.predictions import rms_mm
 from ..identify.verdict import Comparison, Verdict, free_run_advice
 from ..model import Model
+from .gait_runs import GaitEvaluation, gait_evaluation
 from .predict import predict
 
 
@@ -73,6 +76,7 @@ class Evaluation:
     zero_force: FreeRunMetrics
     particles: tuple[ParticleScore, ...]
     comparisons: tuple[Comparison, ...] = ()  # one step, then `horizon` frames ahead
+    gait: GaitEvaluation | None = None  # asked for: the free runs scored as a gait
 
     @property
     def verdict(self) -> Verdict | None:
@@ -114,6 +118,7 @@ class Evaluation:
                 for p in self.particles
             ],
             "comparisons": [c.to_dict() for c in self.comparisons],
+            **({"gait": self.gait.record()} if self.gait is not None else {}),
         }
 
 
@@ -132,11 +137,16 @@ def evaluate(
     starts: int | Sequence[int] = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
     horizon: int = DEFAULT_AHEAD,
+    gait: bool = False,
+    feet: Sequence[str] | None = None,
+    up: Sequence[float] | None = None,
 ) -> Evaluation:
     """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
     particle, in order; default the model's). ``substeps`` and ``integrator``: the
     integration the model was fitted with; ``horizon``: the frames ahead of the multi-step
-    comparison (1: one step only). Raises :class:`InputError` (one line) for markers
+    comparison (1: one step only). ``gait``: score the free runs as a gait too
+    (:mod:`activebonds.report.gait_runs`; ``feet``: particle names, ``up``: a vector, each
+    found from the model or the recording when not given). Raises :class:`InputError` (one line) for markers
     or frames the recording does not have."""
     from ..identify.problem import select_data
     from ..identify.settings import FitSettings
@@ -187,6 +197,17 @@ def evaluate(
         zero_force=found["zero_force"],
         particles=particles,
         comparisons=tuple(comparisons(model, data, horizon, substeps=substeps, method=integrator)),
+        gait=gait_evaluation(
+            model,
+            data,
+            substeps=substeps,
+            integrator=integrator,
+            feet=feet,
+            up=up,
+            first_frame=start,
+        )
+        if gait
+        else None,
     )
 
 

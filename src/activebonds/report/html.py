@@ -379,6 +379,60 @@ def free_run_table(record: RunRecord) -> Table | None:
     )
 
 
+def gait_section(record: RunRecord, pred: Prediction, fig_dir: Path) -> Section | None:
+    """The gait of the model's free runs (:mod:`activebonds.report.gait_runs`), when the
+    model puts particles in contact with a surface (its feet) and their recorded heights
+    have a period: on the frames after the fitted window when they hold two strides, else
+    on the fitted window; None otherwise."""
+    from ..data import Trajectory
+    from . import gait as g
+    from .gait_runs import COLUMNS, contact_feet, gait_evaluation
+
+    model = record.model
+    if not contact_feet(model):
+        return None
+    s = record.settings
+    lo = 0
+    if pred.extended:
+        later = pred.recorded[pred.fit_frames :]
+        up = -np.asarray(model.params.gravity, np.float64)
+        if np.linalg.norm(up) > 0:
+            t = g.dominant_period(g.vertical(later, up)[:, contact_feet(model)])
+            if np.isfinite(t) and later.shape[0] >= 2 * t:
+                lo = pred.fit_frames
+    window = pred.recorded[lo:]
+    data = Trajectory(window, np.isfinite(window).all(axis=-1), pred.markers, 1.0 / pred.dt)
+    first = int(s.frames[0]) + lo
+    try:
+        found = gait_evaluation(
+            model, data, substeps=s.substeps, integrator=s.integrator, offset=lo, first_frame=first
+        )
+    except InputError:
+        return None
+    heights = plots.gait_heights(found, fig_dir / "gait_heights", first_frame=first)
+    cycle = plots.gait_cycle(found, fig_dir / "gait_cycle")
+    rows = [
+        [Marked(c, "misses the target") if c == "FAIL" else c for c in row] for row in found.rows()
+    ]
+    which = "frames after the fitted window" if lo else "the fitted window"
+    return Section(
+        "Gait",
+        text=[
+            f"The free runs judged as a gait on {which} ({first}–{first + len(window) - 1}), "
+            "whatever their phase: a run that drifts out of step with the recording loses "
+            "nothing here, one that loses the rhythm, the feet's lift, the body's place or the "
+            "stride's shape does. Each number beside the zero-force predictor's (constant "
+            "velocity from the same frames) and its target."
+        ],
+        tables=[Table(COLUMNS, rows, found.caption)],
+        figures=[
+            Figure(heights[0], "Feet heights: the recording and the model's free runs."),
+            Figure(cycle[0], "One stride: the recording's mean gait and the runs' averages."),
+        ],
+        anchor="gait",
+    )
+
+
 @dataclass(frozen=True)
 class ReportView:
     """What a post-fit stage's report section may use: the run and the report's predictions."""
@@ -571,6 +625,10 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
             anchor="parameters",
         ),
     ]
+    gait = gait_section(record, pred, fig_dir)
+    if gait is not None:  # after the animation
+        at = next(i for i, sec in enumerate(sections) if sec.anchor == "animation") + 1
+        sections.insert(at, gait)
     if pred.neural.any():
         heat = plots.weight_heatmap(model, fig_dir / "weights")
         act = plots.activations(pred, labels, fig_dir / "activations", **frame_at)

@@ -65,8 +65,10 @@ def activations(model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0) -
 def saturation_share(act: np.ndarray, neural: np.ndarray, limit: float = SATURATION):
     """Share of (frame, neuron) samples with |a| > ``limit`` among neural bonds' known
     activations (NaN if none), and the share per neuron [B] (NaN for non-neural bonds)."""
-    act = np.asarray(act, np.float64).reshape(-1, len(neural))
     neural = np.asarray(neural, bool)
+    if neural.size == 0:  # no binary bond (e.g. springs to anchors only)
+        return float("nan"), np.full(0, np.nan)
+    act = np.asarray(act, np.float64).reshape(-1, len(neural))
     known = np.isfinite(act) & neural[None, :]
     sat = (np.abs(np.where(known, act, 0.0)) > limit) & known
     per = np.full(len(neural), np.nan)
