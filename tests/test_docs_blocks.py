@@ -60,6 +60,18 @@ UNRUNNABLE = {
 }
 
 
+# The pages whose blocks a test below runs (a new page with a runnable block must join them).
+RUN_PAGES = {
+    "tutorial.md",
+    "howto/auto.md",
+    "howto/export-mujoco.md",
+    "howto/gap-filling.md",
+    "howto/noisy-data.md",
+    "howto/several-recordings.md",
+    "howto/sweeps.md",
+}
+
+
 def blocks(page: str) -> list[tuple[str, str]]:
     """The page's fenced blocks in those languages: (language, text)."""
     text = (DOCS / page).read_text()
@@ -103,6 +115,13 @@ def test_every_block_line_is_run_or_listed_as_unrunnable():
     for page in ("tutorial.md", "howto/noisy-data.md", "howto/export-mujoco.md"):
         assert page_lines(page), f"docs/{page} has no command block"
     assert any(lang == "python" for lang, _ in blocks("tutorial.md"))
+    with_runnable = {
+        page
+        for page in PAGES
+        if any(line not in UNRUNNABLE for line in page_lines(page))
+        or any(lang == "python" for lang, _ in blocks(page))
+    }
+    assert with_runnable == RUN_PAGES
 
 
 def test_every_command_of_the_blocks_has_its_options():

@@ -185,11 +185,13 @@ def fit(
     generation, the best RMS error, the time, and what the fit does in its silent phases
     (compilation, refinement, baselines, uncertainty). A function instead is called after
     each chunk of generations with ``(generation, total, best_rms_mm)``, and ``status``
-    with a line of text before each silent phase::
+    with a line of text before each silent phase:
 
-        history = []
-        result = fit("model.toml", "data.csv", generations=500,
-                     progress=lambda g, total, rms: history.append((g, rms)))
+    ```python
+    seen = []
+    result = fit("model.toml", "data.csv", generations=500,
+                 progress=lambda g, total, rms: seen.append((g, rms)))
+    ```
     """
     settings = settings or FitSettings(**options)
     with _precision(settings), shown(progress, status) as (progress, status):
