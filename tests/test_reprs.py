@@ -6,6 +6,7 @@ log, an HTML ``<progress>`` updated in place in Jupyter)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import sys
@@ -115,6 +116,10 @@ def test_fit_result_and_run_html(fitted):
     assert cells["status"] == "completed" and cells["generations"] == "3 of 3"
     assert cells["best RMS one-step error"] == f"{result.rms_mm:.4g} mm"
     assert cells["verdict, fitted frames, one step"].startswith("better than zero force by")
+    bare = dataclasses.replace(result, records={})  # a failed fit: no baselines ran
+    assert bare.baselines == {} and bare.verdict is None and "zero force" not in repr(bare)
+    assert "verdict, fitted frames, one step" not in _cells(bare._repr_html_())
+    assert _cells(RunDir(result.run.parent)._repr_html_()) == {"status": "not a run directory"}
     record = load_run(result.run)
     _short(repr(record))
     assert repr(record).startswith(f"RunRecord({str(result.run)!r}, completed, 3 of 3")
