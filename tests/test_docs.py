@@ -95,6 +95,15 @@ def test_the_pages_name_the_registered_kinds():
     model_file = pages["reference/model-file.md"]
     comment = re.search(r'kind = "binary"\s+# ([\w |]+)', model_file).group(1)
     assert [w.strip() for w in comment.split("|")] == names
+    architecture = pages["ARCHITECTURE.md"]
+    modules = re.search(r"bonds/\s+one module per bond kind \(([^)]*)\)", architecture).group(1)
+    assert [w.strip() for w in modules.split(",")] == names
+    for name in names:
+        assert (ROOT / "src" / "activebonds" / "bonds" / f"{name}.py").is_file(), name
+    # every kind a page's example or prose writes in a model file is a registered one
+    for page, text in {**pages, "README.md": (ROOT / "README.md").read_text()}.items():
+        for used in re.findall(r'\bkind = "(\w+)"', text):
+            assert used in names, f"{page}: kind {used!r} is not registered"
 
 
 def test_the_pages_name_existing_commands_and_state_no_suite_size():
