@@ -166,3 +166,22 @@ def test_the_pages_name_python_files_and_folders_that_exist():
     tree = re.search(r"## Layers\s+```\n(.*?)```", pages["ARCHITECTURE.md"], re.S).group(1)
     for folder in re.findall(r"^(\w+)/\s", tree, re.M):
         assert (ROOT / "src" / "activebonds" / folder).is_dir(), folder
+
+
+def test_the_pages_name_python_objects_that_exist():
+    """Every ``activebonds.a.b.c`` a page names is a module or an attribute of one."""
+    import importlib
+
+    pages = {**_pages(), "README.md": (ROOT / "README.md").read_text()}
+    for page, text in pages.items():
+        for dotted in set(re.findall(r"\b(activebonds(?:\.\w+)+)", text)):
+            parts = dotted.split(".")
+            for i in range(len(parts), 0, -1):
+                try:
+                    obj = importlib.import_module(".".join(parts[:i]))
+                except ImportError:
+                    continue
+                break
+            for name in parts[i:]:
+                assert hasattr(obj, name), f"{page} names {dotted}, which does not exist"
+                obj = getattr(obj, name)
