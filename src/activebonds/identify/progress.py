@@ -17,6 +17,7 @@ from contextlib import contextmanager
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Column
 
 
 class ProgressBar:
@@ -83,12 +84,13 @@ class ProgressBar:
     def _show_rich(self) -> None:
         rms = f"{self.rms:.4g}" if self.rms == self.rms else "-"
         if self.bar is None:
+            fixed = Column(no_wrap=True)
             self.bar = Progress(
-                TextColumn("generation"),
-                MofNCompleteColumn(),
-                BarColumn(),
-                TextColumn("best {task.fields[rms]} mm"),
-                TimeElapsedColumn(),
+                TextColumn("generation", table_column=fixed),
+                MofNCompleteColumn(table_column=Column(no_wrap=True)),
+                BarColumn(bar_width=20),
+                TextColumn("best {task.fields[rms]} mm", table_column=Column(no_wrap=True)),
+                TimeElapsedColumn(table_column=Column(no_wrap=True)),
                 TextColumn("{task.fields[doing]}", markup=False),
                 console=self.console,
                 transient=False,
@@ -100,8 +102,15 @@ class ProgressBar:
             completed=self.generation,
             total=self.total or None,
             rms=rms,
-            doing=self.doing,
+            doing=short(self.doing),
         )
+
+
+def short(text: str, limit: int = 40) -> str:
+    """A status line for the bar's last column: up to its first parenthesis, at most
+    ``limit`` characters."""
+    text = text.split(" (")[0]
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 @contextmanager
