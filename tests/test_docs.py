@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+from pathlib import Path
 
 import pytest
 
@@ -94,6 +95,15 @@ def test_the_pages_name_the_registered_kinds():
     model_file = pages["reference/model-file.md"]
     comment = re.search(r'kind = "binary"\s+# ([\w |]+)', model_file).group(1)
     assert [w.strip() for w in comment.split("|")] == names
+    architecture = pages["ARCHITECTURE.md"]
+    modules = re.search(r"bonds/\s+one module per bond kind \(([^)]*)\)", architecture).group(1)
+    assert [w.strip() for w in modules.split(",")] == names
+    for name in names:
+        assert (ROOT / "src" / "activebonds" / "bonds" / f"{name}.py").is_file(), name
+    # every kind a page's example or prose writes in a model file is a registered one
+    for page, text in {**pages, "README.md": (ROOT / "README.md").read_text()}.items():
+        for used in re.findall(r'\bkind = "(\w+)"', text):
+            assert used in names, f"{page}: kind {used!r} is not registered"
 
 
 def test_the_pages_name_existing_commands_and_state_no_suite_size():
@@ -104,6 +114,8 @@ def test_the_pages_name_existing_commands_and_state_no_suite_size():
                 continue
             assert used in commands, f"docs/{name} names 'activebonds {used}'"
         assert not re.search(r"(default suite|suite of|suite is)\s+\d+", text), name
+        size = re.search(r"\b\d+ (?:passed|tests (?:pass|run|in)|test functions)\b", text)
+        assert size is None, f"docs/{name} states a test-suite size: {size.group(0)}"
         counted = re.search(r"(\d+) (?:bond kinds|commands)\b", text)
         assert counted is None, f"docs/{name} states a count the code owns: {counted.group(0)}"
 
@@ -123,3 +135,53 @@ def test_the_pages_commands_use_existing_options(page):
             opts = {o for p in commands[m.group(1)].params for o in (*p.opts, *p.secondary_opts)}
             for used in re.findall(r"(?<!\S)(--[\w-]+)", m.group(2)):
                 assert used in opts, (page, line, used)
+
+
+def _python_files() -> dict[str, list]:
+    """Every .py file of the repository by name (not the virtual environments)."""
+    out: dict[str, list] = {}
+    for folder in ("src", "tests", "benchmarks", "scripts", "docs"):
+        for path in (ROOT / folder).rglob("*.py"):
+            out.setdefault(path.name, []).append(path)
+    return out
+
+
+def test_the_pages_name_python_files_and_folders_that_exist():
+    """A module or script a page names (``identify/lsq.py``, ``tests/test_x.py``, a bare
+    ``springs.py`` in the architecture's tree) exists: under the repository, ``src/`` or
+    ``src/activebonds/``, or, without a folder, somewhere in it; the package folders the
+    architecture's tree names exist."""
+    files = _python_files()
+    bases = (ROOT, ROOT / "src", ROOT / "src" / "activebonds")
+    pages = {**_pages(), "README.md": (ROOT / "README.md").read_text()}
+    for name, text in pages.items():
+        for path in re.findall(r"(?<![\w./-])((?:[\w-]+/)*[\w-]+\.py)\b", text):
+            if "/" in path:
+                found = any((b / path).is_file() for b in bases) or any(
+                    str(f).endswith("/" + path) for f in files.get(Path(path).name, [])
+                )
+            else:
+                found = path in files
+            assert found, f"{name} names {path}, which does not exist"
+    tree = re.search(r"## Layers\s+```\n(.*?)```", pages["ARCHITECTURE.md"], re.S).group(1)
+    for folder in re.findall(r"^(\w+)/\s", tree, re.M):
+        assert (ROOT / "src" / "activebonds" / folder).is_dir(), folder
+
+
+def test_the_pages_name_python_objects_that_exist():
+    """Every ``activebonds.a.b.c`` a page names is a module or an attribute of one."""
+    import importlib
+
+    pages = {**_pages(), "README.md": (ROOT / "README.md").read_text()}
+    for page, text in pages.items():
+        for dotted in set(re.findall(r"\b(activebonds(?:\.\w+)+)", text)):
+            parts = dotted.split(".")
+            for i in range(len(parts), 0, -1):
+                try:
+                    obj = importlib.import_module(".".join(parts[:i]))
+                except ImportError:
+                    continue
+                break
+            for name in parts[i:]:
+                assert hasattr(obj, name), f"{page} names {dotted}, which does not exist"
+                obj = getattr(obj, name)

@@ -25,6 +25,7 @@ LAYERS = (
         "runtime",
         "document",
         "lazy",
+        "notebook",
     ),  # foundation: no module of the package below them
     ("bonds",),  # the force laws, one module per bond kind, and their registry
     ("model",),  # model files, topology, parameters, genome layout

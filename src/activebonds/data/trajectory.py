@@ -99,6 +99,23 @@ class Trajectory:
             f"{self.n_gaps} missing marker-frames{source})"
         )
 
+    def _repr_html_(self) -> str:
+        """A small table for notebooks: shape, markers, rate, gaps, source."""
+        from activebonds.notebook import html_table, names, number
+
+        share = 100.0 * self.n_gaps / max(self.mask.size, 1)
+        rows = [
+            ("shape", f"{self.n_frames} frames × {self.n_markers} markers × {self.dimension}D"),
+            ("markers", names(self.markers)),
+            ("rate", f"{self.rate:g} Hz (dt {number(self.dt, 's')})"),
+            ("duration", number(self.duration, "s")),
+            ("missing", f"{self.n_gaps} marker-frames ({share:.3g} %)"),
+            ("units in the file", self.source_units),
+        ]
+        if self.source:
+            rows.append(("source", self.source))
+        return html_table("Trajectory", rows)
+
     # ------------------------------------------------------------------ properties
     @property
     def dt(self) -> float:

@@ -27,6 +27,7 @@ from . import rundir, stages, strategies
 from .cost import Display
 from .evolve import Evolution, history_columns, keys
 from .problem import Identification, identification
+from .progress import shown
 from .refine import Stage
 from .rundir import RunDir
 from .settings import FitSettings
@@ -58,14 +59,66 @@ class FitResult:
     records: dict[str, dict] = field(default_factory=dict)
 
     def __repr__(self) -> str:
-        """One line for notebooks: the model, the error, the status, no arrays."""
+        """One line for notebooks: the model, the error, the verdict, the status, no arrays."""
+        from .verdict import short_text
+
         stages = f", {len(self.refinement)} refinement stages" if self.refinement else ""
         run = f", run={str(self.run)!r}" if self.run is not None else ""
+        zero = self.baselines.get("zero_force_rms_mm")
+        judged = ""
+        if zero is not None:
+            judged = f" (zero force {zero:.4g} mm)"
+        if self.verdict is not None:
+            judged += f", {short_text(self.verdict)}"
         return (
-            f"FitResult({self.model!r}, rms {self.rms_mm:.4g} mm, status {self.status!r}, "
-            f"{self.settings.optimizer} {self.settings.population} x "
+            f"FitResult({self.model!r}, rms {self.rms_mm:.4g} mm{judged}, status "
+            f"{self.status!r}, {self.settings.optimizer} {self.settings.population} x "
             f"{self.settings.generations}{stages}{run})"
         )
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks: the model, the error beside its baselines, the
+        verdict, the search and the run."""
+        from ..notebook import html_table, number
+        from .stages.baselines import FLOOR, LSQ, ZERO
+        from .verdict import fit_verdict
+
+        s = self.settings
+        rows: list[tuple[str, object]] = [
+            ("model", repr(self.model)),
+            ("RMS one-step error", number(self.rms_mm, "mm")),
+        ]
+        for key, name in (
+            ("zero_force_rms_mm", ZERO),
+            ("momentum_floor_rms_mm", FLOOR),
+            ("least_squares_rms_mm", LSQ),
+        ):
+            if self.baselines.get(key) is not None:
+                rows.append((name, number(self.baselines[key], "mm")))
+        if (found := fit_verdict(self.records)) is not None:
+            rows.append((f"verdict, {found[0]}, one step", found[1].text()))
+        rows += [
+            ("status", self.status),
+            ("search", f"{s.optimizer}, population {s.population} x {s.generations} generations"),
+            ("genes", f"{len(self.genome)} free parameters"),
+        ]
+        if self.refinement:
+            rows.append(("refinement", f"{len(self.refinement)} stages"))
+        if self.run is not None:
+            rows.append(("run directory", str(self.run)))
+        return html_table("FitResult", rows)
+
+    @property
+    def baselines(self) -> dict[str, float]:
+        """The fit's baselines on the fitted frames, RMS one-step errors in mm:
+        ``zero_force_rms_mm`` (constant velocity, every fitted recording) and, for the plain
+        one-step cost, ``momentum_floor_rms_mm`` (no model of internal forces goes below it)
+        and ``least_squares_rms_mm`` (the exact optimum of a model whose parameters are all
+        linear; None otherwise). Empty when the baselines stage did not run (a failed
+        fit)."""
+        record = self.records.get("baselines") or {}
+        keys = ("zero_force_rms_mm", "momentum_floor_rms_mm", "least_squares_rms_mm")
+        return {k: record[k] for k in keys if k in record}
 
     @property
     def comparisons(self) -> dict[str, list]:
@@ -73,21 +126,19 @@ class FitResult:
         one step and K frames ahead, overall and per marker): ``"fitted"`` on the fitted
         frames (the first recording) and ``"held_out"`` on the validation frames, where
         those stages ran."""
-        from .verdict import comparisons_from
+        from .verdict import judged_comparisons
 
-        out = {}
-        for key, stage in (("fitted", "baselines"), ("held_out", "validation")):
-            if "judged" in self.records.get(stage, {}):
-                out[key] = comparisons_from(self.records[stage]["judged"])
-        return out
+        return judged_comparisons(self.records)
 
     @property
     def verdict(self):
         """The one-step :class:`~activebonds.identify.verdict.Verdict` on the held-out frames
-        when there are some, else on the fitted frames (None before the baselines ran)."""
-        found = self.comparisons
-        chosen = found.get("held_out") or found.get("fitted")
-        return chosen[0].overall if chosen else None
+        when there are some, else on the fitted frames (None before the baselines ran):
+        ``result.verdict.better``, ``.gain_pct``, ``.text()``."""
+        from .verdict import fit_verdict
+
+        found = fit_verdict(self.records)
+        return None if found is None else found[1]
 
     def lines(self) -> list[str]:
         """What the post-fit stages say of this fit, one line each, in their order."""
@@ -115,7 +166,7 @@ def fit(
     out: str | Path | None = None,
     *,
     overwrite: bool = False,
-    progress: Progress | None = None,
+    progress: Progress | bool | None = None,
     status: Status | None = None,
     command: list[str] | None = None,
     **options,
@@ -128,13 +179,24 @@ def fit(
     (settings, hashes, history, checkpoints, best model) and the run can be resumed; a folder
     without the free space the run needs is refused up front, and a write that fails later
     raises :class:`~activebonds.identify.rundir.RunWriteError` with the newest checkpoint
-    kept. ``progress`` is called after each chunk of generations, ``status`` before the long
-    silent phases (compilation, refinement, uncertainty) with what happens. ``command`` is
-    the command line run.json records (default: this process's, ``sys.argv``).
+    kept. ``command`` is the command line run.json records (default: this process's,
+    ``sys.argv``).
+
+    ``progress=True`` shows a progress bar, in a notebook (Jupyter) or a terminal: the
+    generation, the best RMS error, the time, and what the fit does in its silent phases
+    (compilation, refinement, baselines, uncertainty). A function instead is called after
+    each chunk of generations with ``(generation, total, best_rms_mm)``, and ``status``
+    with a line of text before each silent phase:
+
+    ```python
+    seen = []
+    result = fit("model.toml", "data.csv", generations=500,
+                 progress=lambda g, total, rms: seen.append((g, rms)))
+    ```
     """
     settings = settings or FitSettings(**options)
     keep_compiled()  # a second fit of the same shapes loads this one's programs
-    with _precision(settings):
+    with _precision(settings), shown(progress, status) as (progress, status):
         return _fit(model, data, settings, out, overwrite, progress, status, command)
 
 
@@ -216,14 +278,14 @@ def resume(
     *,
     force: bool = False,
     generations: int | None = None,
-    progress: Progress | None = None,
+    progress: Progress | bool | None = None,
     status: Status | None = None,
 ) -> FitResult:
     """Continue an interrupted run from its newest complete checkpoint.
 
     Refuses (one line, naming what changed) if the model file, the data file, the settings or
     the software versions differ from those recorded, unless ``force``. ``generations`` may
-    extend the run.
+    extend the run. ``progress`` and ``status`` as :func:`fit`'s.
     """
     run = RunDir(run)
     meta = run.meta()
@@ -235,7 +297,7 @@ def resume(
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
     keep_compiled()
-    with _precision(settings):
+    with _precision(settings), shown(progress, status) as (progress, status):
         return _resume(run, meta, settings, progress, status)
 
 

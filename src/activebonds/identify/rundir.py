@@ -649,6 +649,24 @@ class RunDir:
     def __repr__(self) -> str:
         return f"RunDir({str(self.path)!r})"
 
+    def _repr_html_(self) -> str:
+        """A small table for notebooks: status, generations, best error, baselines, verdict
+        (read from the run's files; a folder that is not a run says so)."""
+        from ..notebook import html_table
+
+        if not self.is_run():
+            return html_table(f"RunDir {str(self.path)!r}", [("status", "not a run directory")])
+        from . import stages
+
+        try:
+            settings = self.meta().get("settings", {})
+            records = {n: r for n in stages.names() if (r := self.record(n)) is not None}
+            best = self.best_model() if self.best_model_path.is_file() else None
+        except Exception as err:  # noqa: BLE001 - a notebook's table never raises
+            return html_table(f"RunDir {str(self.path)!r}", [("unreadable", str(err))])
+        rows = run_rows(self.status(), settings, records, best)
+        return html_table(f"RunDir {str(self.path)!r}", rows)
+
     @classmethod
     def create(
         cls,
@@ -753,3 +771,29 @@ class RunDir:
     def file(self, name: str, suffix: str) -> Path:
         """RUN/NAME.SUFFIX of a stage (its CSV), for people to open."""
         return self.path / f"{name}.{suffix}"
+
+
+def run_rows(status: dict, settings: dict, records: dict, model=None) -> list[tuple[str, object]]:
+    """What a notebook shows of a run (status.json, run.json's settings, the post-fit stages'
+    records, the best model or None): (name, value) rows."""
+    from ..notebook import number
+    from .stages.baselines import ZERO
+    from .verdict import fit_verdict
+
+    g, total = status.get("generation"), status.get("generations", settings.get("generations"))
+    rows: list[tuple[str, object]] = [
+        ("status", status.get("status", "unknown")),
+        ("generations", f"{g if g is not None else '?'} of {total}"),
+        (
+            "search",
+            f"{settings.get('optimizer', '?')}, population {settings.get('population', '?')}",
+        ),
+        ("best RMS one-step error", number(status.get("best_rms_mm"), "mm")),
+    ]
+    zero = (records.get("baselines") or {}).get("zero_force_rms_mm")
+    if zero is not None:
+        rows.append((ZERO, number(zero, "mm")))
+    if (found := fit_verdict(records)) is not None:
+        rows.append((f"verdict, {found[0]}, one step", found[1].text()))
+    rows.append(("best model", repr(model) if model is not None else "none yet"))
+    return rows

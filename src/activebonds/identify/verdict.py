@@ -218,3 +218,33 @@ def free_run_advice(free_run_rms_mm) -> str | None:
         f"advice: the free run {far}: nothing holds the body or drives it; add ground "
         "contacts (gravity without support falls), anchors (unary springs) or a rhythmic drive"
     )
+
+
+def judged_comparisons(records: dict) -> dict[str, list[Comparison]]:
+    """The comparisons post-fit stages' records hold (``records``: stage name -> record):
+    ``"fitted"`` from the baselines stage (the fitted frames), ``"held_out"`` from the
+    validation stage (the validation frames), where those ran."""
+    out = {}
+    for key, stage in (("fitted", "baselines"), ("held_out", "validation")):
+        if "judged" in (records.get(stage) or {}):
+            out[key] = comparisons_from(records[stage]["judged"])
+    return out
+
+
+def fit_verdict(records: dict) -> tuple[str, Verdict] | None:
+    """The one-step verdict of a fit from its stages' records: on the held-out frames when
+    there are some, else on the fitted frames, with which (None before the baselines ran)."""
+    found = judged_comparisons(records)
+    for key in ("held_out", "fitted"):
+        if found.get(key):
+            return key.replace("_", "-") + " frames", found[key][0].overall
+    return None
+
+
+def short_text(v: Verdict) -> str:
+    """``better than zero force by 31.6 %``, ``worse than zero force``, ``not judged``."""
+    if v.better is None:
+        return "not judged"
+    if v.better and math.isfinite(v.gain_pct):
+        return f"better than zero force by {v.gain_pct:.3g} %"
+    return f"{v.word} than zero force"

@@ -26,14 +26,44 @@ class Model:
 
     def __repr__(self) -> str:
         """One line for notebooks: particles, bonds by kind and free parameters, no arrays."""
-        from collections import Counter
-
-        kinds = Counter(b.kind for b in self.spec.bond)
-        listed = ", ".join(f"{n} {k}" for k, n in kinds.items()) or "no bonds"
+        absent = sum(b.absent for b in self.spec.bond)
+        listed = ", ".join(f"{n} {k}" for k, n in self.bond_counts().items()) or "no bonds"
+        if absent:
+            listed += f" ({absent} absent)"
         return (
             f"Model({self.name!r}, {self.dimension}D, {len(self.spec.particle)} particles, "
             f"bonds: {listed}, {self.layout.n_genes} free parameters)"
         )
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks: particles, bonds by kind, free parameters."""
+        from ..notebook import html_table, names, number
+
+        absent = sum(b.absent for b in self.spec.bond)
+        bonds = ", ".join(f"{n} {k}" for k, n in self.bond_counts().items()) or "none"
+        rows = [
+            ("name", self.name),
+            ("dimension", f"{self.dimension}D"),
+            ("particles", f"{len(self.spec.particle)}: {names(self.particle_names)}"),
+            ("bonds", bonds + (f" ({absent} optional, absent)" if absent else "")),
+            ("free parameters", self.layout.n_genes),
+        ]
+        masses = [p.mass for p in self.spec.particle if isinstance(p.mass, int | float)]
+        if self.spec.total_mass is not None:
+            rows.append(("total mass", number(self.spec.total_mass, "kg")))
+        elif len(masses) == len(self.spec.particle):
+            rows.append(("total mass", number(sum(masses), "kg")))
+        gravity = self.spec.gravity
+        if gravity is not None:
+            fixed = isinstance(gravity, list)
+            rows.append(("gravity", str(gravity) if fixed else "a parameter"))
+        return html_table(f"Model {self.name!r}", rows)
+
+    def bond_counts(self) -> dict[str, int]:
+        """The present bonds by kind, in the file's order of first appearance."""
+        from collections import Counter
+
+        return dict(Counter(b.kind for b in self.spec.bond if not b.absent))
 
     @property
     def name(self) -> str:

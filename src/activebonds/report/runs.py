@@ -38,6 +38,25 @@ class RunRecord:
     def label(self) -> str:
         return self.path.name
 
+    def __repr__(self) -> str:
+        """One line: the run's folder, status, generations and best error, no arrays."""
+        rms = self.status.get("best_rms_mm")
+        best = f", best {rms:.4g} mm" if isinstance(rms, int | float) else ""
+        return (
+            f"RunRecord({str(self.path)!r}, {self.status.get('status', 'unknown')}, "
+            f"{self.status.get('generation', '?')} of {self.settings.generations} "
+            f"generations{best}, {self.model!r})"
+        )
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks (as the run directory's)."""
+        from ..identify.rundir import run_rows
+        from ..notebook import html_table
+
+        settings = self.settings.model_dump()
+        rows = run_rows(self.status, settings, self.records, self.model if self.has_best else None)
+        return html_table(f"RunRecord {str(self.path)!r}", rows)
+
 
 def load_run(run: str | Path) -> RunRecord:
     """Read RUN/ through :class:`~activebonds.identify.rundir.RunDir` (raises
