@@ -346,7 +346,8 @@ def test_run_directory_contents(cli_ref, tmp_path):
     windows = make_windows(window.positions, window.mask, window.dt, 1)
     cost, _ = jax.jit(make_cost(best, windows))(jnp.asarray(best.layout.initial()))
     assert float(rms_mm(cost, windows.n_terms)) == pytest.approx(status["best_rms_mm"], rel=1e-6)
-    assert history[-1, 4] == pytest.approx(status["best_rms_mm"], rel=1e-12)
+    # the ES's last best, then the refinement's (one-step LM), which can only lower it
+    assert status["best_rms_mm"] <= history[-1, 4] * (1 + 1e-12)
 
     out = tmp_path / "x.csv"
     sim = cli("simulate", ref / "best_model.toml", "--n-frames", "20", "--rate", "60", "--out", out)

@@ -55,15 +55,15 @@ def evaluate(
     feet: Annotated[
         str | None,
         typer.Option(
-            help="With --gait: the feet, particles A,B,... (default: the particles of the "
-            "model's contacts, else the lowest markers)."
+            help="With --gait: the feet, particle names separated by commas (default: the "
+            "particles of the model's contacts, else the lowest markers)."
         ),
     ] = None,
     up: Annotated[
         str | None,
         typer.Option(
-            help="With --gait: the vertical, +Z, -Y or x,y,z (default: against the model's "
-            "gravity, else the recording's guess)."
+            help="With --gait: the vertical axis, e.g. +Z or -Y, or a direction as three "
+            "numbers (default: against the model's gravity, else guessed from the recording)."
         ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
