@@ -15,6 +15,17 @@ from typing import NamedTuple
 import numpy as np
 
 
+class Coupling(NamedTuple):
+    """What pulls an entrained drive's phase (static): the coordinate ``axis`` of particle
+    ``particle`` minus ``offset`` (m), read by the neural bonds' parameters at index
+    ``holder`` (the first neural binary bond, which holds the drive's shared numbers)."""
+
+    particle: int
+    axis: int
+    offset: float
+    holder: int
+
+
 @dataclass(frozen=True, eq=False)
 class Topology:
     """Particle count, dimension and bond index arrays: fixed for a whole identification.
@@ -27,6 +38,7 @@ class Topology:
     dimension: int
     bonds: dict[str, dict[str, np.ndarray]]
     disabled: frozenset[str] = field(default_factory=frozenset)
+    drive: Coupling | None = None  # an entrained drive's signal (None: a clock, or no drive)
 
     def count(self, kind: str) -> int:
         """Number of bonds of ``kind`` (0 for a kind the model does not know)."""
