@@ -37,7 +37,7 @@ import numpy as np
 from ..data import Trajectory
 from ..model import Model
 from .baselines import zero_force_predictions
-from .predictions import free_run, one_step
+from .predictions import free_run, one_step, tracked_phases
 
 THRESHOLD_MM = 50.0  # a free run is "off" once a marker is this far from its recording
 DEFAULT_STARTS = 10  # free runs started, spread evenly over the window
@@ -249,6 +249,7 @@ def free_run_metrics(
     # unknown frames before the trajectory put its frames at their time from the origin
     timed = np.concatenate([np.full((pad, *rec.shape[1:]), np.nan), rec])
     one = one_step(model, timed, dt, substeps, method)[pad:]
+    phases = tracked_phases(model, timed, dt, substeps)  # an entrained drive's, else None
 
     def run_from(s: int) -> np.ndarray:
         # the recording hidden before frame s - 1, so the free run starts at its first
@@ -256,7 +257,7 @@ def free_run_metrics(
         # (one compiled program for every start), of which frames s + 1 ... n - 1 are kept
         hidden = timed.copy()
         hidden[: pad + s - 1] = np.nan
-        xs, _ = free_run(model, hidden, dt, pad + s + n - 1, substeps, method)
+        xs, _ = free_run(model, hidden, dt, pad + s + n - 1, substeps, method, phases)
         return xs[pad + s + 1 : pad + n]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
