@@ -28,7 +28,7 @@ from activebonds.identify.predictions import free_run, one_step, tracked_phases
 from activebonds.identify.shooting import frame_states, make_shooting, shooting_windows
 from activebonds.identify.shooting import start_states as window_starts
 from activebonds.model import dumps_model, loads_model
-from activebonds.physics import rollout, rollout_states
+from activebonds.physics import phase, rollout, rollout_states
 from activebonds.report.predict import activations
 from activebonds.simulation import simulate
 from test_rhythmic_drive import triangle
@@ -213,6 +213,39 @@ def test_the_phase_tracked_along_a_record_is_the_simulated_one():
     gappy = data.positions.copy()
     gappy[100:103, 2] = np.nan
     assert np.abs(tracked_phases(model, gappy, data.dt, 10) - tracked).max() < 1e-3
+
+
+def test_the_signal_period_is_its_autocorrelations_first_peak():
+    frames = np.arange(300)
+    s = 0.05 * np.sin(2 * np.pi * frames / 41.5) + 0.01 * np.sin(4 * np.pi * frames / 41.5)
+    assert phase.signal_period(s, 7) in (41, 42)
+    assert phase.signal_period(s[:20], 7) == 7  # shorter than a period: the fallback
+    assert phase.signal_period(np.zeros(50), 7) == 7
+    np.testing.assert_array_equal(
+        phase.extended_back(np.arange(5.0), 3, 2), [1, 0, 1, 0, 1, 2, 3, 4]
+    )
+
+
+def test_a_later_window_runs_on_from_the_origin():
+    """A window ``offset`` frames after the model's origin: a clock (zero gain) runs on as
+    ψ0 + 2π f t; a drive locked to D's bobbing arrives at the window in step with the phase
+    tracked along the whole record (the frames before repeated from the window's first
+    period)."""
+    clock = loads_model(entrained(gain="0.0", start="0.3"))
+    x = simulate(clock, 200, 60.0).positions
+    got = tracked_phases(clock, x[120:], 1 / 60, offset=120)
+    np.testing.assert_allclose(got, 0.3 + 2 * np.pi * 1.5 * np.arange(120, 200) / 60, atol=1e-9)
+    locked = loads_model(with_bobber(entrained(gain="60.0"), hz=1.6))
+    x = simulate(locked, 600, 60.0).positions
+    whole = tracked_phases(locked, x, 1 / 60)[300:]
+    later = tracked_phases(locked, x[300:], 1 / 60, offset=300)
+    alone = tracked_phases(locked, x[300:], 1 / 60)  # from ψ0 at the window's first frame
+    gap = np.abs(np.angle(np.exp(1j * (later - whole))))
+    alone = np.abs(np.angle(np.exp(1j * (alone - whole))))
+    # measured: 0.14, 0.09, 0.02 rad at frames 0, 20, 80 (the 37.5-frame period repeated as
+    # 37 frames); from ψ0 at the window's first frame 2.3, 1.6, 0.38 rad
+    assert gap[0] < 0.2 and gap[80:].max() < 0.03
+    assert (alone[[0, 20, 80]] > 5 * gap[[0, 20, 80]]).all()
 
 
 # --------------------------------------------------------------------------------------------

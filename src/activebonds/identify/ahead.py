@@ -70,7 +70,7 @@ def model_ahead(
     starts = _starts(rec, k)
     if starts.size == 0:
         return out
-    psi = tracked_phases(model, rec, dt, substeps)  # an entrained drive's, else None
+    psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
     psis = None if psi is None else (jnp.asarray(psi[starts - 1]), jnp.asarray(psi[starts]))
     pred = _runs(
         float64_params(model),

@@ -113,24 +113,33 @@ def _track(params, s, dt, topo: StaticTopology, substeps: int):
 
 @float64
 def tracked_phases(
-    model: Model, positions: np.ndarray, dt: float, substeps: int = 1
+    model: Model, positions: np.ndarray, dt: float, substeps: int = 1, offset: int = 0
 ) -> np.ndarray | None:
     """An entrained drive's phase at every frame [F] of a recording, tracked along its
-    signal (:func:`~activebonds.physics.phase.track`) from the start phase at the first
-    frame where the signal's marker is recorded (held before it); None without one."""
+    signal (:func:`~activebonds.physics.phase.track`) from the start phase at the model's
+    time origin, ``offset`` frames before the recording's first frame; None without one.
+    The frames before the signal's marker is first recorded (the ``offset`` frames
+    included) get its first period repeated backwards
+    (:func:`~activebonds.physics.phase.extended_back`; the period from the signal's
+    autocorrelation, else the drive's frequency)."""
     topo = model.topology
     if not phase.entrained(topo):
         return None
     x = np.asarray(positions, np.float64)
     c = topo.drive
     seen = np.flatnonzero(np.isfinite(x[:, c.particle, c.axis]))
+    params = float64_params(model)
     if seen.size == 0:
-        return np.full(x.shape[0], float(np.asarray(phase.start_phase(model.params, topo))))
+        return np.full(x.shape[0], float(np.asarray(phase.start_phase(params, topo))))
     first = int(seen[0])
     s = phase.recorded_signal(topo, x[first:])
-    topo_s = StaticTopology(topo)
-    psi = np.asarray(_track(float64_params(model), jnp.asarray(s), float(dt), topo_s, substeps))
-    return np.concatenate([np.full(first, psi[0]), psi])
+    before = first + max(int(offset), 0)
+    if before:
+        f = float(np.asarray(phase.numbers(params, topo)[0]))
+        fallback = max(1, round(1.0 / (f * dt))) if f > 0 else len(s)
+        s = phase.extended_back(s, before, phase.signal_period(s, fallback))
+    psi = np.asarray(_track(params, jnp.asarray(s), float(dt), StaticTopology(topo), substeps))
+    return psi[max(int(offset), 0) :]
 
 
 @float64

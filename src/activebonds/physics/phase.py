@@ -17,7 +17,11 @@ the substep's start state (:mod:`activebonds.physics.integrate`), writing it int
 bonds' parameters for the forces (:func:`at_phase`). Where a prediction starts from a
 recorded state, psi there is estimated from the record by :func:`track`: the same equation
 integrated along the recorded signal (linear between frames, at the same substeps) from the
-start phase (gene ``drive.coupling.start_phase``) at the window's first frame.
+start phase (gene ``drive.coupling.start_phase``) at the window's first frame. A window that
+starts after the model's time origin (a held-out window, ``offset`` frames later) is tracked
+from the origin too: the unrecorded frames in between get the window's first signal period
+repeated backwards (:func:`extended_back`), so a clock-like drive (small gain) runs on as a
+clock would, and a locked one arrives locked to the gait at the window's first frame.
 """
 
 from __future__ import annotations
@@ -81,6 +85,37 @@ def recorded_signal(topo: Topology, positions: np.ndarray, mask: np.ndarray | No
         raise ValueError("the entrained drive's signal particle is never recorded")
     frames = np.arange(len(s))
     return np.interp(frames, frames[ok], s[ok])
+
+
+def signal_period(s: np.ndarray, fallback: int) -> int:
+    """The period (frames) of a recorded signal [F]: the highest lag of the first positive
+    lobe of its autocorrelation (mean removed, unbiased) after its first zero crossing,
+    within the first three quarters of the lags; ``fallback`` where there is none (a signal
+    too short or not periodic)."""
+    s = np.asarray(s, np.float64) - np.mean(s)
+    n = len(s)
+    if n < 8 or not np.any(s):
+        return fallback
+    ac = np.correlate(s, s, "full")[n - 1 :] / (n - np.arange(n))
+    ac = ac[: (3 * n) // 4]
+    below = np.flatnonzero(ac <= 0)
+    if below.size == 0:
+        return fallback
+    above = below[0] + np.flatnonzero(ac[below[0] :] > 0)  # the lobe after the first zero
+    if above.size == 0:
+        return fallback
+    end = above[0] + np.flatnonzero(ac[above[0] :] <= 0)
+    stop = int(end[0]) if end.size else len(ac)
+    return int(above[0] + np.argmax(ac[above[0] : stop]))
+
+
+def extended_back(s: np.ndarray, before: int, period: int) -> np.ndarray:
+    """The signal [before + F] with ``before`` frames prepended: its first ``period`` frames
+    repeated backwards in time (a periodic extension joining at its first frame)."""
+    s = np.asarray(s, np.float64)
+    period = max(1, min(int(period), len(s)))
+    k = np.arange(-before, 0)
+    return np.concatenate([s[k % period], s])
 
 
 def track(params: Params, topo: Topology, s, dt, substeps: int = 1, psi0=None):
