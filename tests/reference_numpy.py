@@ -19,7 +19,8 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
   + w_b sin(2 pi f t + phi_b)), e_j = L_j - l0_j; the rhythmic drive's weight w_b, phase phi_b
   and (model-wide) frequency f are 0 when ``p`` lacks them
 * entrained drive: its phase psi replaces 2 pi f t, d psi/dt = 2 pi f - sigma s cos psi, s the
-  height (last coordinate) of the coupling's particle minus its offset; advanced by explicit
+  height (last coordinate) of the coupling's particle, or the distance between its two
+  particles, minus its offset; advanced by explicit
   Euler from each step's start (``entrained_rollout``)
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
 * contact of p with the plane n . x = h (n a unit vector): d = h - n . x_p; while d > 0,
@@ -324,9 +325,10 @@ def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler", t0=0
 
 def entrained_rollout(params, topo, x0, v0, dt, n_frames, coupling, substeps=1, t0=0.0):
     """Semi-implicit Euler with an entrained drive: positions [n_frames, P, D] and phases
-    [n_frames]. ``coupling``: ``particle``, ``axis``, ``offset`` (m), ``frequency`` (Hz),
-    ``gain`` (rad/s per m), ``psi0`` (the phase at x0). Each substep: v <- v + h F(x, v,
-    psi)/m, x <- x + h v, psi <- psi + h (2 pi f - sigma s(x_old) cos psi)."""
+    [n_frames]. ``coupling``: ``particles`` (one: its coordinate ``axis`` is the signal;
+    two: their distance), ``axis``, ``offset`` (m), ``frequency`` (Hz), ``gain`` (rad/s per
+    m), ``psi0`` (the phase at x0). Each substep: v <- v + h F(x, v, psi)/m, x <- x + h v,
+    psi <- psi + h (2 pi f - sigma s(x_old) cos psi)."""
     h = dt / substeps
     m = _arr(params.mass)[:, None]
     x, v, psi = _arr(x0).copy(), _arr(v0).copy(), float(coupling["psi0"])
@@ -334,7 +336,11 @@ def entrained_rollout(params, topo, x0, v0, dt, n_frames, coupling, substeps=1, 
     for n in range(n_frames - 1):
         for k in range(substeps):
             time = t0 + n * dt + k * h
-            s = float(x[coupling["particle"], coupling["axis"]]) - coupling["offset"]
+            ps = coupling["particles"]
+            if len(ps) == 1:
+                s = float(x[ps[0], coupling["axis"]]) - coupling["offset"]
+            else:
+                s = float(np.linalg.norm(x[ps[1]] - x[ps[0]])) - coupling["offset"]
             rate = 2.0 * math.pi * coupling["frequency"] - coupling["gain"] * s * math.cos(psi)
             v = v + h * total_force(params, topo, x, v, time, phase=psi) / m
             x = x + h * v

@@ -64,7 +64,7 @@ def test_genes_are_named_and_the_model_writes_back():
     binary = model.params.bonds["binary"]
     np.testing.assert_array_equal(binary["drive_gain"], [20.0, 20.0, 0.0])  # neural bonds
     np.testing.assert_array_equal(binary["drive_start"], [0.5, 0.5, 0.0])
-    assert model.topology.drive == (2, 2, -0.1, 0)  # C's z, offset, held by bond 0
+    assert model.topology.drive == ((2,), 2, -0.1, 0)  # C's z, offset, held by bond 0
     genome = model.layout.initial() + np.array([0.1, 5.0, 0.2, 0.1, 0.3, -0.1])
     text = dumps_model(model.with_genome(genome))
     again = loads_model(text)
@@ -92,11 +92,33 @@ def test_a_free_start_phase_is_a_gene():
         ({'particle = "C"': 'particle = "Z"'}, r"drive\.coupling\.particle: unknown particle 'Z'"),
         ({"gain = 20.0": "gain = -1.0"}, r"drive\.coupling\.gain: must be >= 0, got -1\.0"),
         ({'particle = "C",': 'particle = "C", signal = "load",'}, r"drive\.coupling\.signal"),
+        (
+            {'particle = "C",': 'signal = "length", particles = ["A"],'},
+            r"drive\.coupling\.particles: a length signal needs particles = \[A, B\]",
+        ),
+        (
+            {'particle = "C",': 'particles = ["A", "B"],'},
+            r"drive\.coupling\.particle: a height signal needs particle",
+        ),
+        (
+            {'particle = "C",': 'signal = "length", particles = ["A", "Q"],'},
+            r"drive\.coupling\.particles: unknown particle 'Q'",
+        ),
         ({"offset = -0.1": "offset = -0.1, phase = 1.0"}, r"drive\.coupling\.phase"),
         ({"gain = 20.0, ": ""}, r"drive\.coupling\.gain: required key is missing"),
         ({"neural = true": "neural = false", "gain = 3.0": "", "gain = 4.0": ""}, r"neural"),
     ],
-    ids=["unknown-particle", "negative-gain", "signal", "unknown-key", "no-gain", "no-neuron"],
+    ids=[
+        "unknown-particle",
+        "negative-gain",
+        "signal",
+        "length-one-particle",
+        "height-two-particles",
+        "length-unknown",
+        "unknown-key",
+        "no-gain",
+        "no-neuron",
+    ],
 )
 def test_load_errors_are_one_line(replace, message):
     text = entrained()
@@ -117,12 +139,19 @@ def test_load_errors_are_one_line(replace, message):
 # --------------------------------------------------------------------------------------------
 
 
-def test_the_integrator_matches_the_numpy_oracle():
-    model = loads_model(entrained())
+LENGTH = {
+    'particle = "C"': 'signal = "length", particles = ["A", "C"]',
+    "offset = -0.1": "offset = 0.45",
+}
+
+
+@pytest.mark.parametrize("replace", [{}, LENGTH], ids=["height", "length"])
+def test_the_integrator_matches_the_numpy_oracle(replace):
+    model = loads_model(entrained(**replace))
     x0, v0 = model.initial_state()
     c = model.topology.drive
     coupling = {
-        "particle": c.particle,
+        "particles": c.particles,
         "axis": c.axis,
         "offset": c.offset,
         "frequency": 1.5,
@@ -140,7 +169,7 @@ def test_the_integrator_matches_the_numpy_oracle():
     np.testing.assert_allclose(np.asarray(xs), want_x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(psis), want_psi, rtol=0, atol=1e-11)
     clock = 0.5 + 2 * math.pi * 1.5 * np.arange(90) / 60
-    assert np.abs(want_psi - clock).max() > 0.5  # the coupling moves the phase
+    assert np.abs(want_psi - clock).max() > 0.2  # the coupling moves it (length: 0.32 rad)
 
 
 def test_verlet_and_euler_carry_the_same_phase_at_fine_substeps():

@@ -126,8 +126,7 @@ def tracked_phases(
     if not phase.entrained(topo):
         return None
     x = np.asarray(positions, np.float64)
-    c = topo.drive
-    seen = np.flatnonzero(np.isfinite(x[:, c.particle, c.axis]))
+    seen = np.flatnonzero(np.isfinite(phase.signal(topo, x, np)))
     params = float64_params(model)
     if seen.size == 0:
         return np.full(x.shape[0], float(np.asarray(phase.start_phase(params, topo))))

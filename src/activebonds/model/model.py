@@ -140,7 +140,8 @@ def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
         return None
     holder = int(np.flatnonzero(arrays["binary"]["neural"])[0])
     axis = spec.dimension - 1  # "height": the last axis
-    return Coupling(names[coupling.particle], axis, float(coupling.offset), holder)
+    which = [coupling.particle] if coupling.signal == "height" else coupling.particles
+    return Coupling(tuple(names[n] for n in which), axis, float(coupling.offset), holder)
 
 
 def _file_params(spec: ModelSpec) -> Params:

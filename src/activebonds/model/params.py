@@ -16,11 +16,12 @@ import numpy as np
 
 
 class Coupling(NamedTuple):
-    """What pulls an entrained drive's phase (static): the coordinate ``axis`` of particle
-    ``particle`` minus ``offset`` (m), read by the neural bonds' parameters at index
-    ``holder`` (the first neural binary bond, which holds the drive's shared numbers)."""
+    """What pulls an entrained drive's phase (static): minus ``offset`` (m), the coordinate
+    ``axis`` of particle ``particles[0]`` (one particle: a height) or the distance between
+    ``particles`` (two: a length); the drive's shared numbers are read from the binary bond
+    at index ``holder`` (the first neural one)."""
 
-    particle: int
+    particles: tuple[int, ...]
     axis: int
     offset: float
     holder: int

@@ -57,14 +57,17 @@ GRAVITY_ZERO = 1e-12  # a gravity direction this short is refused as zero
 
 class Coupling(_Strict):
     """The entrainment of the drive (DESIGN.md §2, "Entrained drive"): its phase psi is a
-    state, d psi/dt = 2 pi f - gain s cos psi, pulled by the body's signal s: with ``signal =
-    "height"``, the coordinate of ``particle`` along the last axis (up for the default gravity)
-    minus ``offset`` (m, fixed). ``gain`` (rad/s per m, >= 0; gene ``drive.coupling.gain``)
-    and ``start_phase`` (psi at the first frame of the window or the simulation, rad; gene
-    ``drive.coupling.start_phase`` when free) are numbers or ``{ value, min, max }`` tables."""
+    state, d psi/dt = 2 pi f - gain s cos psi, pulled by the body's signal s minus ``offset``
+    (m, fixed): with ``signal = "height"`` (the default), the coordinate of ``particle`` along
+    the last axis (up for the default gravity); with ``signal = "length"``, the distance
+    between the two ``particles`` (e.g. a leg bond's length). ``gain`` (rad/s per m, >= 0;
+    gene ``drive.coupling.gain``) and ``start_phase`` (psi at the first frame of the window or
+    the simulation, rad; gene ``drive.coupling.start_phase`` when free) are numbers or
+    ``{ value, min, max }`` tables."""
 
-    signal: Literal["height"] = "height"
-    particle: str = Field(min_length=1)
+    signal: Literal["height", "length"] = "height"
+    particle: str | None = Field(default=None, min_length=1)
+    particles: list[str] | None = None
     gain: FiniteFloat | Param
     offset: FiniteFloat = 0.0
     start_phase: FiniteFloat | Param = 0.0
@@ -307,8 +310,23 @@ class ModelSpec(_Strict):
         coupling = self.drive.coupling if self.drive is not None else None
         if coupling is None:
             return
-        if coupling.particle not in names:
-            raise ValueError(f"drive.coupling.particle: unknown particle '{coupling.particle}'")
+        if coupling.signal == "height":
+            if coupling.particle is None or coupling.particles is not None:
+                raise ValueError(
+                    "drive.coupling.particle: a height signal needs particle = .. (one name)"
+                )
+            named = [("particle", coupling.particle)]
+        else:
+            pair = coupling.particles
+            if coupling.particle is not None or pair is None or len(set(pair)) != 2:
+                raise ValueError(
+                    "drive.coupling.particles: a length signal needs particles = [A, B] "
+                    "(two distinct names)"
+                )
+            named = [("particles", n) for n in pair]
+        for key, name in named:
+            if name not in names:
+                raise ValueError(f"drive.coupling.{key}: unknown particle '{name}'")
         if not any(getattr(b, "neural", False) for b in self.bond):
             raise ValueError(
                 "drive.coupling: an entrained drive needs a neural bond to read it (its "

@@ -6,7 +6,8 @@ drive's phase psi is a state of the model, advanced by its frequency and pulled 
 
     d psi / dt = 2 pi f - sigma s(x) cos psi,
 
-``s`` the coupling's signal (a particle's height, minus a fixed offset), ``sigma`` its gain
+``s`` the coupling's signal (a particle's height or the distance between two particles, minus a
+fixed offset), ``sigma`` its gain
 (gene ``drive.coupling.gain``). A periodic signal ``s = s0 + A cos(Omega t + alpha)`` locks
 the phase to it (averaged over a cycle, the phase difference obeys ``d delta / dt = 2 pi f -
 Omega - (sigma A / 2) cos(delta + ...)``) when ``sigma A / 2 > |2 pi f - Omega|``: the drive
@@ -50,10 +51,14 @@ def start_phase(params: Params, topo: Topology):
     return numbers(params, topo)[2]
 
 
-def signal(topo: Topology, x):
-    """The coupling's signal at positions x [..., P, D]: the particle's height minus offset."""
+def signal(topo: Topology, x, xp=jnp):
+    """The coupling's signal at positions x [..., P, D], minus its offset: a particle's
+    height, or the distance between two particles (``xp``: the array module)."""
     c = topo.drive
-    return x[..., c.particle, c.axis] - c.offset
+    if len(c.particles) == 1:
+        return x[..., c.particles[0], c.axis] - c.offset
+    d = x[..., c.particles[1], :] - x[..., c.particles[0], :]
+    return xp.sqrt(xp.sum(d * d, axis=-1)) - c.offset
 
 
 def rate_of(params: Params, topo: Topology, s, psi):
@@ -79,8 +84,10 @@ def recorded_signal(topo: Topology, positions: np.ndarray, mask: np.ndarray | No
     """The signal along a recording [F] (NumPy): positions [F, P, D] (NaN or ``mask`` False
     where missing), gaps filled linearly in time, the ends held."""
     c = topo.drive
-    s = np.asarray(positions, np.float64)[:, c.particle, c.axis] - c.offset
-    ok = np.isfinite(s) if mask is None else np.asarray(mask, bool)[:, c.particle] & np.isfinite(s)
+    s = signal(topo, np.asarray(positions, np.float64), np)
+    ok = np.isfinite(s)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)[:, list(c.particles)].all(axis=1)
     if not ok.any():
         raise ValueError("the entrained drive's signal particle is never recorded")
     frames = np.arange(len(s))
