@@ -22,10 +22,15 @@ import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
 from activebonds.identify.ahead import model_ahead
-from activebonds.identify.cost import make_cost, make_windows
+from activebonds.identify.cost import make_cost, make_windows, start_phases
 from activebonds.identify.population_cost import make_population_cost
 from activebonds.identify.predictions import free_run, one_step, tracked_phases
-from activebonds.identify.shooting import frame_states, make_shooting, shooting_windows
+from activebonds.identify.shooting import (
+    frame_states,
+    make_shooting,
+    shooting_windows,
+    window_phases,
+)
 from activebonds.identify.shooting import start_states as window_starts
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import phase, rollout, rollout_states
@@ -318,6 +323,24 @@ def test_the_restart_cost_at_the_truth_with_other_integrators(method, substeps, 
     with jax.enable_x64(True):
         cost, _ = make_cost(model, windows, substeps, method)(jnp.asarray(model.layout.initial()))
     assert 1000 * math.sqrt(float(cost) / windows.n_terms) < tolerance_mm
+
+
+def test_the_costs_and_the_predictions_track_the_same_phase_through_a_leading_gap(simulated):
+    """C unrecorded over the window's first 5 frames: the restart cost, the shooting windows
+    and the predictions fill them alike (the signal's first period repeated backwards)."""
+    model, data = simulated
+    gappy, mask = data.positions.copy(), data.mask.copy()
+    gappy[:5, 2], mask[:5, 2] = np.nan, False
+    want = tracked_phases(model, gappy, data.dt)
+    windows = make_windows(gappy, mask, data.dt)
+    with jax.enable_x64(True):
+        prev, now = start_phases(model, windows, 1)(model.params)
+        shot = shooting_windows(gappy, mask, data.dt, 10)
+        at_windows = window_phases(model, shot, 1)(model.params)
+    np.testing.assert_allclose(np.asarray(now), want[windows.frames], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(prev), want[windows.frames - 1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(at_windows), want[shot.starts], rtol=0, atol=1e-12)
+    assert np.abs(want - tracked_phases(model, data.positions, data.dt)).max() > 1e-6
 
 
 def test_the_shooting_residuals_vanish_at_the_truth(simulated):

@@ -174,7 +174,8 @@ def start_phases(model: Model, windows: Windows, substeps: int):
         return None
     if windows.frames is None:
         raise ValueError("an entrained drive needs the windows' recordings to track its phase")
-    signals = [jnp.asarray(phase.recorded_signal(topo, r)) for r in windows.records]
+    period = phase.period_frames(model.params, topo, windows.dt)  # (a leading gap's fill)
+    signals = [jnp.asarray(phase.recorded_signal(topo, r, period=period)) for r in windows.records]
     frames, which = np.asarray(windows.frames), np.asarray(windows.recording)
 
     def phases(params):

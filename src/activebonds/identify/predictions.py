@@ -126,19 +126,15 @@ def tracked_phases(
     if not phase.entrained(topo):
         return None
     x = np.asarray(positions, np.float64)
-    seen = np.flatnonzero(np.isfinite(phase.signal(topo, x, np)))
     params = float64_params(model)
-    if seen.size == 0:
+    if not np.isfinite(phase.signal(topo, x, np)).any():
         return np.full(x.shape[0], float(np.asarray(phase.start_phase(params, topo))))
-    first = int(seen[0])
-    s = phase.recorded_signal(topo, x[first:])
-    before = first + max(int(offset), 0)
-    if before:
-        f = float(np.asarray(phase.numbers(params, topo)[0]))
-        fallback = max(1, round(1.0 / (f * dt))) if f > 0 else len(s)
-        s = phase.extended_back(s, before, phase.signal_period(s, fallback))
+    offset = max(int(offset), 0)
+    if offset:  # the frames from the model's origin, unrecorded here
+        x = np.concatenate([np.full((offset, *x.shape[1:]), np.nan), x])
+    s = phase.recorded_signal(topo, x, period=phase.period_frames(params, topo, dt))
     psi = np.asarray(_track(params, jnp.asarray(s), float(dt), StaticTopology(topo), substeps))
-    return psi[max(int(offset), 0) :]
+    return psi[offset:]
 
 
 @float64

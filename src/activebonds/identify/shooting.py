@@ -123,7 +123,8 @@ def window_phases(model: Model, windows: ShootingWindows, substeps: int):
         return None
     if len(windows.records) != len(windows.segments):
         raise ValueError("an entrained drive needs the windows' recordings to track its phase")
-    signals = [jnp.asarray(phase.recorded_signal(topo, r)) for r in windows.records]
+    period = phase.period_frames(model.params, topo, windows.dt)  # (a leading gap's fill)
+    signals = [jnp.asarray(phase.recorded_signal(topo, r, period=period)) for r in windows.records]
 
     def phases(params):
         out = []

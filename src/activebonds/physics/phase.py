@@ -80,9 +80,14 @@ def at_phase(params: Params, psi) -> Params:
     return params._replace(bonds={**params.bonds, "binary": binary})
 
 
-def recorded_signal(topo: Topology, positions: np.ndarray, mask: np.ndarray | None = None):
+def recorded_signal(
+    topo: Topology, positions: np.ndarray, mask: np.ndarray | None = None, period: int = 0
+):
     """The signal along a recording [F] (NumPy): positions [F, P, D] (NaN or ``mask`` False
-    where missing), gaps filled linearly in time, the ends held."""
+    where missing), gaps filled linearly in time, the end held; the frames before the
+    signal is first recorded get its first period repeated backwards
+    (:func:`extended_back`: the period of :func:`signal_period`, else ``period`` frames,
+    else held)."""
     c = topo.drive
     s = signal(topo, np.asarray(positions, np.float64), np)
     ok = np.isfinite(s)
@@ -91,7 +96,18 @@ def recorded_signal(topo: Topology, positions: np.ndarray, mask: np.ndarray | No
     if not ok.any():
         raise ValueError("the entrained drive's signal particle is never recorded")
     frames = np.arange(len(s))
-    return np.interp(frames, frames[ok], s[ok])
+    first = int(np.argmax(ok))
+    s = np.interp(frames[first:], frames[ok], s[ok])
+    if first == 0:
+        return s
+    return extended_back(s, first, signal_period(s, period or len(s)))
+
+
+def period_frames(params: Params, topo: Topology, dt: float) -> int:
+    """The drive's period in frames (from its frequency), at least 1: the signal's period
+    where the recording is too short to measure it."""
+    f = float(np.asarray(numbers(params, topo)[0]))
+    return max(1, round(1.0 / (f * dt))) if f > 0 else 1
 
 
 def signal_period(s: np.ndarray, fallback: int) -> int:
