@@ -22,11 +22,12 @@ import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
 from activebonds.identify.ahead import model_ahead
-from activebonds.identify.cost import make_cost, make_windows, start_phases
+from activebonds.identify.cost import join_windows, make_cost, make_windows, start_phases
 from activebonds.identify.population_cost import make_population_cost
 from activebonds.identify.predictions import free_run, one_step, tracked_phases
 from activebonds.identify.shooting import (
     frame_states,
+    join_shooting,
     make_shooting,
     shooting_windows,
     window_phases,
@@ -341,6 +342,25 @@ def test_the_costs_and_the_predictions_track_the_same_phase_through_a_leading_ga
     np.testing.assert_allclose(np.asarray(prev), want[windows.frames - 1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(at_windows), want[shot.starts], rtol=0, atol=1e-12)
     assert np.abs(want - tracked_phases(model, data.positions, data.dt)).max() > 1e-6
+
+
+def test_several_recordings_each_track_their_own_phase(simulated):
+    """Joined windows of two recordings (the simulation and its frames 40-99): each start
+    takes the phase tracked along its own recording, from the start phase at its first
+    frame."""
+    model, data = simulated
+    records = [(data.positions, data.mask), (data.positions[40:100], data.mask[40:100])]
+    joined = join_windows([make_windows(x, m, data.dt, 4) for x, m in records])
+    shot = join_shooting([shooting_windows(x, m, data.dt, 10) for x, m in records])
+    with jax.enable_x64(True):
+        now = np.asarray(start_phases(model, joined, 1)(model.params)[1])
+        at_windows = np.asarray(window_phases(model, shot, 1)(model.params))
+    want = [tracked_phases(model, x, data.dt) for x, _ in records]
+    for i, (k0, k1, _) in enumerate(shot.segments):
+        mine = joined.recording == i
+        np.testing.assert_allclose(now[mine], want[i][joined.frames[mine]], atol=1e-12)
+        np.testing.assert_allclose(at_windows[k0:k1], want[i][shot.starts[k0:k1]], atol=1e-12)
+    assert set(joined.recording) == {0, 1}
 
 
 def test_the_shooting_residuals_vanish_at_the_truth(simulated):
