@@ -1,11 +1,12 @@
 """The trotting horse with a rhythmic drive: one-step fit against the refined fit, held out.
 
     python scripts/horse_drive.py [--population 200] [--generations 3000] [--seed 0]
-                                  [--horizon 10,30] [--json out.json]
+                                  [--horizon 10,30] [--model M.toml] [--json out.json]
 
 Model: examples/horse_trot_drive.toml (the ground model of horse_ground.py with the four leg
 bonds neural and driven by one phase oscillator, frequency free around the measured stride
-frequency 1.445 Hz). Data: the bundled VHDC Horse1_M1 trot (all 7 markers, 60 Hz), fitted on
+frequency 1.445 Hz); ``--model examples/horse_trot_entrained.toml`` for its drive entrained
+by the left fore hoof's height. Data: the bundled VHDC Horse1_M1 trot (all 7 markers, 60 Hz), fitted on
 frames 0-299, judged on frames 300-599 (never seen by a fit). Fits:
 
 * ``one-step``: the paper's ES on the one-step cost (``--population``, ``--generations``);
@@ -55,6 +56,7 @@ def main(argv=None) -> int:
     ap.add_argument("--generations", type=int, default=3000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--horizon", default="10,30")
+    ap.add_argument("--model", type=Path, default=MODEL)
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     horizons = tuple(int(h) for h in args.horizon.split(","))
@@ -64,10 +66,11 @@ def main(argv=None) -> int:
     from activebonds.model import load_model
 
     traj = read_trajectory(DATA)
-    model = load_model(MODEL)
+    model = load_model(args.model)
     base = dict(frames=FIT, population=args.population, generations=args.generations)
     base["seed"] = args.seed
-    out = {"args": vars(args) | {"json": str(args.json)}, "stride_frames": STRIDE_FRAMES}
+    out = {"args": vars(args) | {"json": str(args.json), "model": str(args.model)}}
+    out["stride_frames"] = STRIDE_FRAMES
     zf = zero_force_metrics(traj.window(*TEST))
     out["zero_force"] = {
         "held_out_one_step_rms_mm": zf.one_step_rms_mm,

@@ -18,6 +18,10 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
 * neuron of bond b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b
   + w_b sin(2 pi f t + phi_b)), e_j = L_j - l0_j; the rhythmic drive's weight w_b, phase phi_b
   and (model-wide) frequency f are 0 when ``p`` lacks them
+* entrained drive: its phase psi replaces 2 pi f t, d psi/dt = 2 pi f - sigma s cos psi, s the
+  height (last coordinate) of the coupling's particle, or the distance between its two
+  particles, minus its offset; advanced by explicit
+  Euler from each step's start (``entrained_rollout``)
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
 * contact of p with the plane n . x = h (n a unit vector): d = h - n . x_p; while d > 0,
   Fn = max(0, k d - c n . v_p) along n, friction Ft = -mu Fn vt / sqrt(|vt|^2 + eps^2) with
@@ -84,8 +88,9 @@ def bond_state(t, x, v):
     return lengths, rates, units
 
 
-def neuron_activations(p, t, x, v, time=0.0) -> np.ndarray:
-    """a_b for every binary bond (computed for all; only neural bonds use it) at ``time``."""
+def neuron_activations(p, t, x, v, time=0.0, phase=None) -> np.ndarray:
+    """a_b for every binary bond (computed for all; only neural bonds use it) at ``time``;
+    with an entrained drive's ``phase`` psi the drive term is w_b sin(psi + phi_b)."""
     lengths, rates, _ = bond_state(t, x, v)
     e = lengths - _arr(p["rest_length"])
     w_len, w_rate = _arr(p["length_weights"]), _arr(p["rate_weights"])
@@ -101,19 +106,20 @@ def neuron_activations(p, t, x, v, time=0.0) -> np.ndarray:
             if j != b:
                 s += w_len[b, j] * e[j] + w_rate[b, j] * rates[j]
         s -= float(p["threshold"][b])
-        s += float(w_drive[b]) * math.sin(2.0 * math.pi * float(freq[b]) * time + float(phi[b]))
+        clock = 2.0 * math.pi * float(freq[b]) * time if phase is None else float(phase)
+        s += float(w_drive[b]) * math.sin(clock + float(phi[b]))
         acts[b] = math.tanh(s)
     return acts
 
 
-def binary_force(p, t, x, v, time=0.0) -> np.ndarray:
+def binary_force(p, t, x, v, time=0.0, phase=None) -> np.ndarray:
     x = _arr(x)
     f = np.zeros_like(x)
     pairs = _particles(t, 2)
     if pairs.shape[0] == 0:
         return f
     lengths, rates, units = bond_state(t, x, v)
-    acts = neuron_activations(p, t, x, v, time)
+    acts = neuron_activations(p, t, x, v, time, phase)
     neural = np.asarray(t["neural"]).reshape(-1)
     for b, (i, j) in enumerate(pairs):
         tension = float(p["stiffness"][b]) * (lengths[b] - float(p["rest_length"][b]))
@@ -187,20 +193,22 @@ KIND_FORCES = {
 }
 
 
-def kind_force(kind, params, topo, x, v, time=0.0) -> np.ndarray:
+def kind_force(kind, params, topo, x, v, time=0.0, phase=None) -> np.ndarray:
     """The forces of one kind's bonds (zero for a disabled kind)."""
     if kind in getattr(topo, "disabled", ()):
         return np.zeros_like(_arr(x))
     oracle = KIND_FORCES[kind]
+    if phase is not None and "phase" in inspect.signature(oracle).parameters:
+        return oracle(params.bonds[kind], topo.bonds[kind], x, v, time=time, phase=phase)
     if "time" in inspect.signature(oracle).parameters:
         return oracle(params.bonds[kind], topo.bonds[kind], x, v, time=time)
     return oracle(params.bonds[kind], topo.bonds[kind], x, v)
 
 
-def total_force(params, topo, x, v, time=0.0) -> np.ndarray:
+def total_force(params, topo, x, v, time=0.0, phase=None) -> np.ndarray:
     f = uniform_field_force(params, topo, x, v)
     for kind in topo.bonds:
-        f = f + kind_force(kind, params, topo, x, v, time)
+        f = f + kind_force(kind, params, topo, x, v, time, phase)
     return f
 
 
@@ -313,3 +321,30 @@ def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler", t0=0
             x, v = step(params, topo, x, v, h, t0 + n * dt + k * h)
         frames.append(x.copy())
     return np.stack(frames)
+
+
+def entrained_rollout(params, topo, x0, v0, dt, n_frames, coupling, substeps=1, t0=0.0):
+    """Semi-implicit Euler with an entrained drive: positions [n_frames, P, D] and phases
+    [n_frames]. ``coupling``: ``particles`` (one: its coordinate ``axis`` is the signal;
+    two: their distance), ``axis``, ``offset`` (m), ``frequency`` (Hz), ``gain`` (rad/s per
+    m), ``psi0`` (the phase at x0). Each substep: v <- v + h F(x, v, psi)/m, x <- x + h v,
+    psi <- psi + h (2 pi f - sigma s(x_old) cos psi)."""
+    h = dt / substeps
+    m = _arr(params.mass)[:, None]
+    x, v, psi = _arr(x0).copy(), _arr(v0).copy(), float(coupling["psi0"])
+    frames, phases = [x.copy()], [psi]
+    for n in range(n_frames - 1):
+        for k in range(substeps):
+            time = t0 + n * dt + k * h
+            ps = coupling["particles"]
+            if len(ps) == 1:
+                s = float(x[ps[0], coupling["axis"]]) - coupling["offset"]
+            else:
+                s = float(np.linalg.norm(x[ps[1]] - x[ps[0]])) - coupling["offset"]
+            rate = 2.0 * math.pi * coupling["frequency"] - coupling["gain"] * s * math.cos(psi)
+            v = v + h * total_force(params, topo, x, v, time, phase=psi) / m
+            x = x + h * v
+            psi = psi + h * rate
+        frames.append(x.copy())
+        phases.append(psi)
+    return np.stack(frames), np.array(phases)

@@ -11,7 +11,7 @@ import numpy as np
 from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
 from .model import Model, build, load_model
-from .physics import advance, rollout, start_velocity
+from .physics import advance, phase, rollout, start_velocity
 from .runtime import float64
 
 
@@ -39,7 +39,9 @@ def simulate(
         substeps: integration steps per frame.
         integrator: ``"euler"`` (semi-implicit) or ``"verlet"``.
 
-    Time (for forces that depend on it) is 0 at the first frame written.
+    Time (for forces that depend on it) is 0 at the first frame written, and an entrained
+    drive's phase is its start phase there (:mod:`~activebonds.physics.phase`; from a
+    recording, tracked to frame 1 along its first two frames).
 
     Raises:
         InputError: a bad rate or integrator, a particle without ``position`` when ``start``
@@ -51,6 +53,9 @@ def simulate(
     if integrator not in ("euler", "verlet"):
         raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
     dt = 1.0 / rate
+    psi_first = psi_second = None  # an entrained drive's phase at the first two frames
+    if phase.entrained(model.topology):
+        psi_first = phase.start_phase(model.params, model.topology)
     if start is None:
         require_initial_state(model)  # before any computation
         x0, v0 = model.initial_state()
@@ -63,6 +68,9 @@ def simulate(
         first = data.positions[0]
         x0 = data.positions[1]
         t0 = dt  # frame 1
+        if psi_first is not None:  # the phase of frame 1 tracked along the record
+            s = phase.recorded_signal(model.topology, data.positions[:2])
+            psi_second = phase.track(model.params, model.topology, s, dt, substeps)[1]
         v0 = start_velocity(
             model.params,
             model.topology,
@@ -72,21 +80,22 @@ def simulate(
             substeps,
             integrator,
             t=t0,
+            psi=psi_first,
         )
     n_run = n_frames if first is None else n_frames - 1
-    xs = np.asarray(
-        rollout(
-            model.params,
-            model.topology,
-            jnp.asarray(x0),
-            jnp.asarray(v0),
-            dt,
-            n_run,
-            substeps,
-            integrator,
-            t0,
-        )
+    run = rollout(
+        model.params,
+        model.topology,
+        jnp.asarray(x0),
+        jnp.asarray(v0),
+        dt,
+        n_run,
+        substeps,
+        integrator,
+        t0,
+        psi_first if first is None else psi_second,
     )
+    xs = np.asarray(run[0] if phase.entrained(model.topology) else run)
     if first is not None:
         xs = np.concatenate([first[None], xs])
     check_finite(model, xs, rate)
@@ -183,8 +192,13 @@ def start_at(
     x1 = np.asarray(data.positions[frame + 1], np.float64)
     dt = data.dt
 
+    psi = None  # an entrained drive starts at its start phase
+    if phase.entrained(model.topology):
+        psi = phase.start_phase(model.params, model.topology)
+
     def step(v):  # eager: a few rounds, not worth a compilation at every checkpoint
-        return advance(model.params, model.topology, x0, v, dt, substeps, integrator, 0.0)[0]
+        topo = model.topology
+        return advance(model.params, topo, x0, v, dt, substeps, integrator, 0.0, psi)[0]
 
     forward = (x1 - x0) / dt
     v = forward

@@ -8,7 +8,10 @@ gains g_b a_b. The last term is the rhythmic drive (a phase oscillator, central-
 generator style): drive weight w_b and phase phi_b per bond (``drive_weight``,
 ``drive_phase``), one frequency f for the whole model (the model file's ``[drive] frequency``,
 gene ``drive.frequency``), t the time from the first frame. Without a ``[drive]`` table every
-w_b is 0 and the term adds exactly zero.
+w_b is 0 and the term adds exactly zero. An entrained drive (``[drive] coupling``) replaces
+2 pi f t by its phase psi, a state of the model (:mod:`activebonds.physics.phase`) that the
+integrator writes into the parameters as ``drive_state``; its frequency, gain and start phase
+are shared parameters held by the neural bonds like ``drive_frequency``.
 
 The passive part is linear in (k, k l0, c), which the exact least squares solves for; the
 neurons are switched off there (their gains and drive weights at 0).
@@ -46,16 +49,24 @@ def kinematics(topology, x, v):
 
 def activation(params, n: int, elongation, rate, t=0.0):
     """Neuron b: a_b = tanh(sum_{j != b} (wL_bj e_j + wV_bj Ldot_j) - theta_b
-    + w_b sin(2 pi f t + phi_b)) (the drive term only where ``params`` has drive weights)."""
+    + w_b sin(2 pi f t + phi_b)) (the drive term only where ``params`` has drive weights);
+    with an entrained drive, ``w_b sin(psi + phi_b)``, psi the drive's state."""
     off = 1.0 - np.eye(n)
     # one matrix-vector product (a batched product once vmapped over states and individuals)
     drive = (params["length_weights"] * off) @ elongation + (params["rate_weights"] * off) @ rate
     net = drive - params["threshold"]
-    if "drive_weight" in params:  # absent from hand-made parameter dicts (older tests)
+    if DRIVE_STATE in params:  # an entrained drive: its phase psi, a state of the model
+        net = net + params["drive_weight"] * jnp.sin(params[DRIVE_STATE] + params["drive_phase"])
+    elif "drive_weight" in params:  # absent from hand-made parameter dicts (older tests)
         net = net + rhythm(
             params["drive_weight"], params["drive_frequency"], params["drive_phase"], t
         )
     return jnp.tanh(net)
+
+
+# The entrained drive's phase psi, set in the kind's parameters by the integrator at every
+# force evaluation (:func:`activebonds.physics.phase.at_phase`): a state, not a gene.
+DRIVE_STATE = "drive_state"
 
 
 def passive(stiffness, damping, elongation, rate):
@@ -277,6 +288,23 @@ KIND = BondKind(
             0.0,
             lambda v: (v / 2, v * 2),
             check=POSITIVE,
+            when=_NEURAL,
+        ),
+        Parameter(
+            "drive.coupling.gain",
+            "drive_gain",
+            0.0,
+            lambda v: (0.0, max(100.0, 2 * abs(v))),
+            log=False,
+            check=NON_NEGATIVE,
+            when=_NEURAL,
+        ),
+        Parameter(
+            "drive.coupling.start_phase",
+            "drive_start",
+            0.0,
+            lambda v: (-math.pi, math.pi),
+            log=False,
             when=_NEURAL,
         ),
     ),

@@ -66,6 +66,7 @@ EXAMPLES = (
     "chain2d.toml",
     "horse_limb.toml",
     "horse_trot_drive.toml",
+    "horse_trot_entrained.toml",
     "horse_trot_ground.toml",
     "sweep.toml",
 )

@@ -9,7 +9,9 @@ zero-force (constant-velocity) predictor gives ``x_s + K (x_s - x_{s-1})``. The 
 target makes its marker's RMS, and the overall one, +inf.
 
 The model's time starts at the window's first frame (``offset``: frames from the model's time
-origin to the window, as :func:`~activebonds.identify.metrics.free_run_metrics`).
+origin to the window, as :func:`~activebonds.identify.metrics.free_run_metrics`); an entrained
+drive's phase at each start is tracked along the window
+(:func:`~activebonds.identify.predictions.tracked_phases`).
 """
 
 from __future__ import annotations
@@ -23,22 +25,24 @@ import numpy as np
 from ..data import Trajectory
 from ..model import Model
 from ..runtime import float64
-from .predictions import StaticTopology, float64_params
+from .predictions import StaticTopology, float64_params, tracked_phases
 from .verdict import Comparison
 
 DEFAULT_AHEAD = 10  # frames ahead in fit's summary and evaluate's default
 
 
 @partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
-def _runs(params, x_prev, x0, t0, dt, topo: StaticTopology, n_steps, substeps, method):
+def _runs(params, x_prev, x0, t0, dt, topo: StaticTopology, n_steps, substeps, method, psis=None):
+    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``."""
     from ..physics.integrate import rollout_states, start_velocity
 
-    def one(a, b, t):
-        v = start_velocity(params, topo.topo, a, b, dt, substeps, method, t=t)
-        xs, _ = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t)
+    def one(a, b, t, *psi):
+        p_prev, p0 = psi if psi else (None, None)
+        v = start_velocity(params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev)
+        xs = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)[0]
         return xs[-1]
 
-    return jax.vmap(one)(x_prev, x0, t0)
+    return jax.vmap(one)(x_prev, x0, t0, *(psis or ()))
 
 
 def _starts(rec: np.ndarray, k: int) -> np.ndarray:
@@ -66,6 +70,8 @@ def model_ahead(
     starts = _starts(rec, k)
     if starts.size == 0:
         return out
+    psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
+    psis = None if psi is None else (jnp.asarray(psi[starts - 1]), jnp.asarray(psi[starts]))
     pred = _runs(
         float64_params(model),
         jnp.asarray(rec[starts - 1]),
@@ -76,6 +82,7 @@ def model_ahead(
         n_steps=int(k),
         substeps=int(substeps),
         method=method,
+        psis=psis,
     )
     pred = np.array(pred, np.float64)
     pred[~np.isfinite(pred)] = np.inf  # a failed prediction: an infinite error, not a gap

@@ -9,7 +9,8 @@ s = 1, 1 + H, 1 + 2H, ... so H = 1 is the paper's one-step cost and H = window l
 The local cost of particle p is its own share; the global cost is their sum. A prediction whose
 inputs (the state at s and s - 1) or target are missing contributes nothing. Each restart
 knows its time, ``s * dt`` from the window's first frame, for forces that depend on time (a
-unary bond's moving anchor).
+unary bond's moving anchor); a model whose drive is entrained starts each restart with the
+drive's phase tracked along the record (:func:`start_phases`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from ..data.smoothing import smooth_positions
 from ..model.model import Model
+from ..physics import phase
 from ..physics.integrate import (
     START_ITERATIONS,
     START_TOLERANCE,
@@ -43,6 +45,11 @@ class Windows:
     weight: np.ndarray  # [S, H, P] 1.0 where the term counts
     dt: float
     t0: np.ndarray | None = None  # [S] time of each start (s * dt, from the first frame)
+    # the recordings themselves (positions [F, P, D], NaN where missing), and each start's
+    # frame and recording: an entrained drive's phase is tracked along them
+    records: tuple[np.ndarray, ...] = ()
+    frames: np.ndarray | None = None  # [S] each start's frame in its recording
+    recording: np.ndarray | None = None  # [S] the index of its recording in ``records``
 
     @property
     def times(self) -> np.ndarray:
@@ -88,6 +95,9 @@ def make_windows(
         weight=weight,
         dt=float(dt),
         t0=starts * float(dt),
+        records=(np.where(mask[..., None], positions, np.nan),),
+        frames=starts,
+        recording=np.zeros(len(starts), np.int64),
     )
 
 
@@ -139,7 +149,46 @@ def join_windows(parts: list[Windows]) -> Windows:
         weight=np.concatenate([pad(w.weight, w) for w in parts]),
         dt=parts[0].dt,
         t0=np.concatenate([w.times for w in parts]),
+        **_joined_records(parts),
     )
+
+
+def _joined_records(parts: list[Windows]) -> dict:
+    """The recordings of several windows' sets, each start pointing into its own."""
+    if any(w.frames is None for w in parts):
+        return {}
+    offsets = np.cumsum([0] + [len(w.records) for w in parts[:-1]])
+    return {
+        "records": tuple(r for w in parts for r in w.records),
+        "frames": np.concatenate([w.frames for w in parts]),
+        "recording": np.concatenate([w.recording + o for w, o in zip(parts, offsets, strict=True)]),
+    }
+
+
+def start_phases(model: Model, windows: Windows, substeps: int):
+    """``params -> (psi at each start's previous frame [S], psi at each start [S])`` of an
+    entrained drive, tracked along the recordings from the start phase at each recording's
+    first frame (:func:`~activebonds.physics.phase.track`); None for a model without one."""
+    topo = model.topology
+    if not phase.entrained(topo):
+        return None
+    if windows.frames is None:
+        raise ValueError("an entrained drive needs the windows' recordings to track its phase")
+    period = phase.period_frames(model.params, topo, windows.dt)  # (a leading gap's fill)
+    signals = [jnp.asarray(phase.recorded_signal(topo, r, period=period)) for r in windows.records]
+    frames, which = np.asarray(windows.frames), np.asarray(windows.recording)
+
+    def phases(params):
+        out = jnp.zeros(len(frames), signals[0].dtype)
+        prev = out
+        for i, s in enumerate(signals):
+            psi = phase.track(params, topo, s, windows.dt, substeps)
+            mine = which == i
+            out = out.at[np.flatnonzero(mine)].set(psi[frames[mine]])
+            prev = prev.at[np.flatnonzero(mine)].set(psi[np.maximum(frames[mine] - 1, 0)])
+        return prev, out
+
+    return phases
 
 
 def _predictor(model: Model, windows: Windows, substeps: int, method: str):
@@ -150,6 +199,9 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str):
     t0 = jnp.asarray(windows.times)
     dt, horizon = windows.dt, windows.horizon
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
+    phases = start_phases(model, windows, substeps)
+    if phases is not None:
+        return _phased_predictor(model, windows, substeps, method, phases)
 
     def velocities(params):
         if exact_backward:
@@ -170,6 +222,34 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str):
             lambda x, v, t: rollout_states(params, topo, x, v, dt, horizon, substeps, method, t)[0]
         )
         return run(x0, v, t0)
+
+    return predict
+
+
+def _phased_predictor(model: Model, windows: Windows, substeps: int, method: str, phases):
+    """:func:`_predictor` for an entrained drive: each restart starts from its recorded
+    state with the phase tracked along the record there (:func:`start_phases`); the phase
+    then moves with the predicted state."""
+    topo = model.topology
+    x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
+    x_prev = jnp.asarray(windows.x_prev)
+    t0 = jnp.asarray(windows.times)
+    dt, horizon = windows.dt, windows.horizon
+
+    def predict(params):
+        psi_prev, psi0 = phases(params)
+        v = v0
+        if not (substeps == 1 and method == "euler"):
+            v = jax.vmap(
+                lambda a, b, t, p: start_velocity(
+                    params, topo, a, b, dt, substeps, method, START_ITERATIONS, t, psi=p
+                )
+            )(x_prev, x0, t0, psi_prev)
+
+        def run(x, v, t, p):
+            return rollout_states(params, topo, x, v, dt, horizon, substeps, method, t, p)[0]
+
+        return jax.vmap(run)(x0, v, t0, psi0)
 
     return predict
 
@@ -228,17 +308,20 @@ def unsolved_starts(
     params = model.layout.decode(jnp.asarray(genome))
     topo = model.topology
 
+    phases = start_phases(model, windows, substeps)
+    psi = None if phases is None else np.asarray(phases(params)[0])[used]
+
     @jax.jit
-    def residuals(x_prev, x0, t0):
-        def one(a, b, t):
+    def residuals(x_prev, x0, t0, psi):
+        def one(a, b, t, p):
             v, r = start_velocity(
-                params, topo, a, b, windows.dt, substeps, method, START_ITERATIONS, t, True
+                params, topo, a, b, windows.dt, substeps, method, START_ITERATIONS, t, True, p
             )
             return jnp.where(jnp.all(jnp.isfinite(v)), r, jnp.inf)
 
-        return jax.vmap(one)(x_prev, x0, t0)
+        return jax.vmap(one)(x_prev, x0, t0, psi)
 
-    r = np.asarray(residuals(windows.x_prev[used], windows.x0[used], windows.times[used]))
+    r = np.asarray(residuals(windows.x_prev[used], windows.x0[used], windows.times[used], psi))
     bad = r > 0
     return int(bad.sum()), n, float(r[bad].max()) if bad.any() else 0.0
 

@@ -34,6 +34,7 @@ import numpy as np
 from ..data.fill import FillPlan
 from ..errors import InputError
 from ..model.model import Model
+from ..physics import phase
 from ..physics.integrate import rollout_states
 from ..runtime import float64
 from .lm import levenberg_marquardt
@@ -143,8 +144,15 @@ def model_fill(
     """The model's fill of the plan's gaps (see the module docstring).
 
     Raises:
-        InputError: the model's trajectory goes non-finite from the record's states.
+        InputError: the model's trajectory goes non-finite from the record's states, or its
+            drive is entrained (not supported here yet).
     """
+    if phase.entrained(model.topology):
+        raise InputError(
+            "--method model",
+            "a model with an entrained drive cannot fill gaps yet (its phase would be tracked "
+            "along the gaps themselves); fill with a model without [drive] coupling",
+        )
     positions, mask = plan.positions, plan.mask
     n_frames, n_markers, dim = positions.shape
     dt = plan.traj.dt

@@ -37,7 +37,7 @@ import numpy as np
 from ..data import Trajectory
 from ..model import Model
 from .baselines import zero_force_predictions
-from .predictions import free_run, one_step
+from .predictions import free_run, one_step, tracked_phases
 
 THRESHOLD_MM = 50.0  # a free run is "off" once a marker is this far from its recording
 DEFAULT_STARTS = 10  # free runs started, spread evenly over the window
@@ -249,11 +249,14 @@ def free_run_metrics(
     # unknown frames before the trajectory put its frames at their time from the origin
     timed = np.concatenate([np.full((pad, *rec.shape[1:]), np.nan), rec])
     one = one_step(model, timed, dt, substeps, method)[pad:]
+    phases = tracked_phases(model, timed, dt, substeps)  # an entrained drive's, else None
 
     def run_from(s: int) -> np.ndarray:
         # always n - 2 steps (one compiled program for every start), of which frames
         # s + 1 ... n - 1 are kept
-        return free_run_from(model, rec, dt, s, n - 2, substeps, method, offset)[: n - s - 1]
+        return free_run_from(model, rec, dt, s, n - 2, substeps, method, offset, phases)[
+            : n - s - 1
+        ]
 
     return _metrics(rec, one, run_from, starts, threshold_mm)
 
@@ -267,18 +270,24 @@ def free_run_from(
     substeps: int = 1,
     method: str = "euler",
     offset: int = 0,
+    phases: np.ndarray | None = None,
 ) -> np.ndarray:
     """The model's free run from the recorded frames ``start - 1`` and ``start`` of
     ``positions`` [F, P, D] (complete), at their own time (``offset``: see
     :func:`free_run_metrics`): the ``n_steps`` frames after ``start`` [n_steps, P, D], which
     may run past the recording's end; NaN once the run went non-finite. Runs of the same
-    ``n_steps`` share one compiled program, whatever their start."""
+    ``n_steps`` share one compiled program, whatever their start. An entrained drive starts
+    at ``phases`` [offset + frames] (default: tracked along ``positions``)."""
     x = np.asarray(positions, np.float64)
-    s = max(int(offset), 0) + int(start)
+    pad = max(int(offset), 0)
+    s = pad + int(start)
+    if phases is None:  # an entrained drive's phase, tracked along the whole recording
+        timed = np.concatenate([np.full((pad, *x.shape[1:]), np.nan), x])
+        phases = tracked_phases(model, timed, dt, substeps)
     # the recording hidden but for the start pair: the run starts there, at its time
     hidden = np.full((s + 1, *x.shape[1:]), np.nan)
     hidden[s - 1 :] = x[start - 1 : start + 1]
-    xs, _ = free_run(model, hidden, dt, s + 1 + int(n_steps), substeps, method)
+    xs, _ = free_run(model, hidden, dt, s + 1 + int(n_steps), substeps, method, phases)
     return xs[s + 1 :]
 
 

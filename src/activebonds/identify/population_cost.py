@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import bonds
 from ..model.model import Model
+from ..physics import phase
 from .cost import Windows
 
 DENSE_LIMIT = 512  # bonds x particles up to which a kind's rows are spread by a dense product
@@ -44,8 +45,8 @@ def make_population_cost(
 ):
     """``genes [N, G] -> (cost [N], local [N, P])`` for the one-step cost, or None where the
     one-step form does not apply (a longer horizon, Verlet or substeps)."""
-    if not applies(windows, substeps, method):
-        return None
+    if not applies(windows, substeps, method) or phase.entrained(model.topology):
+        return None  # (an entrained drive's phase depends on the genome along the record)
     layout, topo = model.layout, model.topology
     # Restarts that count (a start with missing inputs counts nowhere: its state may be 0).
     used = windows.weight[:, 0].any(axis=1)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import bonds
 from ..model import Model, Params, Topology
-from ..physics import advance, rollout_states, start_velocity
+from ..physics import advance, phase, rollout_states, start_velocity
 from ..runtime import float64
 
 
@@ -32,6 +32,7 @@ class StaticTopology:
             topo.n_particles,
             topo.dimension,
             tuple(sorted(topo.disabled)),
+            getattr(topo, "drive", None),
             *(
                 (kind, name, a.shape, a.tobytes())
                 for kind, arrays in topo.bonds.items()
@@ -70,21 +71,70 @@ def neural_bonds(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("topo", "substeps", "method"))
-def _one_step(params, x_prev, x0, times, dt, topo: StaticTopology, substeps: int, method: str):
-    def step(a, b, t):
-        v = start_velocity(params, topo.topo, a, b, dt, substeps, method, t=t)
-        return advance(params, topo.topo, b, v, dt, substeps, method, t)[0]
+def _one_step(
+    params, x_prev, x0, times, dt, topo: StaticTopology, substeps: int, method: str, psis=None
+):
+    """``psis``: an entrained drive's phases (at the frames of ``x_prev``, of ``x0``)."""
 
-    return jax.vmap(step)(x_prev, x0, times)
+    def step(a, b, t, *psi):
+        v = start_velocity(
+            params, topo.topo, a, b, dt, substeps, method, t=t, psi=psi[0] if psi else None
+        )
+        return advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
+
+    return jax.vmap(step)(x_prev, x0, times, *(psis or ()))
 
 
 @partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
 def _free_run(
-    params, x_prev, x0, t0, dt, topo: StaticTopology, n_steps: int, substeps: int, method: str
+    params,
+    x_prev,
+    x0,
+    t0,
+    dt,
+    topo: StaticTopology,
+    n_steps: int,
+    substeps: int,
+    method: str,
+    psis=None,
 ):
-    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method, t=t0)
-    xs, vs = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0)
-    return v0, xs, vs
+    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``; then the
+    run's phases are returned too."""
+    psi_prev, psi0 = psis if psis is not None else (None, None)
+    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev)
+    run = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0, psi0)
+    return (v0, *run)
+
+
+@partial(jax.jit, static_argnames=("topo", "substeps"))
+def _track(params, s, dt, topo: StaticTopology, substeps: int):
+    return phase.track(params, topo.topo, s, dt, substeps)
+
+
+@float64
+def tracked_phases(
+    model: Model, positions: np.ndarray, dt: float, substeps: int = 1, offset: int = 0
+) -> np.ndarray | None:
+    """An entrained drive's phase at every frame [F] of a recording, tracked along its
+    signal (:func:`~activebonds.physics.phase.track`) from the start phase at the model's
+    time origin, ``offset`` frames before the recording's first frame; None without one.
+    The frames before the signal's marker is first recorded (the ``offset`` frames
+    included) get its first period repeated backwards
+    (:func:`~activebonds.physics.phase.extended_back`; the period from the signal's
+    autocorrelation, else the drive's frequency)."""
+    topo = model.topology
+    if not phase.entrained(topo):
+        return None
+    x = np.asarray(positions, np.float64)
+    params = float64_params(model)
+    if not np.isfinite(phase.signal(topo, x, np)).any():
+        return np.full(x.shape[0], float(np.asarray(phase.start_phase(params, topo))))
+    offset = max(int(offset), 0)
+    if offset:  # the frames from the model's origin, unrecorded here
+        x = np.concatenate([np.full((offset, *x.shape[1:]), np.nan), x])
+    s = phase.recorded_signal(topo, x, period=phase.period_frames(params, topo, dt))
+    psi = np.asarray(_track(params, jnp.asarray(s), float(dt), StaticTopology(topo), substeps))
+    return psi[offset:]
 
 
 @float64
@@ -94,7 +144,8 @@ def one_step(
     """Prediction of every frame t >= 2 from the recorded frames t - 1 and t - 2, [F, P, D].
 
     NaN where an input frame misses a marker, and for frames 0 and 1. Time is 0 at frame 0
-    (the fitted window's first frame)."""
+    (the fitted window's first frame); an entrained drive's phase is tracked along the
+    recording (:func:`tracked_phases`)."""
     x = np.asarray(positions, dtype=np.float64)
     out = np.full_like(x, np.nan)
     if x.shape[0] < 3:
@@ -103,6 +154,8 @@ def one_step(
     ok = np.isfinite(prev).all(axis=(1, 2)) & np.isfinite(prev2).all(axis=(1, 2))
     x0 = np.where(ok[:, None, None], prev, 0.0)
     x_prev = np.where(ok[:, None, None], prev2, 0.0)
+    psi = tracked_phases(model, x, dt, substeps)
+    psis = None if psi is None else (jnp.asarray(psi[:-2]), jnp.asarray(psi[1:-1]))
     pred = _one_step(
         float64_params(model),
         jnp.asarray(x_prev),
@@ -112,6 +165,7 @@ def one_step(
         topo=StaticTopology(model.topology),
         substeps=int(substeps),
         method=method,
+        psis=psis,
     )
     pred = np.array(pred, dtype=np.float64)
     pred[~ok] = np.nan
@@ -127,22 +181,35 @@ def free_run(
     n_frames: int | None = None,
     substeps: int = 1,
     method: str = "euler",
-) -> tuple[np.ndarray, np.ndarray]:
+    phases: np.ndarray | None = None,
+    with_phases: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Free run from the first two complete consecutive recorded frames.
 
     Returns positions and velocities [n_frames, P, D] (velocities are the model's own state;
     frames before the start are the recording and NaN velocities). Once a frame goes
-    non-finite, it and every later frame are NaN."""
+    non-finite, it and every later frame are NaN. An entrained drive starts with its phase
+    tracked along ``positions`` (:func:`tracked_phases`), or at ``phases`` [F] when given
+    (e.g. tracked along a recording whose frames before the start are hidden here); with
+    ``with_phases``, the run's phases [n_frames] are returned too (NaN where unknown; the
+    tracked ones up to the start)."""
     x = np.asarray(positions, dtype=np.float64)
     n = x.shape[0] if n_frames is None else int(n_frames)
     xs = np.full((n, *x.shape[1:]), np.nan)
     vs = np.full_like(xs, np.nan)
+    psi_out = np.full(n, np.nan)
     complete = np.isfinite(x).all(axis=(1, 2))
     starts = np.flatnonzero(complete[1:] & complete[:-1]) + 1
     if starts.size == 0 or starts[0] >= n:
-        return xs, vs
+        return (xs, vs, psi_out) if with_phases else (xs, vs)
     s = int(starts[0])
     xs[: s + 1] = x[: s + 1]
+    if phases is None:
+        phases = tracked_phases(model, x, dt, substeps)
+    psis = None
+    if phases is not None:
+        psis = (jnp.asarray(phases[s - 1]), jnp.asarray(phases[s]))
+        psi_out[: s + 1] = phases[: s + 1]
     run = _free_run(
         float64_params(model),
         jnp.asarray(x[s - 1]),
@@ -153,18 +220,22 @@ def free_run(
         n_steps=max(n - s - 1, 1),
         substeps=int(substeps),
         method=method,
+        psis=psis,
     )
     vs[s] = np.asarray(run[0], dtype=np.float64)
     if n - s - 1 > 0:
         xs[s + 1 :] = np.array(run[1], dtype=np.float64)
         vs[s + 1 :] = np.asarray(run[2], dtype=np.float64)
+        if psis is not None:
+            psi_out[s + 1 :] = np.asarray(run[3], dtype=np.float64)[: n - s - 1]
     bad = ~(np.isfinite(xs).all(axis=(1, 2)) & np.isfinite(vs).all(axis=(1, 2)))
     bad[: s + 1] = False
     if bad.any():
         first = int(np.argmax(bad))
         xs[first:] = np.nan
         vs[first:] = np.nan
-    return xs, vs
+        psi_out[first:] = np.nan
+    return (xs, vs, psi_out) if with_phases else (xs, vs)
 
 
 def _finite_or_nan(a: np.ndarray) -> np.ndarray:

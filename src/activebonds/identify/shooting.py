@@ -15,7 +15,8 @@ No state is taken from the noisy record, so (unlike the restart cost) the noise 
 the forces: this is the output-error estimate, made well-posed for long records by the
 windows. H = 1 makes every frame's state a variable; H >= F - 1 is single shooting (a free
 run from a free first state). The variables' start values come from the record (gaps filled
-by linear interpolation) or from a previous stage's trajectory.
+by linear interpolation) or from a previous stage's trajectory. An entrained drive's phase at
+each window's start is tracked along the record (:func:`window_phases`), not a variable.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.model import Model
+from ..physics import phase
 from ..physics.integrate import rollout_states
 
 CONTINUITY_WEIGHT = 100.0  # weight of a continuity defect against a position error
@@ -42,6 +44,7 @@ class ShootingWindows:
     dt: float
     link: np.ndarray | None = None  # [K - 1] 1.0 where window k + 1 continues window k
     segments: tuple[tuple[int, int, int], ...] = ()  # per recording: (first window, end, frames)
+    records: tuple[np.ndarray, ...] = ()  # per recording: positions [F, P, D], NaN if missing
 
     @property
     def horizon(self) -> int:
@@ -78,6 +81,7 @@ def shooting_windows(positions: np.ndarray, mask: np.ndarray, dt: float, horizon
         float(dt),
         link=np.ones(k - 1),
         segments=((0, k, n_frames),),
+        records=(np.where(mask[..., None], positions, np.nan),),
     )
 
 
@@ -104,7 +108,32 @@ def join_shooting(parts: list[ShootingWindows]) -> ShootingWindows:
         parts[0].dt,
         link=np.concatenate(links),
         segments=tuple(segments),
+        records=tuple(r for w in parts for r in w.records),
     )
+
+
+def window_phases(model: Model, windows: ShootingWindows, substeps: int):
+    """``params -> [K]`` an entrained drive's phase at each window's start, tracked along its
+    recording from the start phase at the recording's first frame
+    (:func:`~activebonds.physics.phase.track`): the phase is a window state estimated from
+    the record, not a variable of the fit; within a window it moves with the window's state.
+    None for a model without an entrained drive."""
+    topo = model.topology
+    if not phase.entrained(topo):
+        return None
+    if len(windows.records) != len(windows.segments):
+        raise ValueError("an entrained drive needs the windows' recordings to track its phase")
+    period = phase.period_frames(model.params, topo, windows.dt)  # (a leading gap's fill)
+    signals = [jnp.asarray(phase.recorded_signal(topo, r, period=period)) for r in windows.records]
+
+    def phases(params):
+        out = []
+        for (k0, k1, _), s in zip(windows.segments, signals, strict=True):
+            psi = phase.track(params, topo, s, windows.dt, substeps)
+            out.append(psi[windows.starts[k0:k1]])
+        return jnp.concatenate(out)
+
+    return phases
 
 
 def filled(positions: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -138,15 +167,18 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
     dt, h = windows.dt, windows.horizon
     link = jnp.asarray(windows.link)[:, None, None]
 
+    phases = window_phases(model, windows, substeps)
+
     def run(genome, states):
         params = layout.decode(genome)
         xs0, vs0 = states
 
-        def window(x, v, t):
-            xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t)
+        def window(x, v, t, *psi):
+            xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t, *psi)[:2]
             return jnp.concatenate([x[None], xs]), jnp.concatenate([v[None], vs])
 
-        return jax.vmap(window)(xs0, vs0, t0)  # [K, H + 1, P, D] each
+        extra = () if phases is None else (phases(params),)
+        return jax.vmap(window)(xs0, vs0, t0, *extra)  # [K, H + 1, P, D] each
 
     def residuals(genome, states):
         xs0, vs0 = states

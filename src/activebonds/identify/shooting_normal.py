@@ -30,7 +30,7 @@ from jax.scipy.linalg import solve_triangular
 
 from ..model.model import Model
 from ..physics.integrate import rollout_states
-from .shooting import CONTINUITY_WEIGHT, ShootingWindows
+from .shooting import CONTINUITY_WEIGHT, ShootingWindows, window_phases
 
 BATCH_BYTES = 2**27  # Jacobian blocks computed at once, at most (windows are batched to fit)
 LANES = 1024  # tangents (windows x unknowns per window) propagated at once, at most
@@ -62,10 +62,13 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
     c = jnp.asarray(CONTINUITY_WEIGHT * link)
     scale = jnp.concatenate([jnp.ones(half), jnp.full(half, dt)])  # of a state's defect
 
-    def window(u, s, t, tgt, wt):
+    phases = window_phases(model, windows, substeps)
+
+    def window(u, s, t, tgt, wt, *k):
         params = layout.decode(to_genome(u))
         x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
-        xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t)
+        psi = () if phases is None else (phases(params)[k[0]],)  # tracked along the record
+        xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t, *psi)[:2]
         pos = jnp.concatenate([x[None], xs]).reshape(h + 1, -1)
         measured = jnp.where(wt > 0, (pos - tgt).ravel(), 0.0)
         return measured, jnp.concatenate([xs[-1].ravel(), vs[-1].ravel()])
@@ -73,9 +76,9 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
     jac = jax.jacfwd(window, argnums=(0, 1))
 
     def blocks(args):
-        u, s, s_next, t, tgt, wt, ck = args
-        rm, end = window(u, s, t, tgt, wt)
-        (bm, am), (be, ae) = jac(u, s, t, tgt, wt)
+        u, s, s_next, t, tgt, wt, ck, *k = args  # k: the window's index (entrained drive)
+        rm, end = window(u, s, t, tgt, wt, *k)
+        (bm, am), (be, ae) = jac(u, s, t, tgt, wt, *k)
         rg = ck * scale * (end - s_next)
         gs = ck * scale[:, None] * ae  # d defect / d s_k
         gu = ck * scale[:, None] * be  # d defect / d u
@@ -100,7 +103,8 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         batch = max(1, min(n_windows, by_lanes, BATCH_BYTES // (8 * rows * (n + p) * 2)))
         nxt = jnp.concatenate([states[1:], jnp.zeros((1, n))])
         us = jnp.broadcast_to(u, (n_windows, p))
-        out = jax.lax.map(blocks, (us, states, nxt, t0, target, weight, c), batch_size=batch)
+        ks = () if phases is None else (jnp.arange(n_windows),)
+        out = jax.lax.map(blocks, (us, states, nxt, t0, target, weight, c, *ks), batch_size=batch)
         tkk, tk1, ykk, yk1, pkk, gkk, gk1, guk, dk1 = out
 
         def shift(a):  # window k's contribution to window k + 1

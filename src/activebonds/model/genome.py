@@ -21,7 +21,7 @@ from .forms import Entry, ScalarForm, form_of
 from .genes import Gene, bond_group
 from .layout import gravity_bounds, mass_bounds, pick_log
 from .params import Params
-from .schema import GravityParam, ModelSpec
+from .schema import GravityParam, ModelSpec, entry_at
 from .values import Param, VectorParam, Weights
 
 
@@ -37,8 +37,7 @@ def value_of(p: float | Param | None, default: float = 0.0) -> float:
 
 def shared_value(spec: ModelSpec, par: bonds.Parameter):
     """A shared parameter's entry in its top-level table (None without the table)."""
-    table, key = par.key.split(".", 1)
-    return getattr(getattr(spec, table, None), key, None)
+    return entry_at(spec, par.key)
 
 
 def takes(bond, par: bonds.Parameter) -> bool:

@@ -26,7 +26,9 @@ _EXPECTED = {
     "velocity": "expected a list of numbers",
     "mass": PARAMETER_EXPECTED,
     "frequency": PARAMETER_EXPECTED,
-    "drive": "expected a table { frequency = .. } (Hz: a number or { value, min, max })",
+    "drive": "expected a table { frequency = .. } (Hz: a number or { value, min, max }; "
+    "optionally coupling = { particle = .., gain = .. })",
+    "coupling": "expected a table { particle = .., gain = .., offset = .., start_phase = .. }",
 }
 
 

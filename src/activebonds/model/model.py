@@ -12,7 +12,7 @@ from .. import bonds
 from .forms import form_of, set_value
 from .genome import Genome, put_bonds, put_gravity, put_masses, put_shared, shared_value, takes
 from .layout import Layout
-from .params import Params, Topology
+from .params import Coupling, Params, Topology
 from .schema import GravityParam, ModelSpec
 
 
@@ -154,8 +154,24 @@ def _topology(spec: ModelSpec, disable: frozenset[str]) -> Topology:
             **{f: np.array([getattr(b, f) for b in of_kind], bool).reshape(-1) for f in k.flags},
         }
     return Topology(
-        n_particles=len(spec.particle), dimension=spec.dimension, bonds=arrays, disabled=disable
+        n_particles=len(spec.particle),
+        dimension=spec.dimension,
+        bonds=arrays,
+        disabled=disable,
+        drive=_coupling(spec, names, arrays, disable),
     )
+
+
+def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
+    """The static part of an entrained drive (None without one, or with the binary kind
+    disabled: no neuron reads it then)."""
+    coupling = spec.drive.coupling if spec.drive is not None else None
+    if coupling is None or "binary" in disable:
+        return None
+    holder = int(np.flatnonzero(arrays["binary"]["neural"])[0])
+    axis = spec.dimension - 1  # "height": the last axis
+    which = [coupling.particle] if coupling.signal == "height" else coupling.particles
+    return Coupling(tuple(names[n] for n in which), axis, float(coupling.offset), holder)
 
 
 def _file_params(spec: ModelSpec) -> Params:
@@ -208,7 +224,7 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
                 continue
             value = float(np.asarray(params.bonds[kind.name][par.field])[takers.index(True)])
             current = update_spec.get(table, getattr(spec, table))
-            update_spec[table] = current.model_copy(update={key: set_value(p, value)})
+            update_spec[table] = _with_entry(current, key, set_value(p, value))
     counters: dict[str, int] = {}
     out = []
     for b in spec.bond:
@@ -226,6 +242,14 @@ def spec_with_params(spec: ModelSpec, params: Params, keep=frozenset()) -> Model
             update[par.key] = form_of(par).write(par, current, values[par.field][pos], pos)
         out.append(b.model_copy(update=update))
     return spec.model_copy(update={"particle": particles, "bond": out, **update_spec})
+
+
+def _with_entry(table, key: str, value):
+    """A copy of a (frozen) table with its entry at the dotted ``key`` replaced."""
+    head, _, rest = key.partition(".")
+    if not rest:
+        return table.model_copy(update={head: value})
+    return table.model_copy(update={head: _with_entry(getattr(table, head), rest, value)})
 
 
 def _ratio_masses(spec: ModelSpec, mass: np.ndarray) -> list:

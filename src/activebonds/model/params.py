@@ -15,6 +15,18 @@ from typing import NamedTuple
 import numpy as np
 
 
+class Coupling(NamedTuple):
+    """What pulls an entrained drive's phase (static): minus ``offset`` (m), the coordinate
+    ``axis`` of particle ``particles[0]`` (one particle: a height) or the distance between
+    ``particles`` (two: a length); the drive's shared numbers are read from the binary bond
+    at index ``holder`` (the first neural one)."""
+
+    particles: tuple[int, ...]
+    axis: int
+    offset: float
+    holder: int
+
+
 @dataclass(frozen=True, eq=False)
 class Topology:
     """Particle count, dimension and bond index arrays: fixed for a whole identification.
@@ -27,6 +39,7 @@ class Topology:
     dimension: int
     bonds: dict[str, dict[str, np.ndarray]]
     disabled: frozenset[str] = field(default_factory=frozenset)
+    drive: Coupling | None = None  # an entrained drive's signal (None: a clock, or no drive)
 
     def count(self, kind: str) -> int:
         """Number of bonds of ``kind`` (0 for a kind the model does not know)."""

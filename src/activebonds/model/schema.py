@@ -4,7 +4,8 @@ A model file is TOML: top-level ``name``, ``dimension``, optional ``gravity`` (a
 or a table ``{ value, min, max, direction }``: a magnitude, free or fixed, along a fixed
 direction) and ``total_mass`` (kg: the free masses are then identified as ratios of it),
 an optional ``[drive]`` table (``frequency`` in Hz, > 0, fixed or free: the rhythmic drive of
-the neurons, whose ``drive_weight`` and ``drive_phase`` need it); ``[[particle]]``
+the neurons, whose ``drive_weight`` and ``drive_phase`` need it; an optional ``coupling``
+table entrains its phase by the body, :class:`Coupling`); ``[[particle]]``
 tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
@@ -54,12 +55,43 @@ class GravityParam(Param):
 GRAVITY_ZERO = 1e-12  # a gravity direction this short is refused as zero
 
 
+class Coupling(_Strict):
+    """The entrainment of the drive (DESIGN.md §2, "Entrained drive"): its phase psi is a
+    state, d psi/dt = 2 pi f - gain s cos psi, pulled by the body's signal s minus ``offset``
+    (m, fixed): with ``signal = "height"`` (the default), the coordinate of ``particle`` along
+    the last axis (up for the default gravity); with ``signal = "length"``, the distance
+    between the two ``particles`` (e.g. a leg bond's length). ``gain`` (rad/s per m, >= 0;
+    gene ``drive.coupling.gain``) and ``start_phase`` (psi at the first frame of the window or
+    the simulation, rad; gene ``drive.coupling.start_phase`` when free) are numbers or
+    ``{ value, min, max }`` tables."""
+
+    signal: Literal["height", "length"] = "height"
+    particle: str | None = Field(default=None, min_length=1)
+    particles: list[str] | None = None
+    gain: FiniteFloat | Param
+    offset: FiniteFloat = 0.0
+    start_phase: FiniteFloat | Param = 0.0
+
+
 class Drive(_Strict):
-    """The rhythmic drive (DESIGN.md §2): one phase oscillator sin(2 pi f t + phi_b) read by
-    every neuron with a ``drive_weight``; ``frequency`` f in Hz (> 0), fixed or free (gene
-    ``drive.frequency``)."""
+    """The rhythmic drive (DESIGN.md §2): one phase oscillator sin(psi + phi_b) read by every
+    neuron with a ``drive_weight``; ``frequency`` f in Hz (> 0), fixed or free (gene
+    ``drive.frequency``). Without ``coupling`` psi = 2 pi f t (a clock); with it psi is a
+    state of the model entrained by the body (:class:`Coupling`)."""
 
     frequency: FiniteFloat | Param
+    coupling: Coupling | None = None
+
+
+def entry_at(spec, key: str):
+    """The entry of a dotted key of the model file (``drive.coupling.gain``), None where a
+    table on its path is absent."""
+    value = spec
+    for part in key.split("."):
+        value = getattr(value, part, None)
+        if value is None:
+            return None
+    return value
 
 
 class Particle(_Strict):
@@ -230,6 +262,7 @@ class ModelSpec(_Strict):
                 _finite(g, "gravity")
         self._check_mass_scale()
         self._check_shared()
+        self._check_coupling(seen)
         for i, p in enumerate(self.particle):
             for field in ("position", "velocity"):
                 vec = getattr(p, field)
@@ -272,13 +305,40 @@ class ModelSpec(_Strict):
                 types[b.type] = sig
         return self
 
+    def _check_coupling(self, names: set[str]) -> None:
+        """An entrained drive's signal names a particle, and some neural bond reads it."""
+        coupling = self.drive.coupling if self.drive is not None else None
+        if coupling is None:
+            return
+        if coupling.signal == "height":
+            if coupling.particle is None or coupling.particles is not None:
+                raise ValueError(
+                    "drive.coupling.particle: a height signal needs particle = .. (one name)"
+                )
+            named = [("particle", coupling.particle)]
+        else:
+            pair = coupling.particles
+            if coupling.particle is not None or pair is None or len(set(pair)) != 2:
+                raise ValueError(
+                    "drive.coupling.particles: a length signal needs particles = [A, B] "
+                    "(two distinct names)"
+                )
+            named = [("particles", n) for n in pair]
+        for key, name in named:
+            if name not in names:
+                raise ValueError(f"drive.coupling.{key}: unknown particle '{name}'")
+        if not any(getattr(b, "neural", False) for b in self.bond):
+            raise ValueError(
+                "drive.coupling: an entrained drive needs a neural bond to read it (its "
+                "frequency, gain and start phase are held by the neural bonds)"
+            )
+
     def _check_shared(self) -> None:
         """The kinds' shared (model-level) parameters in their top-level tables: the value and
         any bounds pass the parameter's check (the drive's frequency > 0)."""
         for kind in bonds.kinds():
             for p in kind.shared:
-                table, name = p.key.split(".", 1)
-                value = getattr(getattr(self, table, None), name, None)
+                value = entry_at(self, p.key)
                 if value is None or p.check is None:
                     continue
                 if not p.check.test(_value_of(value)):

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 from .. import bonds
 from ..model.params import Params, Topology
+from . import phase
 from .forces import total_force
 
 Integrator = Literal["euler", "verlet"]
@@ -69,22 +70,47 @@ def kick(params: Params, topo: Topology, x, v, h, force, t=0.0, implicit: bool =
     return jnp.linalg.solve(system, h * force[..., None])[..., 0]
 
 
-def euler_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False):
+def euler_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False, psi=None):
     """Semi-implicit (symplectic) Euler: v <- v + h F(x, v, t)/m; x <- x + h v (the kick
-    linearly implicit in the stiff kinds' velocity dependence with ``implicit``)."""
+    linearly implicit in the stiff kinds' velocity dependence with ``implicit``).
+
+    ``psi``: an entrained drive's phase (:mod:`activebonds.physics.phase`), read by the
+    forces and advanced by explicit Euler from the step's start, ``psi + h dpsi/dt(x, psi)``;
+    then the step returns (x, v, psi)."""
+    if psi is not None:
+        p = phase.at_phase(params, psi)
+        v = v + kick(p, topo, x, v, h, total_force(p, topo, x, v, t), t, implicit)
+        return x + h * v, v, psi + h * phase.rate(params, topo, x, psi)
     v = v + kick(params, topo, x, v, h, total_force(params, topo, x, v, t), t, implicit)
     return x + h * v, v
 
 
-def verlet_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False):
+def verlet_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False, psi=None):
     """Velocity Verlet. With velocity-dependent forces the second force uses the
     half-step velocity (exact Verlet when forces do not depend on velocity); it is
     evaluated at the step's end, t + h. ``implicit``: both half kicks as in
-    :func:`euler_step`."""
+    :func:`euler_step`. ``psi``: as in :func:`euler_step` (the second force reads the
+    step's end phase)."""
+    if psi is not None:
+        p = phase.at_phase(params, psi)
+        v_half = v + kick(p, topo, x, v, 0.5 * h, total_force(p, topo, x, v, t), t, implicit)
+        psi_end = psi + h * phase.rate(params, topo, x, psi)
+        x = x + h * v_half
+        p = phase.at_phase(params, psi_end)
+        f_new = total_force(p, topo, x, v_half, t + h)
+        return x, v_half + kick(p, topo, x, v_half, 0.5 * h, f_new, t + h, implicit), psi_end
     v_half = v + kick(params, topo, x, v, 0.5 * h, total_force(params, topo, x, v, t), t, implicit)
     x = x + h * v_half
     f_new = total_force(params, topo, x, v_half, t + h)
     return x, v_half + kick(params, topo, x, v_half, 0.5 * h, f_new, t + h, implicit)
+
+
+def _needs_phase(topo: Topology, psi) -> None:
+    if psi is None and phase.entrained(topo):
+        raise ValueError(
+            "the model's drive is entrained: its phase is a state, give psi (see "
+            "activebonds.physics.phase.track for a recorded start)"
+        )
 
 
 STEPS: dict[str, Callable] = {"euler": euler_step, "verlet": verlet_step}
@@ -99,8 +125,10 @@ def advance(
     substeps: int = 1,
     method: Integrator = "euler",
     t=0.0,
+    psi=None,
 ):
-    """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``.
+    """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``;
+    returns (x, v), or (x, v, psi) with an entrained drive's phase ``psi`` (required then).
 
     With substeps (> 1) and a stiff kind (:func:`stiff_kinds`), every substep's kick is
     linearly implicit in that kind's velocity dependence (:func:`kick`): substeps exist to
@@ -108,24 +136,32 @@ def advance(
     (stable only below ``h = 2 m eps / (mu Fn)``, about 20 us at a hopper's landing). One
     step per frame keeps the explicit kick, so the paper's one-step cost, its population
     form and the exact least squares are unchanged."""
+    _needs_phase(topo, psi)
     step = STEPS[method]
     h = dt / substeps
+    extra = () if psi is None else (psi,)  # the drive's phase rides with the state
+
+    def one(state, tk, implicit=False):
+        x, v, *rest = state
+        return step(params, topo, x, v, h, tk, implicit, *rest)
+
     if substeps > 1 and stiff(topo):  # a loop, not unrolled: the kicks solve and differentiate
 
         def implicit(k, state):
-            return step(params, topo, *state, h, t + k * h, True)
+            return one(state, t + k * h, True)
 
-        return jax.lax.fori_loop(0, substeps, implicit, (x, v))
+        return jax.lax.fori_loop(0, substeps, implicit, (x, v, *extra))
     if substeps <= UNROLLED:
+        state = (x, v, *extra)
         for k in range(substeps):
-            x, v = step(params, topo, x, v, h, t if k == 0 else t + k * h)
-        return x, v
+            state = one(state, t if k == 0 else t + k * h)
+        return state
 
     def body(state, k):  # a loop, not unrolled: compile time independent of substeps
-        return step(params, topo, *state, h, t + k * h), None
+        return one(state, t + k * h), None
 
-    (x, v), _ = jax.lax.scan(body, step(params, topo, x, v, h, t), jnp.arange(1, substeps))
-    return x, v
+    state, _ = jax.lax.scan(body, one((x, v, *extra), t), jnp.arange(1, substeps))
+    return state
 
 
 UNROLLED = 8  # substeps written out in the program (fastest to run); more run as a loop
@@ -145,10 +181,12 @@ def start_velocity(
     iterations: int = START_ITERATIONS,
     t=0.0,
     with_residual: bool = False,
+    psi=None,
 ):
     """The velocity at a recorded frame that the integrator itself would carry there, given
     the two recorded positions ``x_prev`` (frame t - 1) and ``x`` (frame t); ``t`` is the
-    time of frame t (``x_prev`` is at ``t - dt``).
+    time of frame t (``x_prev`` is at ``t - dt``). ``psi``: an entrained drive's phase at
+    frame t - 1 (required then; the landing step advances it with the state).
 
     The backward difference ``v_b = (x - x_prev) / dt`` is the *mean* velocity over the last
     interval, i.e. the velocity about half a frame earlier. Only one-substep semi-implicit
@@ -184,21 +222,26 @@ def start_velocity(
     ``with_residual``: also return the last residual where the solve has not converged (m;
     0 where it has or none is needed), for counting the starts that could not be solved.
     """
+    _needs_phase(topo, psi)
     v_b = (x - x_prev) / dt
     if substeps == 1 and method == "euler":
         return (v_b, jnp.zeros(())) if with_residual else v_b
     inv_m = 1.0 / params.mass[:, None]
+    at_prev, at_t = params, params  # the forces' parameters at frames t - 1 and t
+    if psi is not None:
+        at_prev = phase.at_phase(params, psi)
+        at_t = phase.at_phase(params, psi + dt * phase.rate(params, topo, x_prev, psi))
     if substeps == 1 and method == "verlet":
-        v = v_b + 0.5 * dt * total_force(params, topo, x, v_b, t) * inv_m
+        v = v_b + 0.5 * dt * total_force(at_t, topo, x, v_b, t) * inv_m
         return (v, jnp.zeros(())) if with_residual else v
     # Constant acceleration a: Euler's N substeps start from v_b - dt (N+1)/(2N) a, Verlet's
     # from v_b - dt/2 a.
     lag = 0.5 * (substeps + 1) / substeps if method == "euler" else 0.5
     t_prev = t - dt
-    v = v_b - lag * dt * total_force(params, topo, x_prev, v_b, t_prev) * inv_m
+    v = v_b - lag * dt * total_force(at_prev, topo, x_prev, v_b, t_prev) * inv_m
 
     def land(v):
-        return advance(params, topo, x_prev, v, dt, substeps, method, t_prev)
+        return advance(params, topo, x_prev, v, dt, substeps, method, t_prev, psi)[:2]
 
     if stiff(topo):
 
@@ -237,9 +280,22 @@ def rollout(
     substeps: int = 1,
     method: Integrator = "euler",
     t0=0.0,
+    psi0=None,
 ):
     """Free run: positions of ``n_frames`` frames, the first being x0 (at time ``t0``).
-    Shape [n_frames, P, D]."""
+    Shape [n_frames, P, D]. With an entrained drive's phase ``psi0`` at x0 (required then):
+    (positions, phases [n_frames])."""
+    _needs_phase(topo, psi0)
+    if psi0 is not None:
+
+        def phased(state, i):
+            x, v, psi = state
+            state = advance(params, topo, x, v, dt, substeps, method, t0 + i * dt, psi)
+            return state, (state[0], state[2])
+
+        _, (xs, psis) = jax.lax.scan(phased, (x0, v0, psi0), jnp.arange(n_frames - 1))
+        psi0 = jnp.asarray(psi0, psis.dtype)
+        return jnp.concatenate([x0[None], xs]), jnp.concatenate([psi0[None], psis])
 
     def body(state, i):
         x, v = advance(params, topo, *state, dt, substeps, method, t0 + i * dt)
@@ -250,10 +306,21 @@ def rollout(
 
 
 def rollout_states(
-    params, topo, x0, v0, dt, n_steps: int, substeps: int = 1, method="euler", t0=0.0
+    params, topo, x0, v0, dt, n_steps: int, substeps: int = 1, method="euler", t0=0.0, psi0=None
 ):
     """Free run returning (positions, velocities) of the ``n_steps`` states after (x0, v0),
-    (x0, v0) being at time ``t0``."""
+    (x0, v0) being at time ``t0``; with an entrained drive's phase ``psi0`` at x0 (required
+    then), (positions, velocities, phases)."""
+    _needs_phase(topo, psi0)
+    if psi0 is not None:
+
+        def phased(state, i):
+            x, v, psi = state
+            state = advance(params, topo, x, v, dt, substeps, method, t0 + i * dt, psi)
+            return state, state
+
+        _, states = jax.lax.scan(phased, (x0, v0, psi0), jnp.arange(n_steps))
+        return states
 
     def body(state, i):
         state = advance(params, topo, *state, dt, substeps, method, t0 + i * dt)

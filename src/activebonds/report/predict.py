@@ -24,7 +24,7 @@ from ..identify.predictions import (
     rms_mm,
 )
 from ..model import Model
-from ..physics import neuron_activity
+from ..physics import neuron_activity, phase
 from ..runtime import float64
 from .runs import RunRecord, load_run, original_window
 
@@ -33,14 +33,23 @@ NEAR_ZERO = 0.01  # |w| below this fraction of the weight range: a near-zero wei
 
 
 @partial(jax.jit, static_argnames=("topo",))
-def _activations(params, xs, vs, ts, topo: StaticTopology):
+def _activations(params, xs, vs, ts, topo: StaticTopology, psis=None):
+    if psis is not None:  # an entrained drive's phase at each state
+
+        def phased(x, v, t, psi):
+            return neuron_activity(phase.at_phase(params, psi), topo.topo, x, v, t)
+
+        return jax.vmap(phased)(xs, vs, ts, psis)
     return jax.vmap(lambda x, v, t: neuron_activity(params, topo.topo, x, v, t))(xs, vs, ts)
 
 
 @float64
-def activations(model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0) -> np.ndarray:
+def activations(
+    model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0, phases=None
+) -> np.ndarray:
     """Neuron activations at each state (x, v) of frames 0, 1, ... (time ``frame * dt``, for
-    a rhythmic drive), [F, B]; 0 for non-neural bonds, NaN where the state is unknown."""
+    a rhythmic drive; an entrained drive's phase ``phases`` [F]), [F, B]; 0 for non-neural
+    bonds, NaN where the state (or an entrained drive's phase) is unknown."""
     xs = np.asarray(xs, np.float64)
     vs = np.asarray(vs, np.float64)
     n_b = len(neural_bonds(model.topology)[1])
@@ -48,6 +57,11 @@ def activations(model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0) -
     if n_b == 0:
         return out
     ok = np.isfinite(xs).all(axis=(1, 2)) & np.isfinite(vs).all(axis=(1, 2))
+    psis = None
+    if phase.entrained(model.topology):
+        phases = np.full(xs.shape[0], np.nan) if phases is None else np.asarray(phases)
+        ok &= np.isfinite(phases)
+        psis = jnp.asarray(phases[ok])
     if not ok.any():
         return out
     ts = jnp.asarray(np.arange(xs.shape[0])[ok] * float(dt))
@@ -57,6 +71,7 @@ def activations(model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0) -
         jnp.asarray(vs[ok]),
         ts,
         topo=StaticTopology(model.topology),
+        psis=psis,
     )
     out[ok] = np.asarray(act, np.float64)
     return out
@@ -177,8 +192,8 @@ def predict(
     fit = n if fit_frames is None else max(1, min(int(fit_frames), n))
     dt = traj.dt
     one = one_step(model, rec, dt, substeps, method)
-    xs, vs = free_run(model, rec, dt, n, substeps, method)
-    act = activations(model, xs, vs, dt)
+    xs, vs, psis = free_run(model, rec, dt, n, substeps, method, with_phases=True)
+    act = activations(model, xs, vs, dt, psis)
     pairs_of_bonds, neural = neural_bonds(model.topology)
     sat, per = saturation_share(act, neural)
     complete = np.isfinite(rec).all(axis=(1, 2))
