@@ -5,6 +5,7 @@ summary and in the report (within 1 % of the range, of the log range for log gen
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 
 import numpy as np
@@ -17,6 +18,7 @@ from activebonds.identify.stages import uncertainty as uncertainty_stage
 from activebonds.identify.uncertainty import describe, from_jacobian
 from activebonds.model import Gene, loads_model
 from activebonds.model.names import (
+    LISTED,
     NEAR_BOUND,
     at_bound,
     bound_position,
@@ -296,3 +298,14 @@ def test_a_mass_under_total_mass_at_its_bound_is_flagged_in_kg():
     # just inside the 1 % band of the ratio's log range (2 log(10/3)): still flagged
     near = np.array([3.0, 10.0 * np.exp(-0.009 * 2 * np.log(10 / 3)), 5.0])
     assert [r.bound for r in parameter_rows(model, near)][:2] == ["min", "max"]
+
+
+def test_a_long_bounds_line_names_the_first_parameters_and_counts_the_rest():
+    model = loads_model(SMALL)
+    rows = parameter_rows(model, [g.value for g in model.layout.genes])
+    flagged_row = dataclasses.replace(rows[1], value=1000.0, bound="max")
+    many = [dataclasses.replace(flagged_row, name=f"p{i}") for i in range(12)]
+    line = bounds_line(many)
+    assert line.startswith("12 of 12 parameters at or near a search bound")
+    assert [f"p{i} = 1000" in line for i in range(12)] == [True] * LISTED + [False] * 4
+    assert line.endswith(", and 4 more (the best model file holds every value)")

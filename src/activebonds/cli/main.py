@@ -33,7 +33,7 @@ from .progress_bar import run_progress as _progress  # noqa: E402
 
 @app.command()
 def info(
-    traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .npz).")],
+    traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .mat, .npz).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
     strict: Annotated[
         bool,

@@ -477,12 +477,18 @@ def resolve_rate(
     rate = reconcile_rates(source, declared)
     if not time_strings:
         if rate is None:
-            raise InputError(source, "no time column and no sample rate given; pass the rate in Hz")
+            raise InputError(
+                source,
+                "no time column and no sample rate given; add a time column or a line '# rate: <Hz>' before the header (or pass rate= to read_trajectory)",
+            )
         return rate, 0.0
     times, resolution = times_from_strings(source, time_strings)
     if len(times) < 2:
         if rate is None:
-            raise InputError(source, "a single frame gives no sample rate; pass the rate in Hz")
+            raise InputError(
+                source,
+                "a single frame gives no sample rate; add a line '# rate: <Hz>' before the header (or pass rate= to read_trajectory)",
+            )
         return rate, float(times[0])
     estimate, start = check_time_column(times, resolution, source, declared, lines)
     return (rate if rate is not None else estimate), start

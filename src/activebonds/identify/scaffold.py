@@ -334,7 +334,7 @@ def scaffold(
         f"# Frames {offset}:{offset + f_count} ({f_count} frames at {rate:g} Hz, T = "
         f"{duration:.4g} s), {p} markers.",
         "# Every candidate bond is optional: `activebonds structure` decides which the recording",
-        "# needs. The rules behind every number: activebonds.model.scaffold's docstring.",
+        "# needs. The rules behind every number: activebonds.identify.scaffold's docstring.",
         f"name = {_q(name or 'scaffold')}",
         f"dimension = {d}  # the recording's",
     ]

@@ -346,6 +346,9 @@ def flagged(rows: Sequence[ParameterRow]) -> list[ParameterRow]:
     return [r for r in rows if r.bound is not None]
 
 
+LISTED = 8  # parameters named in the line, at most
+
+
 def bounds_line(rows: Sequence[ParameterRow]) -> str | None:
     """One line naming the parameters at or near a bound (``fit``'s summary), None if none:
     ``2 of 9 parameters at or near a search bound (within 1 % of the range): spring A-B
@@ -353,7 +356,9 @@ def bounds_line(rows: Sequence[ParameterRow]) -> str | None:
     hits = flagged(rows)
     if not hits:
         return None
-    listed = ", ".join(f"{r.name} = {r.value:.6g} ({r.bound_text()})" for r in hits)
+    listed = ", ".join(f"{r.name} = {r.value:.6g} ({r.bound_text()})" for r in hits[:LISTED])
+    if len(hits) > LISTED:  # the rest: in the best model file
+        listed += f", and {len(hits) - LISTED} more (the best model file holds every value)"
     return (
         f"{len(hits)} of {len(rows)} parameters at or near a search bound (within "
         f"{NEAR_BOUND * 100:g} % of the range; widen it and fit again): {listed}"
