@@ -228,7 +228,7 @@ def test_trc_rate_checks(tmp_path):
 def test_csv_without_time_column_needs_a_rate(tmp_path):
     p = tmp_path / "notime.csv"
     p.write_text("Frame,Head X,Head Y\n1,1000,0\n2,1001,0\n3,1002,nan\n")
-    assert "pass the rate" in error_of(p)
+    assert "add a time column or a line '# rate: <Hz>' before the header" in error_of(p)
     t = read_trajectory(p, rate=120)
     assert t.rate == 120 and t.dimension == 2 and t.markers == ("Head",)
     assert t.positions[1, 0].tolist() == [1.001, 0.0] and t.n_gaps == 1
