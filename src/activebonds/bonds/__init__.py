@@ -18,7 +18,7 @@ from .kind import (
     PopulationForm,
     spread,
 )
-from .registry import get, kinds, names, register, registered, unregister
+from .registry import drive_kind, get, kinds, names, register, registered, unregister
 
 register(unary.KIND)
 register(binary.KIND)
@@ -35,6 +35,7 @@ __all__ = [
     "MujocoForm",
     "Parameter",
     "PopulationForm",
+    "drive_kind",
     "get",
     "kinds",
     "names",

@@ -51,3 +51,9 @@ def listing(words: list[str] | tuple[str, ...], last: str = "or") -> str:
     """ "'a', 'b' or 'c'" (the kinds in messages)."""
     quoted = [f"'{w}'" for w in words]
     return quoted[0] if len(quoted) == 1 else f"{', '.join(quoted[:-1])} {last} {quoted[-1]}"
+
+
+def drive_kind() -> str | None:
+    """The registered kind whose bonds hold the rhythmic drive's numbers (its shared
+    ``drive_frequency``: the neurons' drive), or None."""
+    return next((k.name for k in kinds() if "drive_frequency" in k.fields), None)

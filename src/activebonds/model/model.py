@@ -163,12 +163,13 @@ def _topology(spec: ModelSpec, disable: frozenset[str]) -> Topology:
 
 
 def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
-    """The static part of an entrained drive (None without one, or with the binary kind
-    disabled: no neuron reads it then)."""
+    """The static part of an entrained drive (None without one, or with the kind that holds
+    the drive disabled: no neuron reads it then)."""
     coupling = spec.drive.coupling if spec.drive is not None else None
-    if coupling is None or "binary" in disable:
+    kind = bonds.drive_kind()
+    if coupling is None or kind is None or kind in disable:
         return None
-    holder = int(np.flatnonzero(arrays["binary"]["neural"])[0])
+    holder = int(np.flatnonzero(arrays[kind]["neural"])[0])
     axis = spec.dimension - 1  # "height": the last axis
     which = [coupling.particle] if coupling.signal == "height" else coupling.particles
     return Coupling(tuple(names[n] for n in which), axis, float(coupling.offset), holder)

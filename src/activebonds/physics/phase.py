@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import bonds
 from ..bonds.binary import DRIVE_STATE
 from ..model.params import Params, Topology
 
@@ -42,8 +43,8 @@ def entrained(topo: Topology) -> bool:
 
 def numbers(params: Params, topo: Topology):
     """(f in Hz, gain sigma, start phase) of the drive, from the bond that holds them."""
-    binary, k = params.bonds["binary"], topo.drive.holder
-    return binary["drive_frequency"][k], binary["drive_gain"][k], binary["drive_start"][k]
+    held, k = params.bonds[bonds.drive_kind()], topo.drive.holder
+    return held["drive_frequency"][k], held["drive_gain"][k], held["drive_start"][k]
 
 
 def start_phase(params: Params, topo: Topology):
@@ -75,9 +76,10 @@ def rate(params: Params, topo: Topology, x, psi):
 def at_phase(params: Params, psi) -> Params:
     """The parameters with the drive's phase set for the forces (every binary bond reads it;
     only those with a drive weight are moved by it)."""
-    binary = dict(params.bonds["binary"])
-    binary[DRIVE_STATE] = jnp.broadcast_to(psi, jnp.shape(binary["drive_weight"]))
-    return params._replace(bonds={**params.bonds, "binary": binary})
+    kind = bonds.drive_kind()
+    held = dict(params.bonds[kind])
+    held[DRIVE_STATE] = jnp.broadcast_to(psi, jnp.shape(held["drive_weight"]))
+    return params._replace(bonds={**params.bonds, kind: held})
 
 
 def recorded_signal(
