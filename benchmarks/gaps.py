@@ -19,7 +19,8 @@ gravity), its stiffness, rest lengths and dampings identified by the exact one-s
 squares (``identify.lsq.least_squares``) on the half of the recording that does not hold the
 gap: two fits per recording, each filling the other half's gaps. The model fill is
 ``activebonds fill --method model`` (``identify.fill.model_fill``, ``--context`` 30 frames,
-``--horizon`` 10).
+``--horizon`` 1, the continuity weight chosen from the context: ``identify.fill.continuity_weight``;
+each gap's row records it).
 
 JSON out: the settings, per recording the two fits (frames, one-step RMS mm), every gap
 (marker, start, length, error per method), and summaries: per method and length the median,
@@ -107,13 +108,16 @@ def fill_one(method, model, traj, marker: int, start: int, length: int, context,
         if (g.column, g.start) != (column, start)
     )
     plan = dataclasses.replace(plan, gaps=(gap, *others))
+    extra = {}
     if method == "model":
         from activebonds.identify.fill import model_fill
 
-        values = model_fill(model, plan, context=context, horizon=horizon).values
+        found = model_fill(model, plan, context=context, horizon=horizon)
+        values = found.values
+        extra = {"continuity": found.segments[0].continuity, "steps": found.segments[0].steps}
     else:
         values = fill_baseline(method, plan.positions, plan.mask, plan.local())
-    return values[start : start + length, column]
+    return values[start : start + length, column], extra
 
 
 def summary(errors: list[float]) -> dict:
@@ -177,7 +181,7 @@ def run(args) -> dict:
                 }
                 for method in args.methods:
                     t0 = time.time()
-                    got = fill_one(
+                    got, extra = fill_one(
                         method,
                         models[half],
                         traj,
@@ -190,6 +194,7 @@ def run(args) -> dict:
                     err = np.sqrt(np.mean(np.sum((got - truth) ** 2, axis=-1))) * 1000.0
                     row["error_mm"][method] = float(err)
                     row["seconds"][method] = round(time.time() - t0, 3)
+                    row.update(extra)
                 gaps.append(row)
                 print(
                     f"{name} {row['marker']} {start}:{start + length} "
@@ -259,7 +264,7 @@ def main() -> None:
     p.add_argument("--methods", default=",".join(METHODS))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--context", type=int, default=30)
-    p.add_argument("--horizon", type=int, default=10)
+    p.add_argument("--horizon", type=int, default=1)
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args()
     args.recordings = args.recordings.split(",")

@@ -246,3 +246,47 @@ def test_a_marker_never_present_is_refused_by_name(tmp_path):
     assert res.returncode == 2
     assert "marker(s) C never present in frames 0:60: nothing to fill from" in res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["never.csv"]
+
+
+# ----------------------------------------------------------------------------- the report
+
+
+def test_fill_figure_draws_one_panel_per_filled_gap_with_the_spline_beside():
+    from activebonds.report.fill import fill_figure
+
+    truth = _truth()
+    t = _traj(
+        truth.positions, missing=[(1, 40, 70), (2, 80, 95), (0, 0, 5)], markers=("A", "B", "C")
+    )
+    plan = plan_fill(t, ("A", "B", "C"))
+    values = fill_baseline("linear", plan.positions, plan.mask, plan.local())
+    fig = fill_figure(plan, values, "linear")
+    shown = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title() for ax in shown] == ["B, frames 40:70", "C, frames 80:95"]
+    for ax in shown:
+        # per coordinate: the recording, the run's fill, the spline's fill
+        assert len(ax.get_lines()) == 3 * 3
+    filled = shown[0].get_lines()[1].get_ydata()  # x of B, the run's fill, frames 39..70
+    assert np.allclose(filled, values[39:71, 1, 0] * 1000.0)
+    assert fill_figure(plan_fill(_traj(truth.positions), ("A", "B", "C")), values, "model") is None
+
+
+def test_fill_report_is_one_self_contained_page(tmp_path):
+    src, _ = _gappy(tmp_path)
+    page = tmp_path / "fill.html"
+    out = tmp_path / "filled.trc"
+    res = cli_in_process(
+        "fill", TRIANGLE, src, "--out", out, "--method", "linear", "--report", page
+    )
+    assert res.returncode == 0, res.stderr
+    assert f"wrote {page}" in res.stdout
+    text = page.read_text()
+    assert text.count("data:image/png;base64,") == 1
+    assert 'src="http' not in text and 'href="http' not in text
+    assert "<td>B</td><td>40:70</td><td>30</td><td>filled</td>" in text
+    assert "left: at the start" in text
+    bad = cli_in_process(
+        "fill", TRIANGLE, src, "--out", tmp_path / "f2.trc", "--report", tmp_path / "r.png"
+    )
+    assert bad.returncode == 2 and "--report: expected an .html page" in bad.stderr
+    assert not (tmp_path / "f2.trc").exists()
