@@ -238,16 +238,52 @@ def run(args) -> dict:
 
 
 def table(result: dict) -> str:
-    lines = ["| recording | gap (frames) | " + " | ".join(result["settings"]["methods"]) + " |"]
-    lines.append("|" + " --- |" * (2 + len(result["settings"]["methods"])))
+    """Markdown: per recording and gap length, the gaps, each method's median error (mm), the
+    winner, and the model's median over the spline's and over the PCA fill's."""
+    methods = result["settings"]["methods"]
+    lines = [
+        "| recording | gap (frames) | gaps | "
+        + " | ".join(methods)
+        + " | best | model / spline | model / pca |"
+    ]
+    lines.append("|" + " --- |" * (6 + len(methods)))
     for name, rec in result["recordings"].items():
         for length, per in rec["by_length"].items():
-            cells = [
-                f"{per[m]['median_mm']:.3g}" if per[m].get("n") else "—"
-                for m in result["settings"]["methods"]
+            med = {m: per[m].get("median_mm", float("nan")) for m in methods}
+            cells = [f"{med[m]:.3g}" if per[m].get("n") else "—" for m in methods]
+            best = min(methods, key=lambda m: med[m] if med[m] == med[m] else float("inf"))
+            ratio = [
+                f"{med['model'] / med[o]:.2f}" if {"model", o} <= set(methods) else "—"
+                for o in ("spline", "pca")
             ]
-            lines.append(f"| {name} | {length} | " + " | ".join(cells) + " |")
+            n = per[methods[0]].get("n", 0)
+            lines.append(
+                f"| {name} | {length} | {n} | "
+                + " | ".join(cells)
+                + f" | {best} | "
+                + " | ".join(ratio)
+                + " |"
+            )
     return "\n".join(lines)
+
+
+def merge(paths: list[Path]) -> dict:
+    """One result from several runs' JSON (each recording from the last run that has it); the
+    runs' settings kept in ``runs``."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    out = {"settings": dict(runs[0]["settings"]), "runs": [], "recordings": {}}
+    for run_ in runs:
+        out["runs"].append(
+            {
+                **run_["settings"],
+                "seconds": run_.get("seconds"),
+                "recordings_run": list(run_["recordings"]),
+            }
+        )
+        out["recordings"].update(run_["recordings"])
+    out["settings"]["recordings"] = list(out["recordings"])
+    out["settings"]["command"] = [r["command"] for r in out["runs"]]
+    return out
 
 
 def main() -> None:
@@ -266,7 +302,20 @@ def main() -> None:
     p.add_argument("--context", type=int, default=30)
     p.add_argument("--horizon", type=int, default=1)
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument(
+        "--merge", type=Path, nargs="+", default=None, help="join these runs' JSON into --json"
+    )
+    p.add_argument("--table", type=Path, default=None, help="print the table of this JSON")
     args = p.parse_args()
+    if args.table is not None:
+        print(table(json.loads(args.table.read_text())))
+        return
+    if args.merge:
+        result = merge(args.merge)
+        if args.json is not None:
+            args.json.write_text(json.dumps(result, indent=2) + "\n")
+        print(table(result))
+        return
     args.recordings = args.recordings.split(",")
     args.lengths = [int(x) for x in args.lengths.split(",")]
     args.methods = args.methods.split(",")
