@@ -76,8 +76,6 @@ def fill(
     continuity: Annotated[
         float | None,
         typer.Option(
-            min=0.0,
-            min_open=True,
             help="Weight of the model's continuity defects against the position errors "
             "(default: from how much of the context's accelerations the model explains, "
             "0.3 for a model that explains none to 100 for one that explains them all).",
@@ -120,6 +118,8 @@ def fill(
             raise InputError("--method", f"expected {', '.join(METHODS)}, got '{method}'")
         if denoise and method != "model":
             raise InputError("--denoise", f"needs --method model, not {method}")
+        if continuity is not None and not continuity > 0.0:
+            raise InputError("--continuity", f"expected a positive weight, got {continuity}")
         if integrator not in ("euler", "verlet"):
             raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
         render = WRITERS.get(out_path.suffix.lower())
