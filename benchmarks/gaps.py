@@ -19,7 +19,8 @@ gravity), its stiffness, rest lengths and dampings identified by the exact one-s
 squares (``identify.lsq.least_squares``) on the half of the recording that does not hold the
 gap: two fits per recording, each filling the other half's gaps. The model fill is
 ``activebonds fill --method model`` (``identify.fill.model_fill``, ``--context`` 30 frames,
-``--horizon`` 10).
+``--horizon`` 1, the continuity weight chosen from the context: ``identify.fill.continuity_weight``;
+each gap's row records it).
 
 JSON out: the settings, per recording the two fits (frames, one-step RMS mm), every gap
 (marker, start, length, error per method), and summaries: per method and length the median,
@@ -41,6 +42,7 @@ ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
 METHODS = ("model", "spline", "linear", "pca")
+RECORDINGS = ("horse-trot", "horse-walk", "human-walk")
 
 
 def recording(name: str):
@@ -107,13 +109,16 @@ def fill_one(method, model, traj, marker: int, start: int, length: int, context,
         if (g.column, g.start) != (column, start)
     )
     plan = dataclasses.replace(plan, gaps=(gap, *others))
+    extra = {}
     if method == "model":
         from activebonds.identify.fill import model_fill
 
-        values = model_fill(model, plan, context=context, horizon=horizon).values
+        found = model_fill(model, plan, context=context, horizon=horizon)
+        values = found.values
+        extra = {"continuity": found.segments[0].continuity, "steps": found.segments[0].steps}
     else:
         values = fill_baseline(method, plan.positions, plan.mask, plan.local())
-    return values[start : start + length, column]
+    return values[start : start + length, column], extra
 
 
 def summary(errors: list[float]) -> dict:
@@ -126,6 +131,44 @@ def summary(errors: list[float]) -> dict:
         "median_mm": float(np.median(e)),
         "mean_mm": float(np.mean(e)),
         "p90_mm": float(np.percentile(e, 90)),
+    }
+
+
+def summarize(traj, fits, gaps, args) -> dict:
+    """A recording's result: its fits, its gaps, the summaries per length and per marker."""
+    lengths = sorted({g["length"] for g in gaps})
+    by_length = {
+        str(length): {
+            m: summary([g["error_mm"][m] for g in gaps if g["length"] == length])
+            for m in args.methods
+        }
+        for length in lengths
+    }
+    by_marker = {
+        str(length): {
+            marker: {
+                m: float(
+                    np.median(
+                        [
+                            g["error_mm"][m]
+                            for g in gaps
+                            if g["length"] == length and g["marker"] == marker
+                        ]
+                    )
+                )
+                for m in args.methods
+            }
+            for marker in sorted({g["marker"] for g in gaps if g["length"] == length})
+        }
+        for length in lengths
+    }
+    return {
+        "frames": traj.n_frames,
+        "markers": list(traj.markers),
+        "fits": fits,
+        "by_length": by_length,
+        "by_marker": by_marker,
+        "gaps": gaps,
     }
 
 
@@ -165,7 +208,9 @@ def run(args) -> dict:
             )
         gaps = []
         for length in args.lengths:
-            rng = np.random.default_rng([args.seed, r_index, length])
+            # the recording's place among the bundled ones: a run of a subset draws the same gaps
+            index = RECORDINGS.index(name) if name in RECORDINGS else r_index
+            rng = np.random.default_rng([args.seed, index, length])
             for half, marker, start in draw_gaps(traj, length, args.positions, rng):
                 truth = traj.positions[start : start + length, marker]
                 row = {
@@ -177,7 +222,7 @@ def run(args) -> dict:
                 }
                 for method in args.methods:
                     t0 = time.time()
-                    got = fill_one(
+                    got, extra = fill_one(
                         method,
                         models[half],
                         traj,
@@ -190,59 +235,67 @@ def run(args) -> dict:
                     err = np.sqrt(np.mean(np.sum((got - truth) ** 2, axis=-1))) * 1000.0
                     row["error_mm"][method] = float(err)
                     row["seconds"][method] = round(time.time() - t0, 3)
+                    row.update(extra)
                 gaps.append(row)
                 print(
                     f"{name} {row['marker']} {start}:{start + length} "
                     + " ".join(f"{m} {e:.3g}" for m, e in row["error_mm"].items()),
                     flush=True,
                 )
-        by_length = {
-            str(length): {
-                m: summary([g["error_mm"][m] for g in gaps if g["length"] == length])
-                for m in args.methods
-            }
-            for length in args.lengths
-        }
-        by_marker = {
-            str(length): {
-                marker: {
-                    m: float(
-                        np.median(
-                            [
-                                g["error_mm"][m]
-                                for g in gaps
-                                if g["length"] == length and g["marker"] == marker
-                            ]
-                        )
-                    )
-                    for m in args.methods
-                }
-                for marker in sorted({g["marker"] for g in gaps if g["length"] == length})
-            }
-            for length in args.lengths
-        }
-        out["recordings"][name] = {
-            "frames": traj.n_frames,
-            "markers": list(traj.markers),
-            "fits": fits,
-            "by_length": by_length,
-            "by_marker": by_marker,
-            "gaps": gaps,
-        }
+                out["recordings"][name] = summarize(traj, fits, gaps, args)
+                if args.json is not None:  # a partial result after every gap
+                    args.json.write_text(json.dumps(out, indent=2) + "\n")
+        out["recordings"][name] = summarize(traj, fits, gaps, args)
     return out
 
 
 def table(result: dict) -> str:
-    lines = ["| recording | gap (frames) | " + " | ".join(result["settings"]["methods"]) + " |"]
-    lines.append("|" + " --- |" * (2 + len(result["settings"]["methods"])))
+    """Markdown: per recording and gap length, the gaps, each method's median error (mm), the
+    winner, and the model's median over the spline's and over the PCA fill's."""
+    methods = result["settings"]["methods"]
+    lines = [
+        "| recording | gap (frames) | gaps | "
+        + " | ".join(methods)
+        + " | best | model / spline | model / pca |"
+    ]
+    lines.append("|" + " --- |" * (6 + len(methods)))
     for name, rec in result["recordings"].items():
         for length, per in rec["by_length"].items():
-            cells = [
-                f"{per[m]['median_mm']:.3g}" if per[m].get("n") else "—"
-                for m in result["settings"]["methods"]
+            med = {m: per[m].get("median_mm", float("nan")) for m in methods}
+            cells = [f"{med[m]:.3g}" if per[m].get("n") else "—" for m in methods]
+            best = min(methods, key=lambda m: med[m] if med[m] == med[m] else float("inf"))
+            ratio = [
+                f"{med['model'] / med[o]:.2f}" if {"model", o} <= set(methods) else "—"
+                for o in ("spline", "pca")
             ]
-            lines.append(f"| {name} | {length} | " + " | ".join(cells) + " |")
+            n = per[methods[0]].get("n", 0)
+            lines.append(
+                f"| {name} | {length} | {n} | "
+                + " | ".join(cells)
+                + f" | {best} | "
+                + " | ".join(ratio)
+                + " |"
+            )
     return "\n".join(lines)
+
+
+def merge(paths: list[Path]) -> dict:
+    """One result from several runs' JSON (each recording from the last run that has it); the
+    runs' settings kept in ``runs``."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    out = {"settings": dict(runs[0]["settings"]), "runs": [], "recordings": {}}
+    for run_ in runs:
+        out["runs"].append(
+            {
+                **run_["settings"],
+                "seconds": run_.get("seconds"),
+                "recordings_run": list(run_["recordings"]),
+            }
+        )
+        out["recordings"].update(run_["recordings"])
+    out["settings"]["recordings"] = list(out["recordings"])
+    out["settings"]["command"] = [r["command"] for r in out["runs"]]
+    return out
 
 
 def main() -> None:
@@ -253,15 +306,28 @@ def main() -> None:
 
     jax.config.update("jax_enable_x64", True)
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--recordings", default="horse-trot,horse-walk,human-walk")
+    p.add_argument("--recordings", default=",".join(RECORDINGS))
     p.add_argument("--lengths", default="10,30,60")
     p.add_argument("--positions", type=int, default=20)
     p.add_argument("--methods", default=",".join(METHODS))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--context", type=int, default=30)
-    p.add_argument("--horizon", type=int, default=10)
+    p.add_argument("--horizon", type=int, default=1)
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument(
+        "--merge", type=Path, nargs="+", default=None, help="join these runs' JSON into --json"
+    )
+    p.add_argument("--table", type=Path, default=None, help="print the table of this JSON")
     args = p.parse_args()
+    if args.table is not None:
+        print(table(json.loads(args.table.read_text())))
+        return
+    if args.merge:
+        result = merge(args.merge)
+        if args.json is not None:
+            args.json.write_text(json.dumps(result, indent=2) + "\n")
+        print(table(result))
+        return
     args.recordings = args.recordings.split(",")
     args.lengths = [int(x) for x in args.lengths.split(",")]
     args.methods = args.methods.split(",")

@@ -67,8 +67,20 @@ def fill(
         ),
     ] = 30,
     horizon: Annotated[
-        int, typer.Option(min=1, help="Frames per shooting window of the model's fit.")
-    ] = 10,
+        int,
+        typer.Option(
+            min=1,
+            help="Frames per shooting window of the model's fit (1: every frame's state free).",
+        ),
+    ] = 1,
+    continuity: Annotated[
+        float | None,
+        typer.Option(
+            help="Weight of the model's continuity defects against the position errors "
+            "(default: from how much of the context's accelerations the model explains, "
+            "0.3 for a model that explains none to 100 for one that explains them all).",
+        ),
+    ] = None,
     substeps: Annotated[
         int, typer.Option(min=1, help="Integration substeps per frame (as the model was fitted).")
     ] = 1,
@@ -80,6 +92,13 @@ def fill(
         typer.Option(
             help="The sidecar CSV listing every sample of every gap: frame, marker, filled or "
             "left, method, estimated uncertainty (default: OUT's name with .gaps.csv)."
+        ),
+    ] = None,
+    report: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also write this self-contained HTML page: per filled gap, the recording "
+            "around it, the filled samples and the cubic spline's fill beside them."
         ),
     ] = None,
 ):
@@ -99,6 +118,8 @@ def fill(
             raise InputError("--method", f"expected {', '.join(METHODS)}, got '{method}'")
         if denoise and method != "model":
             raise InputError("--denoise", f"needs --method model, not {method}")
+        if continuity is not None and not continuity > 0.0:
+            raise InputError("--continuity", f"expected a positive weight, got {continuity}")
         if integrator not in ("euler", "verlet"):
             raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
         render = WRITERS.get(out_path.suffix.lower())
@@ -113,6 +134,11 @@ def fill(
             raise InputError("--record", f"is the filled file itself ({out_path})")
         check_output_path(out_path)
         check_output_path(sidecar)
+        if report is not None:
+            if report.suffix.lower() not in (".html", ".htm"):
+                raise InputError("--report", f"expected an .html page, got '{report.name}'")
+            if not report.absolute().parent.is_dir():
+                raise InputError("--report", f"the folder of {report} does not exist")
         window = parse_option_frames(frames, parse_frames)
         m = load_model(model)
         chosen = parse_markers(markers) or m.markers
@@ -129,19 +155,30 @@ def fill(
             )
         plan = plan_fill(data, chosen, window, max_gap)
         values, uncertainty, note = _fill_values(
-            m, plan, method, denoise, context, horizon, substeps, integrator
+            m, plan, method, denoise, context, horizon, substeps, integrator, continuity
         )
         from ..data.fill import apply_fill, record_csv
 
         filled, records = apply_fill(plan, values, uncertainty, method, denoised=denoise)
         text = render(filled, out_path)  # every check of the format before anything is written
+        page = None
+        if report is not None:
+            from ..report.fill import fill_report
+
+            page = fill_report(plan, values, method, traj.name, note)
         _write_both(out_path, text, sidecar, record_csv(records))
+        if page is not None:
+            from ..report.files import write_html
+
+            write_html(report, page)
     except InputError as e:
         fail(e)
     _summary(plan, records, method, out_path, sidecar, denoise, note)
+    if report is not None:
+        say(f"wrote {report} (the filled gaps drawn, the spline's fill beside)")
 
 
-def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrator):
+def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrator, continuity):
     """(values [F, M, D] of the window, per gap to fill its uncertainty in metres, a note)."""
     if method == "model":
         from ..identify.fill import model_fill
@@ -154,6 +191,7 @@ def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrato
             substeps=substeps,
             integrator=integrator,
             denoise=denoise,
+            continuity=continuity,
         )
         return found.values, found.uncertainty, found.note()
     from ..data.fill import baseline_uncertainty, fill_baseline

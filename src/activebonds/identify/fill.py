@@ -39,6 +39,7 @@ from ..physics.integrate import rollout_states
 from ..runtime import float64
 from .lm import levenberg_marquardt
 from .shooting import (
+    CONTINUITY_WEIGHT,
     ShootingWindows,
     frame_states,
     make_shooting,
@@ -48,6 +49,9 @@ from .shooting import (
 from .shooting_normal import block_tridiagonal_solve, make_normal
 
 MAX_STEPS = 200
+RATIO_FRAMES = 8  # frames ahead of the prediction that sets the continuity weight
+HORIZON = 1  # frames per shooting window: every frame's state its own unknown
+CONTINUITY = 0.3  # least weight of a continuity defect against a position error (metres each)
 RTOL, ATOL = 1e-10, 1e-12
 
 
@@ -60,9 +64,11 @@ class Segment:
     steps: int
     message: str
     rms_mm: float  # of the present samples, at the solution
+    continuity: float = CONTINUITY_WEIGHT  # weight of a continuity defect
 
     def record(self) -> dict:
         return {
+            "continuity": self.continuity,
             "frames": f"{self.start}:{self.stop}",
             "steps": self.steps,
             "message": self.message,
@@ -130,16 +136,63 @@ def inverse_diagonal_blocks(diag: np.ndarray, off: np.ndarray) -> np.ndarray:
     return np.linalg.inv(left + right - diag)
 
 
+def continuity_weight(ratio: float) -> float:
+    """The weight of a continuity defect (against a position error) for a model whose one-step
+    error is ``ratio`` times zero force's: ``CONTINUITY / ratio^2`` within
+    [``CONTINUITY``, ``CONTINUITY_WEIGHT``]. A model that explains the accelerations (ratio near
+    0: the true model, the noise left) is held to its dynamics as the shooting fit holds it; a
+    model that explains little of them (ratio near 1) lets the trajectory leave its dynamics
+    where the markers present ask for it, at a cost still large enough to carry the missing
+    marker through the gap."""
+    if not np.isfinite(ratio) or ratio <= 0.0:
+        return CONTINUITY_WEIGHT
+    return float(np.clip(CONTINUITY / ratio**2, CONTINUITY, CONTINUITY_WEIGHT))
+
+
+def one_step_ratio(
+    model: Model, genome, positions, mask, dt, first, substeps=1, integrator="euler"
+) -> float:
+    """How much of the motion's accelerations the model leaves unexplained: on the frames t of
+    ``positions`` [S, M, D] where every marker is present at t - n, t and t + n
+    (n = ``RATIO_FRAMES``), the RMS of ``x(t+n) - 2 x(t) + x(t-n) - (n dt)^2 F(x, v, t) / m``
+    over the RMS of the second difference alone (zero force's), with v the central difference
+    over 2 n frames; NaN without such frames. Over several frames the accelerations outgrow
+    the marker noise, which a one-frame ratio would measure instead. (``substeps`` and
+    ``integrator`` are the fill's; the ratio reads the forces alone.)"""
+    from ..physics.forces import total_force
+
+    n = RATIO_FRAMES
+    if len(positions) <= 2 * n:
+        return float("nan")
+    ok = mask[: -2 * n].all(1) & mask[n:-n].all(1) & mask[2 * n :].all(1)
+    t = np.flatnonzero(ok) + n
+    if not t.size:
+        return float("nan")
+    x, prev, nxt = positions[t], positions[t - n], positions[t + n]
+    params = model.layout.decode(genome)
+    v = (nxt - prev) / (2 * n * dt)
+
+    def accel(x0, v0, time):
+        return total_force(params, model.topology, x0, v0, time) / params.mass[:, None]
+
+    a = np.asarray(jax.vmap(accel)(jnp.asarray(x), jnp.asarray(v), jnp.asarray((t + first) * dt)))
+    second = nxt - 2.0 * x + prev
+    e_model = float(np.sqrt(np.mean(np.square(second - (n * dt) ** 2 * a))))
+    e_zero = float(np.sqrt(np.mean(np.square(second))))
+    return e_model / e_zero if e_zero > 0.0 else float("nan")
+
+
 @float64
 def model_fill(
     model: Model,
     plan: FillPlan,
     context: int = 30,
-    horizon: int = 10,
+    horizon: int = HORIZON,
     substeps: int = 1,
     integrator: str = "euler",
     denoise: bool = False,
     max_steps: int = MAX_STEPS,
+    continuity: float | None = None,
 ) -> ModelFill:
     """The model's fill of the plan's gaps (see the module docstring).
 
@@ -166,6 +219,19 @@ def model_fill(
     sigma = np.zeros((n_frames, n_markers))
     segments = []
     for a, b in spans:
+        weight = continuity
+        if weight is None:
+            ratio = one_step_ratio(
+                model,
+                genome,
+                positions[a:b],
+                mask[a:b],
+                dt,
+                plan.window[0] + a,
+                substeps,
+                integrator,
+            )
+            weight = continuity_weight(ratio)
         xs, sd, seg = _fit_segment(
             model,
             genome,
@@ -178,8 +244,9 @@ def model_fill(
             substeps,
             integrator,
             max_steps,
+            weight / CONTINUITY_WEIGHT,
         )
-        seg = Segment(a, b, *seg)
+        seg = Segment(a, b, *seg, continuity=weight)
         segments.append(seg)
         values[a:b] = xs
         sigma[a:b] = sd
@@ -195,13 +262,15 @@ class _Programs:
     :class:`.shooting.ShootingWindows` holds them) as arguments: compiled once per shape, not
     once per gap."""
 
-    def __init__(self, model: Model, horizon: int, dt: float, substeps: int, integrator: str):
+    def __init__(
+        self, model: Model, horizon: int, dt: float, substeps: int, integrator: str, link: float
+    ):
         self.model, self.horizon, self.dt = model, horizon, dt
 
         def windows(starts, target, weight):
             k = target.shape[0]
-            link = np.ones(k - 1)
-            return ShootingWindows(starts, target, weight, dt, link=link, segments=((0, k, 0),))
+            link_ = np.full(k - 1, link)
+            return ShootingWindows(starts, target, weight, dt, link=link_, segments=((0, k, 0),))
 
         def split(z, target):
             half = z.shape[1] // 2
@@ -239,19 +308,30 @@ class _Programs:
 
 
 @functools.lru_cache(maxsize=4)
-def _programs(model, horizon, dt, substeps, integrator) -> _Programs:
-    return _Programs(model, horizon, dt, substeps, integrator)
+def _programs(model, horizon, dt, substeps, integrator, link=1.0) -> _Programs:
+    return _Programs(model, horizon, dt, substeps, integrator, link)
 
 
 def _fit_segment(
-    model, genome, positions, mask, states, dt, first, horizon, substeps, integrator, max_steps
+    model,
+    genome,
+    positions,
+    mask,
+    states,
+    dt,
+    first,
+    horizon,
+    substeps,
+    integrator,
+    max_steps,
+    link=1.0,
 ):
     """(positions [S, M, D], their standard errors [S, M], (steps, message, RMS mm))."""
     n_frames, n_markers, dim = positions.shape
     local = shooting_windows(positions, mask, dt, horizon)
     x0, v0 = start_states(local, [states])
     k, h = len(local.starts), local.horizon
-    programs = _programs(model, h, dt, substeps, integrator)
+    programs = _programs(model, h, dt, substeps, integrator, float(link))
     # frames of the recording: time-dependent forces see its time
     data = (
         jnp.asarray(local.starts + first, jnp.float64),
