@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 
 YNN_FLAG = "xla_cpu_experimental_ynn_fusion_type"
+MIN_SECONDS_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
 
 
 def fast_cpu_flags() -> None:
@@ -60,9 +61,6 @@ def compilation_cache() -> None:
     jax.config.update("jax_compilation_cache_dir", str(folder))
     if MIN_SECONDS_ENV not in os.environ:  # keep every program: a fit's small ones add up
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-
-
-MIN_SECONDS_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
 
 
 def keep_compiled() -> None:

@@ -46,12 +46,11 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import FLOOR, damped_step, make_normal, marquardt_diagonal
+from .shooting_normal import damped_step, floored, make_normal, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
-INITIAL_DAMPING = (
-    1e-3  # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
-)
+# of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
+INITIAL_DAMPING = 1e-3
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
 EDGE = 1e-9  # a start on a bound is moved this far (of the span) inside, where sin' != 0
 
@@ -121,8 +120,7 @@ def _solve_dense(residual, y0, max_steps: int):
 @jax.jit
 def _dense_diagonal(system):
     """J^T J's diagonal, floored (as :func:`.shooting_normal.marquardt_diagonal`)."""
-    diag = jnp.diagonal(system[0])
-    return jnp.maximum(diag, FLOOR * jnp.max(diag))
+    return floored(jnp.diagonal(system[0]))
 
 
 @jax.jit

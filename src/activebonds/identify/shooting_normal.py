@@ -177,10 +177,14 @@ FLOOR = 1e-9  # of the largest diagonal entry: the least a variable's damping is
 def marquardt_diagonal(normal: Normal):
     """J^T J's diagonal as (du [p], dS [K, n]), floored at :data:`FLOOR` of its largest entry
     (a variable the data do not see is still damped): Marquardt's scaling of the damping."""
-    du = jnp.diagonal(normal.params)
-    ds = jnp.diagonal(normal.diag, axis1=1, axis2=2)
-    floor = FLOOR * jnp.maximum(jnp.max(du), jnp.max(ds))
-    return jnp.maximum(du, floor), jnp.maximum(ds, floor)
+    return floored((jnp.diagonal(normal.params), jnp.diagonal(normal.diag, axis1=1, axis2=2)))
+
+
+def floored(diagonal):
+    """A diagonal (an array or a tuple of arrays) floored at :data:`FLOOR` of its largest
+    entry."""
+    floor = FLOOR * jnp.max(jnp.stack([jnp.max(d) for d in jax.tree.leaves(diagonal)]))
+    return jax.tree.map(lambda d: jnp.maximum(d, floor), diagonal)
 
 
 @jax.jit
