@@ -23,13 +23,13 @@ The steps, each one's output in the output folder ``OUT``:
    the scaffold is written again without gravity (the first kept in
    ``OUT/scaffold-gravity.toml``) and decided again, and the run says so;
 3. **fit** (:func:`~.driver.fit`) of the structure from its exact optimum (``init =
-   "model"``: the ES seeded there) on the one-step cost, whose optimum it is: ``OUT/run/``.
-   Where there is a ground model, it is fitted too, from its own start, the refinement's
-   cost chosen as ``fit --cost auto`` does (:func:`~.cost_choice.choose_cost`: multiple
-   shooting where a window has at most 300 unknowns, else the restart cost):
-   ``OUT/run-ground/``; it is kept where its one-step BIC on the fitted frames is lower than
-   the structure's (its contacts and gravity earn their parameters), else the structure's
-   fit is (:func:`~.structure_choice.criterion`). ``auto.json`` names the kept run;
+   "model"``: the ES seeded there) on the one-step cost, whose optimum it is, and by which
+   the pipeline judges a model: ``OUT/run/``. Where there is a ground model, it is fitted the
+   same way from its own start (``OUT/run-ground/``) and kept where its one-step BIC on the
+   fitted frames is lower than the structure's (its contacts and gravity earn their
+   parameters), else the structure's fit is (:func:`~.structure_choice.criterion`).
+   ``auto.json`` names the kept run (``steps.fit.run``). For parameters unbiased by marker
+   noise, refit the kept model with ``fit --cost shooting``;
 4. **evaluate** (:func:`~activebonds.report.evaluate.evaluate`) the kept model on the
    held-out tail (the last :data:`HELD_OUT` of the frames, never seen by steps 1-3) and on
    the fitted frames, one step and :data:`AHEAD` frames ahead, beside zero force:
@@ -454,8 +454,6 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
     there is a ground model, it fitted too (OUT/run-ground, the cost as fit --cost auto) and
     kept where its one-step BIC on the fitted frames is lower. Records the kept run's name in
     the fit step of ``state``."""
-    from .identify.cost_choice import choose_cost
-    from .identify.problem import select_recordings, variant
     from .identify.rundir import RunDir
     from .identify.structure_choice import criterion
     from .model import load_model
@@ -469,14 +467,12 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
     linear = _fit_into(folder.run, folder.structure, recording_path, one_step, say, fit_progress)
     kept, why = folder.run, ""
     if folder.ground.exists():
-        spec = variant(load_model(folder.ground), settings.bonds)
-        data = select_recordings(spec, [recording], settings)[0]
-        coords = data.positions.shape[1] * data.positions.shape[2]
-        ground_settings, line = choose_cost(settings, spec.layout.n_genes, coords, False)
-        say(f"      the model with gravity and ground contacts ({folder.ground}): {line}")
-        _fit_into(
-            folder.run_ground, folder.ground, recording_path, ground_settings, say, fit_progress
+        say(
+            f"      the model with gravity and ground contacts ({folder.ground}), from its "
+            "exact optimum with the contacts held: the same cost, one step, by which the two "
+            "are compared"
         )
+        _fit_into(folder.run_ground, folder.ground, recording_path, one_step, say, fit_progress)
         scores = {
             path: criterion(load_model(RunDir(path).best_model_path), recording, split.fitted)
             for path in (folder.run, folder.run_ground)
