@@ -55,7 +55,7 @@ from pathlib import Path
 from .errors import InputError
 
 HELD_OUT = 0.2  # the share of the frames held out at the end of the window
-MAX_DECIDED = 40  # candidate springs: above, structure keeps them all (no elimination)
+MAX_DECIDED = 40  # candidate bonds: above, structure keeps them all (no elimination)
 AHEAD = 10  # frames ahead of the multi-step verdict
 POPULATION = 40  # the ES's, small: it starts at the structure's exact optimum
 GENERATIONS = 200
@@ -278,7 +278,7 @@ def run(
             say(f"      {note}")
         write_text_atomic(folder.scaffold, found.text)
         return (
-            f"{found.particles} particles, {found.bonds} candidate springs, {found.contacts} "
+            f"{found.particles} particles, {found.bonds} candidate bonds, {found.contacts} "
             f"ground contacts, gravity {found.gravity}: {folder.scaffold}"
         )
 
@@ -441,7 +441,7 @@ def _decide(model, recording, split: Windows, say):
     eliminate = n <= MAX_DECIDED
     if not eliminate:
         say(
-            f"      structure: {n} candidate springs, more than {MAX_DECIDED}: no elimination "
+            f"      structure: {n} candidate bonds, more than {MAX_DECIDED}: no elimination "
             f"(its exact least squares grow with the square of the candidates, hours here); "
             "every candidate kept, at its exact least-squares optimum"
         )
