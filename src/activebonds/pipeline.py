@@ -27,7 +27,8 @@ The steps, each one's output in the output folder ``OUT``:
    the pipeline judges a model: ``OUT/run/``. Where there is a ground model, it is fitted the
    same way from its own start (``OUT/run-ground/``) and kept where its one-step BIC on the
    fitted frames is lower than the structure's (its contacts and gravity earn their
-   parameters), else the structure's fit is (:func:`~.structure_choice.criterion`).
+   parameters) or ``--up`` / ``--gravity`` insists on gravity, else the structure's fit is
+   (:func:`~.structure_choice.criterion`).
    ``auto.json`` names the kept run (``steps.fit.run``). For parameters unbiased by marker
    noise, refit the kept model with ``fit --cost shooting``;
 4. **evaluate** (:func:`~activebonds.report.evaluate.evaluate`) the kept model on the
@@ -478,12 +479,15 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
             for path in (folder.run, folder.run_ground)
         }
         plain, ground = scores[folder.run], scores[folder.run_ground]
-        if ground.bic < plain.bic:
+        insisted = options.gravity is True or options.up is not None
+        if ground.bic < plain.bic or insisted:
             kept = folder.run_ground
         why = (
-            f"; kept {kept.name}: one-step BIC {min(plain.bic, ground.bic):.6g} against "
-            f"{max(plain.bic, ground.bic):.6g} (RMS {plain.rms_mm:.4g} mm with {plain.k} "
-            f"parameters, {ground.rms_mm:.4g} mm with {ground.k} and gravity, contacts)"
+            f"; kept {kept.name}"
+            + (" (--up or --gravity insists on gravity)" if insisted else "")
+            + f": one-step BIC {ground.bic:.6g} with gravity and contacts ({ground.rms_mm:.4g} "
+            f"mm, {ground.k} parameters), {plain.bic:.6g} without ({plain.rms_mm:.4g} mm, "
+            f"{plain.k})"
         )
         state["parts"]["fit"] = {
             "criterion": {"run": plain.record(), "run-ground": ground.record()}
