@@ -199,9 +199,11 @@ def run_auto(gait: str, folder: Path) -> dict:
     command = ["activebonds", "auto", str(path), "--held-out", "0.5", "--out", str(out_dir)]
     state = out_dir / "auto.json"
     if not (state.is_file() and "report" in json.loads(state.read_text())["steps"]):
-        proc = subprocess.run(command, capture_output=True, text=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(folder / f"{gait}.log", "w") as log:  # the command's own lines
+            proc = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(proc.stderr)
+            raise RuntimeError(f"{' '.join(command)} failed: see {folder / gait}.log")
     record = json.loads(state.read_text())
     held = json.loads((out_dir / "evaluation.json").read_text())["held_out"]
     kept = out_dir / record["steps"]["fit"].get("run", "run")
@@ -217,8 +219,8 @@ def run_auto(gait: str, folder: Path) -> dict:
         "fit": record["steps"]["fit"]["note"],
         "held_out_rms_mm": one["model_mm"],
         "zero_force_rms_mm": one["zero_force_mm"],
-        "per_marker_mm": one["model_per_marker"],
-        "zero_force_per_marker_mm": one["zero_force_per_marker"],
+        "per_marker_mm": one["model_per_marker_mm"],
+        "zero_force_per_marker_mm": one["zero_force_per_marker_mm"],
         "ahead": {k: ahead[k] for k in ("horizon", "model_mm", "zero_force_mm")},
         "frames_within_50mm": held["model"]["median_frames_within"],
         "zero_force_frames_within_50mm": held["zero_force"]["median_frames_within"],
