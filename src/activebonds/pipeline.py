@@ -493,12 +493,13 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
             "criterion": {"run": plain.record(), "run-ground": ground.record()}
         }
     state["parts"].setdefault("fit", {})["run"] = kept.name
-    return f"best one-step RMS {linear.rms_mm:.4g} mm on the fitted frames: {folder.run}{why}"
+    return f"best one-step RMS {linear:.4g} mm on the fitted frames: {folder.run}{why}"
 
 
-def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress):
-    """A fit of ``model_path`` in ``run_path``: kept if completed before, resumed if
-    interrupted, else run anew; its summary lines said."""
+def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress) -> float:
+    """A fit of ``model_path`` in ``run_path``: resumed where it holds a checkpoint (a
+    completed run resumes at once: its stages' records are kept, a missing one is run), else
+    run anew; its summary lines said. Returns its best one-step RMS (mm)."""
     from contextlib import nullcontext
 
     from .identify.driver import fit, resume
@@ -509,8 +510,8 @@ def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress)
     status = read_status(run_path).get("status") if run_dir.is_run() else None
     with progress(settings.generations, "compiling") as bar:
         hooks = {"progress": bar, "status": bar.status} if bar is not None else {}
-        if status not in (None, "completed") and newest_checkpoint(run_path) is not None:
-            say(f"      resuming the interrupted fit in {run_path}")
+        if status is not None and newest_checkpoint(run_path) is not None:
+            say(f"      resuming the fit in {run_path} ({status})")
             result = resume(run_path, **hooks)
         else:
             result = fit(
@@ -520,7 +521,7 @@ def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress)
         raise RuntimeError(f"the fit ended {result.status}; see {run_path}")
     for line in result.lines():
         say(f"      {line}")
-    return result
+    return result.rms_mm
 
 
 def fit_settings(options: Options, split: Windows):
