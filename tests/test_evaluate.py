@@ -161,6 +161,7 @@ def test_the_command_prints_a_table_and_json(files):
         "zero_force",
         "particles",
         "comparisons",  # the verdicts, one step and 10 frames ahead (test_verdict.py)
+        "holds",  # what holds the model, for the free run's advice (test_verdict.py)
     }
     assert record["model_file"] == str(TRIANGLE) and record["frames"] == [0, FRAMES]
     assert record["model"] == found.model.to_dict()

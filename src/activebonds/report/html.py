@@ -308,7 +308,7 @@ def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
     out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
     if "fitted" in fitted:
         run = FreeRunMetrics.from_dict(fitted["fitted"]["model"]).free_run_rms_mm
-        out += [a for a in (free_run_advice(run),) if a is not None]
+        out += [a for a in (free_run_advice(run, fitted.get("holds")),) if a is not None]
     held = record.records.get(validation.NAME)
     if held is not None and "judged" in held:
         a, b = held["frames"]
