@@ -69,6 +69,8 @@ class Stage:
     continuity_mm: float | None  # largest continuity defect in position (shooting), at the end
     seconds: float
     genome: list[float] = field(default_factory=list)  # the result (the start if rejected)
+    # why shooting was not kept, when this one-step stage was refined in its place, else ""
+    instead_of_shooting: str = ""
 
     def record(self) -> dict:
         return asdict(self)
@@ -367,6 +369,7 @@ class Refinement:
         stage = self._restart(1, genome, getattr(self.settings, "max_steps", MAX_STEPS))
         stage.cost = "restart"
         stage.message = f"{why}; refined on the one-step cost instead: {stage.message}"
+        stage.instead_of_shooting = why
         return stage
 
     def _judge(self, horizon, start_genome, result, objective, rms, steps, message):
