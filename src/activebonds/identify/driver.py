@@ -519,7 +519,12 @@ def _run_stage(stage, fit: stages.Fit, records: dict) -> np.ndarray | None:
     if fit.say is not None:
         fit.say(stage.doing(fit))
     saved, arrays = run.load_record(stage.name) if run is not None else (None, {})
-    outcome = stage.run(fit, saved, arrays)
+    try:
+        outcome = stage.run(fit, saved, arrays)
+    except KeyboardInterrupt:  # Ctrl-C at a stage's safe point: it saved what it had
+        if run is not None:
+            run.update_status(status="interrupted")
+        raise
     records[stage.name] = outcome.record
     if run is not None:
         run.save_record(stage.name, outcome.record, arrays=outcome.arrays, files=outcome.files)
