@@ -215,3 +215,48 @@ def test_cli_writes_the_file_and_nothing_on_refusal(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.strip() == "error: --format: expected mjcf, got 'urdf'"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["triangle.xml"]
+
+
+def test_export_from_a_recording_starts_with_the_velocity_that_lands_on_the_next_frame(tmp_path):
+    """``export --from TRAJ --frame 0``, as documented: the velocity from which the model's
+    step lands on frame 1, not the forward difference. A triangle damped strongly for its
+    100 Hz frames (c dt / m = 3), where the cheap fixed point diverges: Newton's method finds
+    the recording's own start velocity, MuJoCo from the exported keyframe lands on frame 1,
+    and the command says how the velocity was found. (It wrote the forward difference here,
+    silently: 0.28 m/s off.)"""
+    import re
+
+    from activebonds.data import write_trajectory
+    from helpers import cli_in_process
+
+    text = re.sub(r"damping = \{[^}]*\}", "damping = 300.0", TRIANGLE.read_text())
+    model = loads_model(text)
+    recording = simulate(model, 20, RATE)
+    write_trajectory(recording, tmp_path / "rec.csv")
+    (tmp_path / "damped.toml").write_text(text)
+    out = tmp_path / "damped.xml"
+    proc = cli_in_process(
+        "export",
+        tmp_path / "damped.toml",
+        "--out",
+        out,
+        "--rate",
+        RATE,
+        "--from",
+        tmp_path / "rec.csv",
+        "--frame",
+        "0",
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (
+        "initial velocities at frame 0: the velocity from which the model's step lands on the "
+        "next frame (by Newton's method: the step's damping is strong for the frame rate)"
+    ) in proc.stdout
+    m = mujoco.MjModel.from_xml_path(str(out))
+    qvel = m.key_qvel.reshape(3, 3)
+    _, truth = model.initial_state()
+    np.testing.assert_allclose(qvel, truth, rtol=0, atol=1e-6)  # the CSV's rounding
+    forward = (recording.positions[1] - recording.positions[0]) * RATE
+    assert np.abs(forward - truth).max() > 0.2
+    landed = mujoco_run(out.read_text(), 3, 3, 1)[1]
+    np.testing.assert_allclose(landed, recording.positions[1], rtol=0, atol=1e-6)
