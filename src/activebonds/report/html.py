@@ -240,7 +240,10 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),
         ("best RMS per particle (one-step)", f"{per} mm"),
         ("failed evaluations", st.get("failed_evaluations", "—")),
-        ("wall time", "—" if wall is None else f"{float(wall):.4g} s"),
+        (
+            "wall time (the run's, every session)",
+            "—" if wall is None else f"{float(wall):.4g} s",
+        ),
         ("versions", versions),
         ("backend", f"{be.get('backend', '?')} ({be.get('platform', '?')}), x64 {be.get('x64')}"),
         ("created", meta.get("created", "—")),
@@ -294,6 +297,11 @@ def errors_table(pred: Prediction, caption: str = "RMS position error per partic
             ]
         rows.append(row)
     caption += f"; red: {WORSE} (the constant-velocity predictor, same terms)"
+    if pred.extended:
+        caption += (
+            "; free run beyond: a run of its own from the first two frames beyond the fit, as "
+            "evaluate --frames scores those frames"
+        )
     return Table(columns=cols, rows=rows, caption=caption)
 
 
