@@ -37,8 +37,10 @@ def export(
     ] = None,
     frame: Annotated[int, typer.Option(help="The frame of --from to start at.")] = 0,
 ):
-    """Write the model for MuJoCo: point masses, gravity, binary spring-dampers (tendons) and
-    fixed unary anchors (joint springs); neural, ternary and contact bonds are refused. The
+    """Write the model for MuJoCo: point masses, gravity, binary spring-dampers (tendons),
+    fixed unary anchors (joint springs) and ground contacts (a plane, a sphere per particle
+    and a contact pair matching the bond's stiffness, damping and friction); neural and
+    ternary bonds and contacts with a moving surface are refused. The
     start is the model file's positions and velocities, or --from a recording's --frame."""
     from ..export import FORMATS, write_mjcf
     from ..model import load_model
