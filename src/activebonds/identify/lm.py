@@ -162,7 +162,10 @@ def levenberg_marquardt(
         variance = 2.0 * loss / dof  # sigma^2
         trusted = linear_enough is None or linear_enough(y)
         if scale is not None and -change < 0.5 * variance and trusted:
-            gauss_newton = step(system, JITTER * float(scale(system)))
+            jitter = JITTER * float(scale(system))
+            if scaling is not None:  # as a diagonal: the step's program compiled once
+                jitter = _times(jitter, jax.tree.map(jnp.ones_like, scaling))
+            gauss_newton = step(system, jitter)
             distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
             if distance < precision**2:
                 return (

@@ -282,7 +282,9 @@ class Refinement:
         residual = jax.jit(plain)  # compiled once per stage
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
-        start = _sum_squares(residual(u0))
+        # the start's and the end's costs by the shared program (the checks against constant
+        # velocity reuse it; a start that diverges compiles nothing more)
+        start = _sum_squares(residuals(to_genome(u0)))
         stopped = None
         if not np.isfinite(start):  # no step can be judged from a non-finite cost
             u, steps, message = u0, 1, "not started"
@@ -295,8 +297,8 @@ class Refinement:
             except Interrupted as stop:
                 stopped = stop
                 u, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
-        end = _sum_squares(residual(u))
         result = np.asarray(to_genome(u), np.float64)
+        end = _sum_squares(residuals(jnp.asarray(result)))
 
         def mm(c):
             return float(rms_mm(c, windows.n_terms)) if np.isfinite(c) else float("inf")

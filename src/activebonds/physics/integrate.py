@@ -199,17 +199,19 @@ def start_velocity(
       velocity, and the step closes with ``+ dt/2 a(x_t, v_half)``);
     * otherwise: the state at t - 1 whose step lands on ``x`` is solved for its velocity,
       started from the constant-acceleration estimate, and the velocity that step ends with
-      is returned (corrected to first order by the last residual). The solve is a
-      fixed-point iteration ``v <- v + (x - x_end) / dt`` (Newton's method with the
-      Jacobian ``d x_end / d v`` taken as ``dt I``), contracting by about
-      ``dt * (c/m + dt k/m)`` per round; on data the same scheme generated it recovers the
-      true state to ``~ contraction^(iterations+1)``. Where a force is stiff in the velocity
-      for the frame interval, that contraction exceeds 1 and the iteration diverges: a
-      contact's friction near sticking is a drag of ``mu Fn / eps`` (``dt mu Fn / (m eps)``
-      is 10-500 at 100-200 Hz). With a kind of :func:`stiff_kinds` the solve is therefore
-      Newton's method on the exact Jacobian (forward mode over the P D velocity
-      coordinates: about P D + 1 times a step's cost per round, quadratic convergence), the
-      substeps' kicks being linearly implicit in that kind's drag (:func:`advance`).
+      is returned (corrected to first order by the last residual). The solve is Newton's
+      chord method: ``v <- v + J^-1 (x - x_end)`` with J = ``d x_end / d v`` computed once,
+      at the first guess (forward mode over the P D velocity coordinates), and held. For
+      springs and linear dampers the landing map is nearly affine in v, so it converges in
+      one or two rounds whatever the damping. (A fixed-point iteration with J taken as
+      ``dt I`` contracts only by about ``dt (c/m + dt k/m)`` per round: it failed, and cost
+      +inf, on every restart state of a one-step least-squares optimum on noisy data, whose
+      dampings are inflated.) J is held out of the derivative: no forward-mode tangent of
+      the fit's parameters runs through its P D columns. Where a force is stiff in the
+      velocity and has kinks (a contact's friction near sticking is a drag of ``mu Fn /
+      eps``: ``dt mu Fn / (m eps)`` is 10-500 at 100-200 Hz), a kind of :func:`stiff_kinds`,
+      the solve is Newton's method on the Jacobian of every round, the substeps' kicks being
+      linearly implicit in that kind's drag (:func:`advance`).
 
     A solve has converged when its last residual is at most ``START_TOLERANCE`` of the
     frame's displacement plus ``START_ATOL``. Where it has not, the velocity is NaN, so such
@@ -256,10 +258,21 @@ def start_velocity(
             return v + jnp.linalg.solve(j, (x - x_end).ravel()).reshape(x.shape)
 
         v = jax.lax.fori_loop(0, iterations, newton, v)
-    else:
+    else:  # Newton's chord method: the landing map's Jacobian at the first guess, held
+        # fixed (no derivative flows through it: the iteration's fixed point, and the
+        # derivative of the velocity once it has converged, are Newton's own)
+        frozen, v_guess, psi_frozen = jax.lax.stop_gradient((params, v, psi))
+
+        def land_frozen(vf):
+            state = advance(
+                frozen, topo, x_prev, vf.reshape(x.shape), dt, substeps, method, t_prev, psi_frozen
+            )
+            return state[0].ravel()
+
+        chord = jax.scipy.linalg.lu_factor(jax.jacfwd(land_frozen)(v_guess.ravel()))
         for _ in range(iterations):
             x_end, _ = land(v)
-            v = v + (x - x_end) / dt
+            v = v + jax.scipy.linalg.lu_solve(chord, (x - x_end).ravel()).reshape(x.shape)
     x_end, v_end = land(v)
     residual = jnp.sqrt(jnp.sum((x - x_end) ** 2))
     scale = jnp.sqrt(jnp.sum((x - x_prev) ** 2))
