@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 
 from activebonds.cli.main import app
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
-from activebonds.identify.metrics import window_metrics
+from activebonds.errors import InputError
+from activebonds.identify.metrics import free_run_from, window_metrics
 from activebonds.model import load_model, loads_model
 from activebonds.report.evaluate import evaluate
 from activebonds.report.predict import predict
@@ -126,6 +127,39 @@ def test_a_gap_weights_each_particle_by_its_terms(files):
         assert weighted == pytest.approx(overall, rel=1e-9), attr
 
 
+def test_the_body_markers_alone_count_their_own_frames_within(files):
+    """``body``: the same free runs from the same starts, off once one of the named markers
+    is (here at 0.5 mm, as the triangle's runs on another triangle's recording stay within
+    50 mm); counted by hand from the runs, for the model and for zero force."""
+    model, _, _, other = files
+    rec = np.asarray(other.positions, np.float64)
+    found = evaluate(model, other, body=["B"], threshold_mm=0.5)
+    assert found.body_markers == ("B",)
+    body, every = found.body["model"], found.model
+    assert body.starts == every.starts
+
+    def by_hand(run, s):
+        err = np.linalg.norm(run - rec[s + 1 :, 1], axis=-1) * 1000.0
+        off = np.flatnonzero(err > 0.5)
+        return int(off[0]) if off.size else len(err)
+
+    runs = {
+        s: free_run_from(model, rec, other.dt, s, FRAMES - 2)[: FRAMES - s - 1] for s in body.starts
+    }
+    assert list(body.frames_within) == [by_hand(runs[s][:, 1], s) for s in body.starts]
+    k = np.arange(1, FRAMES)[:, None]
+    zero = {s: rec[s, 1] + k[: FRAMES - s - 1] * (rec[s, 1] - rec[s - 1, 1]) for s in body.starts}
+    assert list(found.body["zero_force"].frames_within) == [
+        by_hand(zero[s], s) for s in body.starts
+    ]
+    # one marker's errors can only end a run later than every marker's
+    assert all(b >= e for b, e in zip(body.frames_within, every.frames_within, strict=True))
+    assert any(b > e for b, e in zip(body.frames_within, every.frames_within, strict=True))
+    assert body.one_step_rms_mm == pytest.approx(found.particles[1].one_step_rms_mm, rel=1e-12)
+    with pytest.raises(InputError, match="--body"):
+        evaluate(model, other, body=["Z"])
+
+
 # ----------------------------------------------------------------------------- command line
 
 
@@ -174,6 +208,15 @@ def test_the_command_prints_a_table_and_json(files):
         "zero_force": found.particles[0].zero_force_one_step_rms_mm,
     }
     assert set(first["free_run_rms_mm"]) == {"model", "zero_force"}
+
+    res = _run(TRIANGLE, other, "--body", "A,C")
+    assert res.exit_code == 0, res.output
+    assert "frames within 50 mm, A, C (median of 10 starts)" in res.output
+    res = _run(TRIANGLE, other, "--json", "--body", "C,A")
+    body = json.loads(res.stdout)["body"]
+    direct = evaluate(model, read_trajectory(other), body=["A", "C"]).body
+    assert body["markers"] == ["A", "C"] and body["model"] == direct["model"].to_dict()
+    assert body["zero_force"] == direct["zero_force"].to_dict()
 
     res = _run(TRIANGLE, own, "--json", "--frames", "10:60", "--markers", "A,B,C")
     record = json.loads(res.stdout)

@@ -137,6 +137,32 @@ def test_with_genome_weights_become_per_bond_lists():
         assert isinstance(changed.spec.bond[b].weights.length, list)
 
 
+ANCHORED = """
+dimension = 2
+[[particle]]
+name = "a"
+mass = 1.0
+[[bond]]
+kind = "unary"
+particles = ["a"]
+stiffness = 3.0
+anchor = { value = [0.5, 0.5], min = [-0.00107999, 0.0], max = [1.0, 1.0] }
+"""
+
+
+def test_a_vector_rounded_past_its_bound_is_written_within_it():
+    """A solver's value a rounding below an anchor's min (as a least-squares optimum at its
+    bound can be) is written at the bound, so the file loads again."""
+    model = loads_model(ANCHORED)
+    below = np.nextafter(-0.00107999, -1.0)
+    genome = model.layout.initial()
+    genome[0] = below
+    changed = model.with_genome(genome)
+    assert changed.spec.bond[0].anchor.value == [-0.00107999, 0.5]
+    again = loads_model(dumps_model(changed), "<dumped>")
+    assert again.spec.bond[0].anchor.value == [-0.00107999, 0.5]
+
+
 MODEL_WITHOUT_FREE_PARAMETERS = """
 dimension = 2
 [[particle]]

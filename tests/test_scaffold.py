@@ -141,6 +141,42 @@ def test_candidates_are_near_rigid_pairs_and_nearest_neighbours():
     assert made.gravity == "none" and made.contacts == 0
 
 
+def test_a_small_marker_set_gets_every_pair_and_an_anchor_per_marker():
+    """Up to 8 markers: every pair (rest lengths free from 0 to twice the largest distance
+    seen) and an anchor per marker (free 2 extents about its median), all optional; with
+    --neighbours or beyond 8 markers, a neighbourhood graph and no anchor."""
+    traj = read_trajectory(HORSE_TROT)
+    made = scaffold(traj, frames=(0, 300), gravity=False)
+    spec = loads_model(made.text).spec
+    springs = [b for b in spec.bond if b.kind == "binary"]
+    anchors = [b for b in spec.bond if b.kind == "unary"]
+    assert len(springs) == 21 and len(anchors) == 7 and made.bonds == 28
+    assert all(b.optional for b in spec.bond)
+    x = np.asarray(traj.positions[:300])
+    dist = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1)
+    extent = np.max(np.median(dist, axis=0))
+    names = list(traj.markers)
+    for b in springs:
+        i, j = (names.index(n) for n in b.particles)
+        assert b.rest_length.min == 0.0
+        assert b.rest_length.max == pytest.approx(2 * dist[:, i, j].max(), rel=1e-5)
+    for b in anchors:
+        centre = np.median(x[:, names.index(b.particles[0])], axis=0)
+        np.testing.assert_allclose(b.anchor.value, centre, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(b.anchor.min, centre - 2 * extent, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(b.anchor.max, centre + 2 * extent, rtol=1e-5, atol=1e-5)
+        assert b.stiffness.min > 0 and b.stiffness.max / b.stiffness.min > 1e4
+    assert "every pair (7 markers: the complete graph)" in made.text
+    assert any("an anchor per marker" in n for n in made.notes)
+    chosen = scaffold(traj, frames=(0, 300), gravity=False, neighbours=2)
+    assert "unary" not in chosen.text and chosen.bonds < 21
+    nine = _wobble(frames=80, particles=9)
+    many = scaffold(
+        Trajectory(nine, np.ones((80, 9), bool), tuple(f"M{i}" for i in range(9)), 100.0)
+    )
+    assert "unary" not in many.text and many.bonds < 36
+
+
 def test_an_uncertain_vertical_gets_no_gravity_unless_named(tmp_path):
     x = _wobble(frames=80, particles=5)  # small wobbles about random points: no clear ground
     traj = Trajectory(x, np.ones(x.shape[:2], bool), tuple(f"M{i}" for i in range(5)), 100.0)
@@ -208,4 +244,8 @@ def test_neural_turns_the_present_springs_of_a_structure_result_into_neural_bond
     assert proc.returncode == 0, proc.stderr
     neural = load_model(out).spec
     assert len(neural.bond) == len(spec["bond"]) - 1
-    assert all(b.neural and not b.optional for b in neural.bond)
+    assert not any(b.optional for b in neural.bond)
+    springs = [b for b in neural.bond if getattr(b, "rest_length", None) is not None]
+    anchors = [b for b in neural.bond if len(b.particles) == 1]  # a small scaffold's anchors
+    assert springs and all(b.neural for b in springs)
+    assert len(anchors) == 3 and len(springs) + 3 == len(neural.bond)

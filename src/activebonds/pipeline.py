@@ -3,21 +3,35 @@
 The steps, each one's output in the output folder ``OUT``:
 
 1. **scaffold** (:func:`~.scaffold.scaffold`) on the fitted frames: ``OUT/scaffold.toml``;
-2. **structure** (:func:`~.structure.structure_of`): ``OUT/structure.toml`` and
-   ``OUT/structure.json``. Backward elimination solves every remaining structure at each step
-   (about ``n^2 / 2`` exact least squares for ``n`` candidates, each dearer with more of
-   them: on the 41-marker human walk's 110 candidates, a second a solve, hours in all), so
-   above :data:`MAX_DECIDED` candidates nothing is eliminated: every candidate is kept,
-   its linear parameters at their exact least-squares optimum, and the run says so. Where
-   the scaffold guessed gravity (no ``--up``, no ``--gravity``) and the springs' exact
-   optimum is still worse than zero force (nothing found holds the body up: the contacts'
-   reach leaves out too little), the scaffold is written again without gravity (the first
-   kept in ``OUT/scaffold-gravity.toml``) and decided again, and the run says so;
-3. **fit** (:func:`~.driver.fit`) from the structure's values (``init = "model"``), the
-   refinement's cost chosen as ``fit --cost auto`` does (:func:`~.cost_choice.choose_cost`:
-   multiple shooting where a window has at most 300 unknowns, else the restart cost):
-   ``OUT/run/``;
-4. **evaluate** (:func:`~activebonds.report.evaluate.evaluate`) the fitted model on the
+2. **structure** (:mod:`~.identify.structure_choice`, :func:`~.structure.structure_of`):
+   ``OUT/structure.toml`` and ``OUT/structure.json``. Up to :data:`MAX_DECIDED` candidates,
+   variants of the scaffold's linear part (its masses as scaffolded or in inverse proportion to
+   each marker's acceleration; its anchors as springs, as dampers alone or none; the
+   candidates the BIC keeps or every one) are fitted by exact least squares on the first 80 %
+   of the fitted frames and scored on the rest, the validation tail; the variant with the
+   lowest one-step RMS there among those better than zero force at every marker (else the
+   lowest) is decided and solved again on every fitted frame. Where the scaffold has gravity
+   or ground contacts, they are added to it in ``OUT/ground.toml``, its linear parameters
+   solved again with the contacts held (the start of the ground fit). Backward elimination
+   solves every remaining structure at each step (about ``n^2 / 2`` exact least squares for
+   ``n`` candidates, each dearer with more of them: on the 41-marker human walk's 110
+   candidates, a second a solve, hours in all), so above :data:`MAX_DECIDED` candidates
+   nothing is eliminated nor chosen: every candidate is kept, its linear parameters at their
+   exact least-squares optimum, and the run says so. There, where the scaffold guessed
+   gravity (no ``--up``, no ``--gravity``) and the springs' exact optimum is still worse than
+   zero force (nothing found holds the body up: the contacts' reach leaves out too little),
+   the scaffold is written again without gravity (the first kept in
+   ``OUT/scaffold-gravity.toml``) and decided again, and the run says so;
+3. **fit** (:func:`~.driver.fit`) of the structure from its exact optimum (``init =
+   "model"``: the ES seeded there) on the one-step cost, whose optimum it is, and by which
+   the pipeline judges a model: ``OUT/run/``. Where there is a ground model, it is fitted the
+   same way from its own start (``OUT/run-ground/``) and kept where its one-step BIC on the
+   fitted frames is lower than the structure's (its contacts and gravity earn their
+   parameters) or ``--up`` / ``--gravity`` insists on gravity, else the structure's fit is
+   (:func:`~.structure_choice.criterion`).
+   ``auto.json`` names the kept run (``steps.fit.run``). For parameters unbiased by marker
+   noise, refit the kept model with ``fit --cost shooting``;
+4. **evaluate** (:func:`~activebonds.report.evaluate.evaluate`) the kept model on the
    held-out tail (the last :data:`HELD_OUT` of the frames, never seen by steps 1-3) and on
    the fitted frames, one step and :data:`AHEAD` frames ahead, beside zero force:
    ``OUT/evaluation.json``;
@@ -42,7 +56,7 @@ from pathlib import Path
 from .errors import InputError
 
 HELD_OUT = 0.2  # the share of the frames held out at the end of the window
-MAX_DECIDED = 40  # candidate springs: above, structure keeps them all (no elimination)
+MAX_DECIDED = 40  # candidate bonds: above, structure keeps them all (no elimination)
 AHEAD = 10  # frames ahead of the multi-step verdict
 POPULATION = 40  # the ES's, small: it starts at the structure's exact optimum
 GENERATIONS = 200
@@ -112,7 +126,9 @@ class Folder:
     scaffold_gravity = property(lambda self: self.path / "scaffold-gravity.toml")
     structure = property(lambda self: self.path / "structure.toml")
     structure_record = property(lambda self: self.path / "structure.json")
+    ground = property(lambda self: self.path / "ground.toml")
     run = property(lambda self: self.path / "run")
+    run_ground = property(lambda self: self.path / "run-ground")
     evaluation = property(lambda self: self.path / "evaluation.json")
     report = property(lambda self: self.path / "report.html")
     state = property(lambda self: self.path / STATE)
@@ -244,11 +260,13 @@ def run(
         if name in steps:
             say(f"[{k}/5] {name}: done before ({steps[name]['seconds']:.0f} s)")
             return
+        state["parts"] = {}  # what a step records beside its note
         say(f"[{k}/5] {name}: {what}")
         t0 = time.perf_counter()
         note = body()
         seconds = time.perf_counter() - t0
-        steps[name] = {"seconds": round(seconds, 1), "note": note}
+        parts = state.pop("parts").get(name, {})
+        steps[name] = {"seconds": round(seconds, 1), "note": note, **parts}
         folder.write_state(state)
         say(f"[{k}/5] {name}: {note} ({seconds:.0f} s)")
 
@@ -261,7 +279,7 @@ def run(
             say(f"      {note}")
         write_text_atomic(folder.scaffold, found.text)
         return (
-            f"{found.particles} particles, {found.bonds} candidate springs, {found.contacts} "
+            f"{found.particles} particles, {found.bonds} candidate bonds, {found.contacts} "
             f"ground contacts, gravity {found.gravity}: {folder.scaffold}"
         )
 
@@ -269,17 +287,19 @@ def run(
     step(
         2,
         "structure",
-        "which candidate springs the fitted frames need (BIC, exact least squares)",
+        "which candidate bonds the fitted frames need (exact least squares, BIC, a validation "
+        "tail)",
         lambda: _structure(folder, recording, split, options, say),
     )
     step(
         3,
         "fit",
-        f"from the structure's values, population {options.population}, "
+        f"from the structure's exact optimum, population {options.population}, "
         f"{options.generations} generations, then the refinement",
-        lambda: _fit(folder, recording_path, recording, split, options, say, fit_progress),
+        lambda: _fit(folder, recording_path, recording, split, options, say, fit_progress, state),
     )
-    held, fitted = _evaluations(folder, recording, split, options)
+    kept = folder.path / steps["fit"].get("run", "run")
+    held, fitted = _evaluations(kept, recording, split, options)
     step(
         4,
         "evaluate",
@@ -291,7 +311,7 @@ def run(
         5,
         "report",
         "the HTML report of the run over the fitted and held-out frames",
-        lambda: _report(folder, b - a),
+        lambda: _report(kept, folder.report, b - a),
     )
     state["total_seconds"] = round(sum(v["seconds"] for v in steps.values()), 1)
     folder.write_state(state)
@@ -300,6 +320,74 @@ def run(
 
 
 def _structure(folder: Folder, recording, split: Windows, options: Options, say) -> str:
+    from .identify.structure import candidates
+    from .model import load_model
+
+    scaffolded = load_model(folder.scaffold)
+    n = len(candidates(scaffolded.spec))
+    if n > MAX_DECIDED:
+        return _undecided(folder, recording, split, options, say)
+    from .atomic import write_text_atomic
+    from .identify.structure_choice import Variant, choose, decide
+    from .model import save_model
+
+    choice = choose(scaffolded, recording, split.fitted, say)
+    variant = choice.chosen if choice is not None else Variant()
+    if choice is not None:
+        say(f"      {choice.line()}")
+    result = decide(scaffolded, recording, split.fitted, variant)
+    save_model(result.spec, folder.structure)
+    ground = _ground(folder, scaffolded.spec, result.spec, recording, split)
+    record = {
+        "eliminated": variant.decided,
+        "candidates": n,
+        "max_decided": MAX_DECIDED,
+        "variant": variant.text(),
+        "choice": choice.record() if choice is not None else None,
+        "ground": ground,
+    }
+    write_text_atomic(
+        folder.structure_record, json.dumps({**record, **result.record()}, indent=2) + "\n"
+    )
+    kept = sum(not b.absent for b in result.spec.bond)
+    extra = (
+        f"; with gravity and contacts: {folder.ground} ({ground['rms_mm']:.4g} mm)"
+        if ground
+        else ""
+    )
+    return (
+        f"{kept} of {len(result.spec.bond)} bonds kept ({variant.text()}); one-step RMS "
+        f"{result.rms_mm:.4g} mm (zero force {result.zero_force_rms_mm:.4g} mm): "
+        f"{folder.structure}{extra}"
+    )
+
+
+def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> dict | None:
+    """The decided structure with the scaffold's gravity and the bonds the exact least
+    squares does not solve (ground contacts), its linear parameters solved again with the
+    contacts held: OUT/ground.toml, or None where the scaffold has neither."""
+    from . import bonds
+    from .identify.cost import make_windows
+    from .identify.problem import select_data
+    from .identify.settings import FitSettings
+    from .identify.structure import exact_optimum
+    from .model import build, save_model
+
+    extra = [b for b in scaffolded.bond if bonds.get(b.kind).linear is None]
+    if scaffolded.gravity is None and not extra:
+        if folder.ground.exists():
+            folder.ground.unlink()
+        return None
+    spec = decided.model_copy(update={"gravity": scaffolded.gravity, "bond": decided.bond + extra})
+    model = build(spec)
+    data = select_data(model, recording, FitSettings(frames=split.fitted))
+    solved, rms = exact_optimum(model, make_windows(data.positions, data.mask, data.dt, 1))
+    save_model(solved, folder.ground)
+    return {"contacts": len(extra), "gravity": scaffolded.gravity is not None, "rms_mm": rms}
+
+
+def _undecided(folder: Folder, recording, split: Windows, options: Options, say) -> str:
+    """Above MAX_DECIDED candidates: every candidate kept at its exact optimum."""
     from .atomic import write_text_atomic
     from .identify.scaffold import scaffold
     from .model import load_model, loads_model, save_model
@@ -326,6 +414,8 @@ def _structure(folder: Folder, recording, split: Windows, options: Options, say)
         write_text_atomic(folder.scaffold, found.text)
         result, eliminate, n = _decide(load_model(folder.scaffold), recording, split, say)
     save_model(result.spec, folder.structure)
+    if folder.ground.exists():
+        folder.ground.unlink()
     record = {"eliminated": eliminate, "candidates": n, "max_decided": MAX_DECIDED}
     write_text_atomic(
         folder.structure_record, json.dumps({**record, **result.record()}, indent=2) + "\n"
@@ -352,7 +442,7 @@ def _decide(model, recording, split: Windows, say):
     eliminate = n <= MAX_DECIDED
     if not eliminate:
         say(
-            f"      structure: {n} candidate springs, more than {MAX_DECIDED}: no elimination "
+            f"      structure: {n} candidate bonds, more than {MAX_DECIDED}: no elimination "
             f"(its exact least squares grow with the square of the candidates, hours here); "
             "every candidate kept, at its exact least-squares optimum"
         )
@@ -360,39 +450,77 @@ def _decide(model, recording, split: Windows, say):
     return result, eliminate, n
 
 
-def _fit(folder, recording_path, recording, split, options, say, fit_progress) -> str:
-    from contextlib import nullcontext
-
-    from .identify.cost_choice import choose_cost
-    from .identify.driver import fit, resume
-    from .identify.problem import select_recordings, variant
-    from .identify.rundir import RunDir, newest_checkpoint, read_status
+def _fit(folder, recording_path, recording, split, options, say, fit_progress, state) -> str:
+    """The structure fitted from its exact optimum on the one-step cost (OUT/run); where
+    there is a ground model, it fitted too (OUT/run-ground, the cost as fit --cost auto) and
+    kept where its one-step BIC on the fitted frames is lower. Records the kept run's name in
+    the fit step of ``state``."""
+    from .identify.rundir import RunDir
+    from .identify.structure_choice import criterion
     from .model import load_model
 
     settings = fit_settings(options, split)
-    spec = variant(load_model(folder.structure), settings.bonds)
-    data = select_recordings(spec, [recording], settings)[0]
-    settings, why = choose_cost(
-        settings, spec.layout.n_genes, data.positions.shape[1] * data.positions.shape[2], False
+    one_step = settings.model_copy(update={"cost": "restart", "horizon": (1,)})
+    say(
+        "      cost: one step (the structure's linear parameters start at the exact optimum of "
+        "this cost; the ES seeded there keeps it or finds better)"
     )
-    say(f"      {why}")
-    run_dir = RunDir(folder.run)
+    linear = _fit_into(folder.run, folder.structure, recording_path, one_step, say, fit_progress)
+    kept, why = folder.run, ""
+    if folder.ground.exists():
+        say(
+            f"      the model with gravity and ground contacts ({folder.ground}), from its "
+            "exact optimum with the contacts held: the same cost, one step, by which the two "
+            "are compared"
+        )
+        _fit_into(folder.run_ground, folder.ground, recording_path, one_step, say, fit_progress)
+        scores = {
+            path: criterion(load_model(RunDir(path).best_model_path), recording, split.fitted)
+            for path in (folder.run, folder.run_ground)
+        }
+        plain, ground = scores[folder.run], scores[folder.run_ground]
+        insisted = options.gravity is True or options.up is not None
+        if ground.bic < plain.bic or insisted:
+            kept = folder.run_ground
+        why = (
+            f"; kept {kept.name}"
+            + (" (--up or --gravity insists on gravity)" if insisted else "")
+            + f": one-step BIC {ground.bic:.6g} with gravity and contacts ({ground.rms_mm:.4g} "
+            f"mm, {ground.k} parameters), {plain.bic:.6g} without ({plain.rms_mm:.4g} mm, "
+            f"{plain.k})"
+        )
+        state["parts"]["fit"] = {
+            "criterion": {"run": plain.record(), "run-ground": ground.record()}
+        }
+    state["parts"].setdefault("fit", {})["run"] = kept.name
+    return f"best one-step RMS {linear.rms_mm:.4g} mm on the fitted frames: {folder.run}{why}"
+
+
+def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress):
+    """A fit of ``model_path`` in ``run_path``: kept if completed before, resumed if
+    interrupted, else run anew; its summary lines said."""
+    from contextlib import nullcontext
+
+    from .identify.driver import fit, resume
+    from .identify.rundir import RunDir, newest_checkpoint, read_status
+
+    run_dir = RunDir(run_path)
     progress = fit_progress or (lambda total, starting: nullcontext(None))
-    status = read_status(folder.run).get("status") if run_dir.is_run() else None
+    status = read_status(run_path).get("status") if run_dir.is_run() else None
     with progress(settings.generations, "compiling") as bar:
         hooks = {"progress": bar, "status": bar.status} if bar is not None else {}
-        if status not in (None, "completed") and newest_checkpoint(folder.run) is not None:
-            say(f"      resuming the interrupted fit in {folder.run}")
-            result = resume(folder.run, **hooks)
+        if status not in (None, "completed") and newest_checkpoint(run_path) is not None:
+            say(f"      resuming the interrupted fit in {run_path}")
+            result = resume(run_path, **hooks)
         else:
             result = fit(
-                folder.structure, recording_path, settings, out=folder.run, overwrite=True, **hooks
+                model_path, recording_path, settings, out=run_path, overwrite=True, **hooks
             )
     if result.status != "completed":
-        raise RuntimeError(f"the fit ended {result.status}; see {folder.run}")
+        raise RuntimeError(f"the fit ended {result.status}; see {run_path}")
     for line in result.lines():
         say(f"      {line}")
-    return f"best one-step RMS {result.rms_mm:.4g} mm on the fitted frames: {folder.run}"
+    return result
 
 
 def fit_settings(options: Options, split: Windows):
@@ -435,8 +563,9 @@ class _Scored:
         return out + ([self._advice] if self._advice else [])
 
 
-def _evaluations(folder: Folder, recording, split: Windows, options: Options):
-    """Two thunks: the fitted model evaluated on the held-out frames and on the fitted ones."""
+def _evaluations(run: Path, recording, split: Windows, options: Options):
+    """Two thunks: the kept run's model evaluated on the held-out frames and on the fitted
+    ones."""
 
     def on(frames):
         def evaluate_there():
@@ -444,7 +573,7 @@ def _evaluations(folder: Folder, recording, split: Windows, options: Options):
             from .model import load_model
             from .report.evaluate import evaluate
 
-            model = load_model(RunDir(folder.run).best_model_path)
+            model = load_model(RunDir(run).best_model_path)
             return evaluate(model, recording, frames=frames, horizon=options.ahead)
 
         return evaluate_there
@@ -464,7 +593,7 @@ def _write_evaluation(folder: Folder, held, fitted) -> str:
     )
 
 
-def _report(folder: Folder, frames: int) -> str:
+def _report(run: Path, report: Path, frames: int) -> str:
     from .report import write_report
 
-    return str(write_report(folder.run, folder.report, frames=frames))
+    return str(write_report(run, report, frames=frames))

@@ -74,6 +74,14 @@ def evaluate(
             "numbers (default: against the model's gravity, else guessed from the recording)."
         ),
     ] = None,
+    body: Annotated[
+        str | None,
+        typer.Option(
+            help="Also count the free runs' frames within 50 mm (and their RMS) over these "
+            "particles alone, e.g. Head,Withers,Sacrum: a run holding the body while a foot "
+            "swings off counts on."
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
@@ -102,6 +110,7 @@ def evaluate(
             gait=gait,
             feet=[f.strip() for f in feet.split(",") if f.strip()] if feet else None,
             up=parse_up(up, loaded.dimension) if up else None,
+            body=[b.strip() for b in body.split(",") if b.strip()] if body else None,
         )
     except InputError as e:
         fail(e)
@@ -134,6 +143,18 @@ def evaluate(
         z.frames_text(),
         "",
     )
+    if found.body is not None:
+        bm, bz = found.body["model"], found.body["zero_force"]
+        which = ", ".join(found.body_markers)
+        table.add_row(
+            f"free-run RMS, {which} (mm)", _mm(bm.free_run_rms_mm), _mm(bz.free_run_rms_mm), ""
+        )
+        table.add_row(
+            f"frames within {bm.threshold_mm:g} mm, {which} (median of {len(bm.starts)} starts)",
+            bm.frames_text(),
+            bz.frames_text(),
+            "",
+        )
     out.print(table)
     per = Table(title="per particle (RMS error, mm; red: not better than zero force)")
     for col in ("particle", "marker"):

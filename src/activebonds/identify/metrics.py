@@ -188,17 +188,26 @@ def _metrics(
     run_from: Callable[[int], np.ndarray],
     starts: int | Sequence[int],
     threshold_mm: float,
+    markers: Sequence[int] | None = None,
 ) -> FreeRunMetrics:
     """The three numbers from a one-step prediction [F, P, D] and ``run_from(s)``: a free run
-    started at frame s (from frames s - 1 and s), predicting frames s + 1 ... F - 1."""
+    started at frame s (from frames s - 1 and s), predicting frames s + 1 ... F - 1.
+    ``markers``: the indices of the markers whose errors count (default: every one); the
+    predictions and the start frames are those of every marker (a run starts where all are
+    recorded)."""
     rec = np.asarray(recorded, np.float64)
     n = rec.shape[0]
     complete = np.isfinite(rec).all(axis=(1, 2))
     expected = np.zeros(n, bool)
     expected[2:] = complete[1:-1] & complete[:-2]
-    one_rms = _rms_terms(one, rec, expected)
     chosen = start_frames(rec, starts)
     first = start_frames(rec, 1)
+    if markers is not None:
+        pick = list(markers)
+        rec, one = rec[:, pick], np.asarray(one)[:, pick]
+        whole = run_from
+        run_from = lambda s: whole(s)[:, pick]  # noqa: E731
+    one_rms = _rms_terms(one, rec, expected)
     runs = {s: run_from(s) for s in sorted(set(chosen) | set(first))}
     free_rms = float("nan")
     if first:
@@ -230,10 +239,13 @@ def free_run_metrics(
     starts: int | Sequence[int] = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
     offset: int = 0,
+    markers: Sequence[int] | None = None,
 ) -> FreeRunMetrics:
     """One-step RMS, free-run RMS and frames within ``threshold_mm`` of ``model`` along
     ``trajectory`` (markers in the model's particle order; ``substeps`` and ``method``: the
     run's integration, as in its settings). See the module's docstring for the definitions.
+    ``markers``: the indices of the markers whose errors count (e.g. the body's, not the
+    feet's; default: every one), the model's runs those of all.
 
     ``offset``: frames from the model's time origin (the fitted window's first frame, where
     predictions take time 0) to ``trajectory``'s first frame, e.g. ``300`` for frames 300:400
@@ -258,7 +270,7 @@ def free_run_metrics(
             : n - s - 1
         ]
 
-    return _metrics(rec, one, run_from, starts, threshold_mm)
+    return _metrics(rec, one, run_from, starts, threshold_mm, markers)
 
 
 def free_run_from(
@@ -296,16 +308,18 @@ def zero_force_metrics(
     *,
     starts: int | Sequence[int] = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
+    markers: Sequence[int] | None = None,
 ) -> FreeRunMetrics:
     """The same numbers for the zero-force (constant-velocity) predictor: one step
-    ``x_t = 2 x_{t-1} - x_{t-2}``, free run ``x_t = x_s + (t - s) (x_s - x_{s-1})``."""
+    ``x_t = 2 x_{t-1} - x_{t-2}``, free run ``x_t = x_s + (t - s) (x_s - x_{s-1})``
+    (``markers``: as :func:`free_run_metrics`'s)."""
     rec = np.asarray(trajectory.positions, np.float64)
     one = zero_force_predictions(rec, 1)[0]
 
     def run_from(s: int) -> np.ndarray:
         return zero_force_predictions(rec, s)[1][s + 1 :]
 
-    return _metrics(rec, one, run_from, starts, threshold_mm)
+    return _metrics(rec, one, run_from, starts, threshold_mm, markers)
 
 
 def window_metrics(

@@ -9,8 +9,11 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   first frame). Masses are fixed, ``total_mass / P`` each (``--total-mass``, default
   :data:`MASS_PER_MARKER` kg per marker); free them (as ratios of ``total_mass``) once the
   structure is chosen, as ``structure`` needs fixed masses.
-* **Candidate bonds** (binary springs): the union of the ``k`` nearest neighbours of each
-  marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension), the near-rigid
+* **Candidate bonds** (binary springs). Up to :data:`COMPLETE_MAX` markers (``P (P + 1) / 2``
+  candidates, at most 36: few enough for ``structure``'s elimination, which ``activebonds
+  auto`` runs up to 40), **every pair** of markers and **an anchor per marker** (below); the
+  reasons that follow are still named beside each pair. Beyond (or with ``--neighbours``), the
+  union of the ``k`` nearest neighbours of each marker by median distance (``k`` = :data:`NEIGHBOURS` of the dimension), the near-rigid
   pairs among each marker's ``2 k`` nearest (their distance's spread, 5th to 95th
   percentile, at most :data:`RIGID` of its median) and, up to :data:`DELAUNAY_MAX` markers,
   the edges of the Delaunay triangulation of the markers at the placement frame (braces that
@@ -18,7 +21,18 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   the square of the candidates, grow fast).
 * **Rest length**: the pair's median distance; bounds the observed range (minimum to maximum)
   widened by half the range on each side and to at least :data:`REST_MARGIN` of the median
-  (a spring compressed under a load is never seen at its rest length).
+  (a spring compressed under a load is never seen at its rest length). In a complete graph,
+  from 0 to :data:`REST_REACH` times the largest distance seen: there a spring is also a
+  regression term of the exact least squares, and one held far from its rest length adds a
+  nearly constant pull along the pair (on the horse, the narrower bounds cost 0.1 mm of
+  held-out one-step error; docs/EXPERIMENTS.md).
+* **Anchors** (complete graphs only): a unary spring-damper per marker, ``-k (x - a) - c v``,
+  its anchor ``a`` free from the marker's median position to :data:`ANCHOR_REACH` times the
+  recording's extent (the largest distance between two markers) away on each axis: a body held
+  in place (on a treadmill, by its own legs) is pulled back to where it stays, and a far anchor
+  with a weak spring is a nearly constant force (a weight held up). Stiffness and damping as a
+  spring's (below) with the marker's mass for ``mu``; the value of ``k`` from the marker's own
+  acceleration and distance from its median position.
 * **Stiffness** (N/m) and **damping** (N s/m), from the pair's reduced mass
   ``mu = m_i m_j / (m_i + m_j)``, the rate and the window:
 
@@ -66,6 +80,9 @@ RIGID = 0.05  # a near-rigid pair's distance spread (5th-95th percentile) / its 
 NEIGHBOURS = {2: 3, 3: 4}  # nearest neighbours per marker, by dimension
 RIGID_REACH = 2  # near-rigid pairs are looked for among this many times k nearest neighbours
 DELAUNAY_MAX = 16  # markers: the Delaunay edges are candidates up to this many (they grow fast)
+COMPLETE_MAX = 8  # markers: up to this many, every pair and an anchor per marker are candidates
+REST_REACH = 2.0  # complete graph: rest lengths from 0 to this times the largest distance seen
+ANCHOR_REACH = 2.0  # anchors: free this many extents of the recording about the median position
 REST_MARGIN = 0.2  # the rest length's bounds reach at least this share of the median
 G = 9.81  # m/s^2
 FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
@@ -275,9 +292,11 @@ def scaffold(
     gravity: bool | None = None,
     neighbours: int | None = None,
     name: str | None = None,
+    complete: bool | None = None,
 ) -> Scaffold:
-    """The candidate model of a recording (see the module's docstring); InputError (one
-    line) for one marker, no frame with every marker, a flat recording asked for gravity, a
+    """The candidate model of a recording (see the module's docstring); ``complete``: every
+    pair and an anchor per marker (default: up to :data:`COMPLETE_MAX` markers, unless
+    ``neighbours`` is given). InputError (one line) for one marker, no frame with every marker, a flat recording asked for gravity, a
     total mass <= 0 or unknown markers."""
     source = traj.source or "the recording"
     if total_mass is not None and not (math.isfinite(total_mass) and total_mass > 0):
@@ -295,8 +314,8 @@ def scaffold(
     x = np.asarray(data.positions, np.float64)  # [F, P, D]
     mask = np.asarray(data.mask, bool)
     f_count, _, d = x.shape
-    complete = np.flatnonzero(mask.all(axis=1))
-    if complete.size == 0:
+    whole = np.flatnonzero(mask.all(axis=1))  # the frames with every marker
+    if whole.size == 0:
         raise InputError(
             source,
             f"no frame of {offset}:{offset + f_count} holds every one of the {p} markers; "
@@ -315,7 +334,7 @@ def scaffold(
     mu = m / 2.0  # the reduced mass of a pair of equal masses
 
     # placement: the first complete frame; its velocity by a backward (else forward) difference
-    t0 = int(complete[0])
+    t0 = int(whole[0])
     if t0 > 0 and mask[t0 - 1].all():
         v0, how = (x[t0] - x[t0 - 1]) / dt, "backward difference"
     elif t0 + 1 < f_count and mask[t0 + 1].all():
@@ -332,6 +351,16 @@ def scaffold(
         spread = (hi95 - lo5) / med
     k_nn = neighbours or NEIGHBOURS[d]
     pairs = _pairs(med, np.nan_to_num(spread, nan=np.inf), k_nn, x[t0])
+    if complete is None:
+        complete = neighbours is None and p <= COMPLETE_MAX
+    if complete:
+        every = f"every pair ({p} markers: the complete graph)"
+        pairs = {
+            (i, j): [every, *pairs.get((i, j), [])]
+            for i in range(p)
+            for j in range(i + 1, p)
+            if np.isfinite(med[i, j])
+        }
 
     k_lo = mu * (2 * math.pi / duration) ** 2 / 10
     k_hi = 10 * mu * (math.pi * rate) ** 2
@@ -379,6 +408,10 @@ def scaffold(
         half = 0.5 * (dmax - dmin)
         rl_lo = max(0.0, min(dmin - half, (1 - REST_MARGIN) * l0))
         rl_hi = max(dmax + half, (1 + REST_MARGIN) * l0)
+        rest_rule = f"widened by half the range and to +-{100 * REST_MARGIN:g} % of the median"
+        if complete:
+            rl_lo, rl_hi = 0.0, REST_REACH * dmax
+            rest_rule = f"bounds 0 .. {REST_REACH:g} x the largest (a complete graph)"
         stretch = series - l0
         acc = (series[2:] - 2 * series[1:-1] + series[:-2]) / dt**2
         acc = acc[np.isfinite(acc)]
@@ -399,8 +432,7 @@ def scaffold(
                     f"particles = [{_q(names[i])}, {_q(names[j])}]",
                     "optional = true",
                     f"rest_length = {_param(l0, rl_lo, rl_hi)}  # m: median distance over "
-                    f"{int(seen.sum())} frames; observed {dmin:.4g}..{dmax:.4g}, widened by half "
-                    f"the range and to +-{100 * REST_MARGIN:g} % of the median",
+                    f"{int(seen.sum())} frames; observed {dmin:.4g}..{dmax:.4g}, {rest_rule}",
                     f"stiffness = {_param(k0, k_lo, k_hi)}  # N/m: mu {mu:.4g} kg x rms "
                     f"acceleration {rms_a:.3g} m/s^2 / rms stretch {1000 * rms_s:.3g} mm; "
                     f"bounds mu (2 pi / {duration:.4g} s)^2 / 10 .. 10 mu (pi {rate:g} Hz)^2",
@@ -409,15 +441,70 @@ def scaffold(
                 ]
             )
         )
-    text = "\n".join(lines) + "\n" + "\n".join(bond_blocks) + "\n"
+    extent = float(np.nanmax(med))  # the largest median distance between two markers
+    anchors = (
+        _anchors(x, names, m, (m / mu) * np.array([k_lo, k_hi, c_lo, c_hi]), dt, extent)
+        if complete
+        else []
+    )
+    if complete:
+        notes.append(
+            f"candidates: every pair of the {p} markers and an anchor per marker (at most "
+            f"{COMPLETE_MAX} markers; --neighbours K for a neighbourhood graph)"
+        )
+    text = "\n".join(lines) + "\n" + "\n".join(bond_blocks + anchors) + "\n"
     return Scaffold(
         text=text,
         particles=p,
-        bonds=len(pairs),
+        bonds=len(pairs) + len(anchors),
         contacts=contacts,
         gravity=up_text,
         notes=notes,
     )
+
+
+def _anchors(x, names, m, limits, dt, extent) -> list[str]:
+    """The anchors' [[bond]] blocks: a unary spring-damper per marker, its anchor free about
+    the marker's median position (see the module's docstring); ``limits``: the stiffness and
+    damping bounds (k_lo, k_hi, c_lo, c_hi) for a mass ``m``."""
+    out = []
+    reach = ANCHOR_REACH * extent
+    unary = bonds.unary.KIND.name
+    k_lo, k_hi, c_lo, c_hi = (float(v) for v in limits)
+    for i, n in enumerate(names):
+        xi = x[:, i]
+        centre = np.nanmedian(xi, axis=0)
+        dist = np.sqrt(np.nansum((xi - centre) ** 2, axis=-1))
+        dist = dist[np.isfinite(xi).all(axis=-1)]
+        acc = (xi[2:] - 2 * xi[1:-1] + xi[:-2]) / dt**2
+        acc = np.sqrt(np.sum(acc**2, axis=-1))
+        acc = acc[np.isfinite(acc)]
+        rms_d = float(np.sqrt(np.mean(dist**2))) if dist.size else 0.0
+        rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
+        k_raw = m * rms_a / rms_d if rms_d > 0 else k_hi
+        k0 = float(np.clip(k_raw, k_lo, k_hi))
+        c0 = float(np.clip(0.1 * 2 * math.sqrt(k0 * m), c_lo, c_hi))
+        out.append(
+            "\n".join(
+                [
+                    "",
+                    f"# {n} anchored: a candidate of the complete graph",
+                    "[[bond]]",
+                    f"kind = {_q(unary)}",
+                    f"particles = [{_q(n)}]",
+                    "optional = true",
+                    f"anchor = {{ value = {_vec(centre)}, min = {_vec(centre - reach)}, "
+                    f"max = {_vec(centre + reach)} }}  # m: the marker's median position, free "
+                    f"{ANCHOR_REACH:g} x the recording's extent {extent:.4g} m about it",
+                    f"stiffness = {_param(k0, k_lo, k_hi)}  # N/m: its mass {m:.4g} kg x rms "
+                    f"acceleration {rms_a:.3g} m/s^2 / rms distance from the median "
+                    f"{1000 * rms_d:.3g} mm; bounds as a spring's, m for mu",
+                    f"damping = {_param(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
+                    "2 sqrt(k m); bounds as a spring's, m for mu",
+                ]
+            )
+        )
+    return out
 
 
 def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:

@@ -269,6 +269,24 @@ def held_out_of_reach(model: Model, windows: Windows) -> tuple[Model, Windows]:
     return build(spec, disable=model.disabled), replace(windows, weight=weight)
 
 
+def exact_optimum(model: Model, windows: Windows) -> tuple[ModelSpec, float]:
+    """(the model file with its linear parameters at their exact least-squares optimum on
+    ``windows``, its one-step RMS in mm there): every bond as it is (an absent candidate stays
+    absent, a present one present); the bonds the least squares does not solve but whose reach
+    is known (contacts) held at their file values and their particles' predictions left out
+    where they may act (:func:`held_out_of_reach`). The start of a fit that adds contacts and
+    gravity to a decided structure."""
+    original = model.spec
+    held_model, held_windows = held_out_of_reach(model, windows)
+    fit = least_squares(held_model, held_windows)
+    spec = held_model.with_genome(fit.genome).spec
+    held = [i for i, b in enumerate(original.bond) if _held(b)]
+    spec = spec.model_copy(
+        update={"bond": [original.bond[i] if i in held else b for i, b in enumerate(spec.bond)]}
+    )
+    return spec, fit.rms_mm
+
+
 def identify_structure(model: Model, windows: Windows, eliminate: bool = True) -> Structure:
     """Backward elimination of the optional bonds of ``model`` under the BIC, each structure
     solved by exact least squares on ``windows`` (horizon 1). InputError when the model has

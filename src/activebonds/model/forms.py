@@ -117,7 +117,16 @@ class VectorForm:
 
     def write(self, par: bonds.Parameter, current, row, pos: int):
         xs = [float(x) for x in row]
-        return current.model_copy(update={"value": xs}) if isinstance(current, VectorParam) else xs
+        if not isinstance(current, VectorParam):
+            return xs
+        n = len(xs)  # within the bounds, as set_value keeps a scalar (rounding may cross one)
+        lo = current.min if isinstance(current.min, list) else [current.min] * n
+        hi = current.max if isinstance(current.max, list) else [current.max] * n
+        xs = [
+            min(max(x, a if a is not None else x), b if b is not None else x)
+            for x, a, b in zip(xs, lo, hi, strict=True)
+        ]
+        return current.model_copy(update={"value": xs})
 
 
 class WeightsForm:

@@ -12,6 +12,10 @@ for the model and for the zero-force (constant-velocity) predictor:
   :func:`~activebonds.report.predict.rms_mm` of the constant-velocity predictions for the
   zero force). Squared and averaged with each particle's count of terms, they give the
   overall numbers back;
+* asked for (``body``: a subset of the markers, e.g. a horse's head, withers and sacrum), the
+  same three numbers counting only those markers' errors: the free runs of the whole model
+  (and of zero force) from the same starts, off once one of *these* markers is off by more
+  than the threshold (a swinging hoof does not end a run that holds the body);
 * asked for (``gait``), the free runs scored as a gait, insensitive to their phase
   (:mod:`activebonds.report.gait`): period, feet excursions, body distance, cycle RMS;
 * one step and ``horizon`` frames ahead (the model's free run from each recorded state, beside
@@ -78,6 +82,8 @@ class Evaluation:
     comparisons: tuple[Comparison, ...] = ()  # one step, then `horizon` frames ahead
     gait: GaitEvaluation | None = None  # asked for: the free runs scored as a gait
     holds: dict | None = None  # what holds the model (identify.verdict.holds): the advice's
+    body_markers: tuple[str, ...] = ()  # asked for: the markers whose errors alone count
+    body: dict[str, FreeRunMetrics] | None = None  # their numbers: "model", "zero_force"
 
     @property
     def verdict(self) -> Verdict | None:
@@ -121,6 +127,16 @@ class Evaluation:
             "comparisons": [c.to_dict() for c in self.comparisons],
             "holds": self.holds,
             **({"gait": self.gait.record()} if self.gait is not None else {}),
+            **(
+                {
+                    "body": {
+                        "markers": list(self.body_markers),
+                        **{k: m.to_dict() for k, m in self.body.items()},
+                    }
+                }
+                if self.body is not None
+                else {}
+            ),
         }
 
 
@@ -142,14 +158,17 @@ def evaluate(
     gait: bool = False,
     feet: Sequence[str] | None = None,
     up: Sequence[float] | None = None,
+    body: Sequence[str] | None = None,
 ) -> Evaluation:
     """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
     particle, in order; default the model's). ``substeps`` and ``integrator``: the
     integration the model was fitted with; ``horizon``: the frames ahead of the multi-step
     comparison (1: one step only). ``gait``: score the free runs as a gait too
     (:mod:`activebonds.report.gait_runs`; ``feet``: particle names, ``up``: a vector, each
-    found from the model or the recording when not given). Raises :class:`InputError` (one line) for markers
-    or frames the recording does not have."""
+    found from the model or the recording when not given). ``body``: particle (or marker)
+    names whose errors alone count in a second set of the free-run numbers. Raises
+    :class:`InputError` (one line) for markers or frames the recording does not have, or a
+    ``body`` name the model does not have."""
     from ..identify.problem import select_data
     from ..identify.settings import FitSettings
 
@@ -171,6 +190,11 @@ def evaluate(
     found = window_metrics(
         model, data, substeps, integrator, starts=starts, threshold_mm=threshold_mm
     )
+    picked = _body(body, model.particle_names, data.markers)
+    body_found = None
+    if picked:
+        options = {"starts": starts, "threshold_mm": threshold_mm, "markers": picked}
+        body_found = window_metrics(model, data, substeps, integrator, **options)
     pred = predict(model, data, substeps=substeps, method=integrator)
     rec = np.asarray(data.positions, np.float64)
     first = start_frames(rec, 1)
@@ -211,7 +235,27 @@ def evaluate(
         if gait
         else None,
         holds=holds(model),
+        body_markers=tuple(model.particle_names[i] for i in picked),
+        body=body_found,
     )
+
+
+def _body(names: Sequence[str] | None, particles: Sequence[str], markers: Sequence[str]):
+    """The particle indices of ``names`` (particle names, or the markers that follow them),
+    in the model's order; InputError (``--body``) for a name neither holds."""
+    if not names:
+        return []
+    out = []
+    for name in names:
+        if name in particles:
+            out.append(list(particles).index(name))
+        elif name in markers:
+            out.append(list(markers).index(name))
+        else:
+            raise InputError(
+                "--body", f"{name!r} is no particle of the model; they are {', '.join(particles)}"
+            )
+    return sorted(set(out))
 
 
 def evaluate_files(model: str | Path, trajectory: str | Path, **options) -> Evaluation:

@@ -1,0 +1,272 @@
+"""Which variant of a scaffold's linear structure ``activebonds auto`` keeps: chosen on a
+validation tail of the fitted frames, never on the held-out ones.
+
+The exact least squares (:mod:`.lsq`) and the BIC (:mod:`.structure`) judge a structure on
+the frames it was fitted to. A model that predicts new frames must also do well where the
+body is not quite where it was: on a treadmill it wanders, and a marker tied to a place in
+the room (an anchor) is pulled back to where it stood while the rest of the body moves on.
+So the variants below are each fitted (exact least squares, with or without the BIC's
+elimination) on the first :data:`TRAIN` of the fitted frames and scored by their one-step
+error on the rest, the **validation tail**, beside the zero-force predictor's there:
+
+* **masses**: as scaffolded (equal), or in inverse proportion to each marker's RMS
+  acceleration over the frames (the same total): a pair of bodies pushed apart by one force
+  accelerate in inverse proportion to their masses, so a marker that barely accelerates (a
+  horse's withers) is heavy beside one that does (a hoof), and a spring that moves the hoof
+  hardly moves it;
+* **anchors** (a scaffold's unary spring-dampers): as scaffolded (springs with free anchors),
+  as dampers alone (stiffness 0: a drag towards rest in the room, no place to hold), or none;
+* **decided**: the candidates the BIC keeps, or every candidate.
+
+Gravity and the bonds the exact least squares does not solve (ground contacts) are left out
+of every variant: they are the fit's to add (``activebonds auto`` fits them from the chosen
+variant and keeps them where the BIC of the fitted frames says they earn their parameters).
+
+The chosen variant is the one with the lowest one-step RMS on the tail among those that beat
+zero force at every marker there; if none does, the lowest RMS. It is then decided and solved
+again on all the fitted frames (:func:`decide`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from itertools import product
+
+import numpy as np
+
+from .. import bonds
+from ..model import Model, build
+from ..model.schema import ModelSpec
+
+TRAIN = 0.8  # the share of the fitted frames each variant is fitted on; the rest is the tail
+MIN_TAIL = 10  # frames: a shorter tail chooses nothing (the default variant is kept)
+MASSES = ("scaffold", "acceleration")
+ANCHORS = ("springs", "dampers", "none")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One variant of a scaffold's linear structure."""
+
+    masses: str = "scaffold"  # MASSES
+    anchors: str = "springs"  # ANCHORS ("springs" where the scaffold has no anchor)
+    decided: bool = True  # the BIC's elimination (False: every candidate present)
+
+    def text(self) -> str:
+        masses = "scaffold masses" if self.masses == "scaffold" else "masses ~ 1/rms acceleration"
+        anchors = {"springs": "anchors", "dampers": "anchors as dampers", "none": "no anchor"}
+        decided = "BIC-decided" if self.decided else "every candidate"
+        return f"{masses}, {anchors[self.anchors]}, {decided}"
+
+
+@dataclass(frozen=True)
+class Scored:
+    """A variant fitted on the first frames and scored on the tail (mm)."""
+
+    variant: Variant
+    tail_rms_mm: float
+    tail_zero_force_mm: float
+    per_marker_mm: tuple[float, ...]
+    zero_force_per_marker_mm: tuple[float, ...]
+    bonds: int  # present bonds
+
+    @property
+    def every_marker_better(self) -> bool:
+        return all(
+            m < z for m, z in zip(self.per_marker_mm, self.zero_force_per_marker_mm, strict=True)
+        )
+
+    def record(self) -> dict:
+        return {**asdict(self), "variant": asdict(self.variant), "text": self.variant.text()}
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The variants' scores on the tail and the one chosen (None: no choice was made)."""
+
+    chosen: Variant
+    scored: tuple[Scored, ...]
+    train: tuple[int, int]
+    tail: tuple[int, int]
+    markers: tuple[str, ...]
+
+    def record(self) -> dict:
+        return {
+            "rule": "lowest one-step RMS on the validation tail among the variants better than "
+            "zero force at every marker there (else the lowest RMS)",
+            "train_frames": list(self.train),
+            "tail_frames": list(self.tail),
+            "markers": list(self.markers),
+            "chosen": asdict(self.chosen),
+            "chosen_text": self.chosen.text(),
+            "variants": [s.record() for s in self.scored],
+        }
+
+    def line(self) -> str:
+        best = next(s for s in self.scored if s.variant == self.chosen)
+        a, b = self.tail
+        return (
+            f"chosen on the validation tail {a}:{b} (fitted on {self.train[0]}:{self.train[1]}) "
+            f"among {len(self.scored)} variants: {self.chosen.text()}, {best.tail_rms_mm:.4g} "
+            f"mm (zero force {best.tail_zero_force_mm:.4g} mm)"
+        )
+
+
+def has_anchors(spec: ModelSpec) -> bool:
+    return any(b.kind == bonds.unary.KIND.name for b in spec.bond)
+
+
+def variants(spec: ModelSpec) -> list[Variant]:
+    """Every variant of the scaffold ``spec``, in the order ties are settled."""
+    anchors = ANCHORS if has_anchors(spec) else ("springs",)
+    return [Variant(m, a, d) for m, a, d in product(MASSES, anchors, (True, False))]
+
+
+def acceleration_masses(positions: np.ndarray, dt: float, total: float) -> np.ndarray:
+    """Masses summing to ``total`` in inverse proportion to each marker's RMS acceleration
+    (second differences over ``dt^2`` where three frames are recorded), [P]; equal where a
+    marker's acceleration cannot be measured or is zero."""
+    x = np.asarray(positions, np.float64)
+    acc = (x[2:] - 2 * x[1:-1] + x[:-2]) / dt**2
+    a2 = np.sum(acc**2, axis=-1)  # [F - 2, P], NaN where missing
+    with np.errstate(invalid="ignore"):
+        rms = np.sqrt(np.nanmean(a2, axis=0))
+    if not np.all(np.isfinite(rms) & (rms > 0)):
+        return np.full(x.shape[1], total / x.shape[1])
+    inverse = 1.0 / rms
+    return total * inverse / inverse.sum()
+
+
+def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> ModelSpec:
+    """The scaffold ``spec`` as ``variant`` has it: no gravity, no bond the exact least
+    squares does not solve, anchors and masses as the variant says (``positions`` [F, P, D]:
+    the frames the masses are measured on)."""
+    unary = bonds.unary.KIND.name
+    kept = []
+    for b in spec.bond:
+        if bonds.get(b.kind).linear is None:
+            continue  # contacts: the fit's to add
+        if b.kind == unary and variant.anchors == "none":
+            continue
+        if b.kind == unary and variant.anchors == "dampers":
+            anchor = b.anchor.value if hasattr(b.anchor, "value") else b.anchor
+            b = b.model_copy(update={"stiffness": 0.0, "anchor": [float(a) for a in anchor]})
+        kept.append(b)
+    particles = list(spec.particle)
+    if variant.masses == "acceleration":
+        total = sum(_mass(p) for p in particles)
+        masses = acceleration_masses(positions, dt, total)
+        particles = [
+            p.model_copy(update={"mass": float(m)}) for p, m in zip(particles, masses, strict=True)
+        ]
+    return spec.model_copy(update={"bond": kept, "gravity": None, "particle": particles})
+
+
+def _mass(p) -> float:
+    return float(p.mass.value if hasattr(p.mass, "value") else p.mass)
+
+
+def decide(model: Model, recording, frames: tuple[int, int], variant: Variant):
+    """``variant`` of the scaffold ``model`` decided and solved on ``frames`` of
+    ``recording`` (:func:`~.structure.structure_of`): a :class:`~.structure.Structure`."""
+    from .problem import select_data
+    from .settings import FitSettings
+    from .structure import candidates, structure_of
+
+    settings = FitSettings(frames=frames)
+    data = select_data(model, recording, settings)
+    spec = linear_spec(model.spec, variant, data.positions, data.dt)
+    linear = build(spec)
+    eliminate = variant.decided and bool(candidates(spec))
+    return structure_of(linear, recording, settings, 0, eliminate)
+
+
+def choose(model: Model, recording, frames: tuple[int, int], say=None) -> Choice | None:
+    """The variants of the scaffold ``model`` fitted on the first :data:`TRAIN` of ``frames``
+    and scored on the rest (see the module's docstring); None where the tail would hold
+    fewer than :data:`MIN_TAIL` frames or the training part fewer than that."""
+    from .baselines import zero_force_predictions
+    from .predictions import one_step, rms_mm
+    from .problem import select_data
+    from .settings import FitSettings
+
+    a, b = frames
+    split = a + int(round(TRAIN * (b - a)))
+    if b - split < MIN_TAIL or split - a < MIN_TAIL:
+        return None
+    tail = select_data(model, recording, FitSettings(frames=(split, b)))
+    rec = np.asarray(tail.positions, np.float64)
+    zero = zero_force_predictions(rec, 1)[0]
+    zero_each = rms_mm(zero, rec)
+    zero_all = _overall(zero, rec)
+    scored = []
+    for variant in variants(model.spec):
+        found = decide(model, recording, (a, split), variant)
+        fitted = build(found.spec)
+        one = one_step(fitted, rec, tail.dt)
+        each = rms_mm(one, rec)
+        s = Scored(
+            variant=variant,
+            tail_rms_mm=_overall(one, rec),
+            tail_zero_force_mm=zero_all,
+            per_marker_mm=tuple(float(v) for v in each),
+            zero_force_per_marker_mm=tuple(float(v) for v in zero_each),
+            bonds=sum(1 for bd in found.spec.bond if not bd.absent),
+        )
+        scored.append(s)
+        if say is not None:
+            flag = "" if s.every_marker_better else " (a marker not better than zero force)"
+            say(f"      {variant.text()}: {s.tail_rms_mm:.4g} mm on the tail{flag}")
+    better = [s for s in scored if s.every_marker_better and np.isfinite(s.tail_rms_mm)]
+    pool = better or [s for s in scored if np.isfinite(s.tail_rms_mm)] or scored
+    best = min(pool, key=lambda s: s.tail_rms_mm if np.isfinite(s.tail_rms_mm) else np.inf)
+    return Choice(best.variant, tuple(scored), (a, split), (split, b), tuple(tail.markers))
+
+
+def _overall(predicted: np.ndarray, recorded: np.ndarray) -> float:
+    """RMS (mm) over every (frame, marker) term both hold."""
+    err2 = np.sum((np.asarray(predicted) - np.asarray(recorded)) ** 2, axis=-1)
+    ok = np.isfinite(err2)
+    return float(np.sqrt(err2[ok].mean()) * 1000.0) if ok.any() else float("nan")
+
+
+@dataclass(frozen=True)
+class Criterion:
+    """A model's one-step BIC on the fitted frames: ``n ln(RSS / n) + k ln n`` (n residual
+    coordinates, k free parameters), as :mod:`.structure` decides bonds."""
+
+    rss: float  # m^2
+    n: int  # residual coordinates
+    k: int  # free parameters (genes)
+    rms_mm: float
+
+    @property
+    def bic(self) -> float:
+        return self.n * float(np.log(max(self.rss, 1e-300) / self.n)) + self.k * float(
+            np.log(self.n)
+        )
+
+    def record(self) -> dict:
+        return {**asdict(self), "bic": self.bic}
+
+
+def criterion(model: Model, recording, frames: tuple[int, int]) -> Criterion:
+    """The one-step BIC of ``model`` on ``frames`` of ``recording`` (every frame predicted
+    from the two recorded before it, one Euler step, as the fit's one-step cost)."""
+    from .predictions import one_step
+    from .problem import select_data
+    from .settings import FitSettings
+
+    data = select_data(model, recording, FitSettings(frames=frames))
+    rec = np.asarray(data.positions, np.float64)
+    one = one_step(model, rec, data.dt)
+    err2 = np.sum((one - rec) ** 2, axis=-1)
+    complete = np.isfinite(rec).all(axis=(1, 2))
+    inputs = np.zeros(rec.shape[0], bool)
+    inputs[2:] = complete[1:-1] & complete[:-2]
+    counted = np.isfinite(rec).all(axis=-1) & inputs[:, None]  # the terms the cost counts
+    bad = counted & ~np.isfinite(err2)
+    rss = float("inf") if bad.any() else float(np.sum(err2[counted]))
+    terms = int(counted.sum())
+    rms = float(np.sqrt(rss / max(terms, 1)) * 1000.0)
+    return Criterion(rss=rss, n=terms * rec.shape[-1], k=model.layout.n_genes, rms_mm=rms)

@@ -1,0 +1,103 @@
+"""The variants of a scaffold's linear structure that ``activebonds auto`` chooses among on a
+validation tail (identify/structure_choice.py), and the one-step BIC that keeps or drops the
+ground model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from activebonds.data import read_trajectory
+from activebonds.identify.cost import make_windows
+from activebonds.identify.lsq import least_squares
+from activebonds.identify.scaffold import scaffold
+from activebonds.identify.structure_choice import (
+    TRAIN,
+    Variant,
+    acceleration_masses,
+    choose,
+    criterion,
+    linear_spec,
+    variants,
+)
+from activebonds.model import build, loads_model
+from activebonds.simulation import simulate
+from helpers import HORSE_TROT, TRIANGLE
+
+
+def test_masses_in_inverse_proportion_to_the_rms_acceleration():
+    t = np.arange(50)[:, None] * 0.01
+    x = np.zeros((50, 3, 1))
+    x[:, 0, 0] = np.sin(2 * np.pi * t[:, 0])  # amplitudes 1, 2 and 4 at one frequency
+    x[:, 1, 0] = 2 * np.sin(2 * np.pi * t[:, 0])
+    x[:, 2, 0] = 4 * np.sin(2 * np.pi * t[:, 0])
+    m = acceleration_masses(x, 0.01, 7.0)
+    np.testing.assert_allclose(m, [4.0, 2.0, 1.0], rtol=1e-12)
+    still = np.zeros((10, 2, 3))  # no acceleration to measure: equal
+    np.testing.assert_allclose(acceleration_masses(still, 0.01, 4.0), [2.0, 2.0])
+
+
+def test_a_variant_drops_gravity_and_contacts_and_sets_anchors_and_masses():
+    traj = read_trajectory(HORSE_TROT)
+    spec = loads_model(scaffold(traj, frames=(0, 300)).text).spec
+    assert spec.gravity is not None and any(b.kind == "contact" for b in spec.bond)
+    assert len(variants(spec)) == 12
+    x = np.asarray(traj.positions[:300])
+    for anchors in ("springs", "dampers", "none"):
+        out = linear_spec(spec, Variant("acceleration", anchors, True), x, traj.dt)
+        model = build(out)  # builds as written
+        assert out.gravity is None and not any(b.kind == "contact" for b in out.bond)
+        unary = [b for b in out.bond if b.kind == "unary"]
+        assert len(unary) == {"springs": 7, "dampers": 7, "none": 0}[anchors]
+        if anchors == "dampers":  # no stiffness and no anchor gene: a drag alone
+            assert all(b.stiffness == 0.0 and isinstance(b.anchor, list) for b in unary)
+            assert not any("anchor" in g.name for g in model.layout.genes)
+        masses = [p.mass for p in out.particle]
+        np.testing.assert_allclose(masses, acceleration_masses(x, traj.dt, 7.0), rtol=1e-12)
+        assert sum(masses) == pytest.approx(7.0, rel=1e-12)
+    same = linear_spec(spec, Variant(), x, traj.dt)
+    assert [p.mass for p in same.particle] == [p.mass for p in spec.particle]
+
+
+@pytest.fixture(scope="module")
+def triangle_recording():
+    """The triangle (three springs, masses 1, 1.5 and 2 kg, no anchor), 200 frames."""
+    from activebonds.model import load_model
+
+    return simulate(load_model(TRIANGLE), 200, 60.0)
+
+
+def test_the_choice_is_the_best_tail_among_variants_better_at_every_marker(triangle_recording):
+    rec = triangle_recording
+    model = loads_model(scaffold(rec, frames=(0, 160), gravity=False).text)
+    choice = choose(model, rec, (0, 160))
+    split = int(round(TRAIN * 160))
+    assert choice.train == (0, split) and choice.tail == (split, 160)
+    assert len(choice.scored) == 12
+    better = [s for s in choice.scored if s.every_marker_better]
+    assert better  # a spring model of a spring recording beats constant velocity
+    best = min(better, key=lambda s: s.tail_rms_mm)
+    assert choice.chosen == best.variant
+    # the truth's masses are 1, 1.5 and 2 kg, neither variant's: not exact, but far better
+    assert best.tail_rms_mm < 0.2 * best.tail_zero_force_mm
+    record = choice.record()
+    assert record["chosen"] == {"masses": best.variant.masses, "anchors": best.variant.anchors,
+                                "decided": best.variant.decided}  # fmt: skip
+    assert len(record["variants"]) == 12
+    short = choose(model, rec, (0, 30))  # a 6-frame tail chooses nothing
+    assert short is None
+
+
+def test_the_criterion_is_the_one_step_bic_of_the_exact_cost(triangle_recording):
+    rec = triangle_recording
+    model = loads_model(scaffold(rec, frames=(0, 160), gravity=False).text)
+    linear = build(linear_spec(model.spec, Variant(anchors="none"), rec.positions, rec.dt))
+    data = rec.window(0, 160)
+    fit = least_squares(linear, make_windows(data.positions, data.mask, data.dt, 1))
+    solved = linear.with_genome(fit.genome)
+    found = criterion(solved, rec, (0, 160))
+    n = 158 * 3 * 3  # predicted frames x markers x coordinates
+    assert found.n == n and found.k == linear.layout.n_genes == 9
+    assert found.rss == pytest.approx(fit.cost, rel=1e-9)
+    assert found.bic == pytest.approx(n * np.log(fit.cost / n) + 9 * np.log(n), rel=1e-12)
+    assert found.rms_mm == pytest.approx(fit.rms_mm, rel=1e-9)
