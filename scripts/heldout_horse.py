@@ -26,7 +26,8 @@ the zero-force predictor's):
 4. with ``--auto DIR``: ``activebonds auto DATA --held-out 0.5 --out DIR/GAIT`` (run unless
    DIR/GAIT holds a finished run of it), its held-out evaluation (evaluation.json) and the
    kept model's free runs counted over the body markers alone (``evaluate --body
-   Head,Withers,Sacrum``).
+   Head,Withers,Sacrum``); the same of ``auto``'s own split (``--out DIR/GAIT-default``:
+   fitted on 0-479, judged on 480-599).
 """
 
 from __future__ import annotations
@@ -222,9 +223,10 @@ def run_gait(gait: str) -> dict:
     return out
 
 
-def run_auto(gait: str, folder: Path) -> dict:
-    """``activebonds auto`` on the gait (held out: 300-599), unless finished before; its
-    held-out evaluation and the body markers' free-run count."""
+def run_auto(gait: str, folder: Path, default: bool = False) -> dict:
+    """``activebonds auto`` on the gait (held out: 300-599; ``default``: auto's own split,
+    480-599), unless finished before; its held-out evaluation and the body markers' free-run
+    count."""
     from activebonds.data import read_trajectory
     from activebonds.data.bundled import dataset
     from activebonds.identify.rundir import RunDir
@@ -232,24 +234,28 @@ def run_auto(gait: str, folder: Path) -> dict:
     from activebonds.report.evaluate import evaluate
 
     path = dataset(GAITS[gait]).path
-    out_dir = folder / gait
-    command = ["activebonds", "auto", str(path), "--held-out", "0.5", "--out", str(out_dir)]
+    name = f"{gait}-default" if default else gait
+    out_dir = folder / name
+    split = [] if default else ["--held-out", "0.5"]
+    command = ["activebonds", "auto", str(path), *split, "--out", str(out_dir)]
     state = out_dir / "auto.json"
     if not (state.is_file() and "report" in json.loads(state.read_text())["steps"]):
         folder.mkdir(parents=True, exist_ok=True)
-        with open(folder / f"{gait}.log", "w") as log:  # the command's own lines
+        with open(folder / f"{name}.log", "w") as log:  # the command's own lines
             proc = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(f"{' '.join(command)} failed: see {folder / gait}.log")
+            raise RuntimeError(f"{' '.join(command)} failed: see {folder / name}.log")
     record = json.loads(state.read_text())
     held = json.loads((out_dir / "evaluation.json").read_text())["held_out"]
     kept = out_dir / record["steps"]["fit"].get("run", "run")
     model = load_model(RunDir(kept).best_model_path)
-    body = evaluate(model, read_trajectory(path), frames=TEST, body=BODY, horizon=1)
+    frames = tuple(held["frames"])
+    body = evaluate(model, read_trajectory(path), frames=frames, body=BODY, horizon=1)
     one, ahead = held["comparisons"][0], held["comparisons"][1]
     return {
         "command": "activebonds auto $(activebonds datasets "
-        f"{GAITS[gait]}) --held-out 0.5 --out {gait}",
+        f"{GAITS[gait]}) {' '.join(split)} --out {name}".replace("  ", " "),
+        "held_out_frames": list(frames),
         "steps_seconds": {k: v["seconds"] for k, v in record["steps"].items()},
         "kept_run": kept.name,
         "structure": record["steps"]["structure"]["note"],
@@ -294,6 +300,7 @@ def main(argv=None) -> int:
         r = run_gait(gait)
         if args.auto is not None:
             r["auto"] = run_auto(gait, args.auto)
+            r["auto_default_split"] = run_auto(gait, args.auto, default=True)
         results.append(r)
         print(f"\n{gait}: fitted 0-299, held out 300-599 ({r['seconds']:.0f} s)")
         print(table({**r["exact"], **r["ablations"]}, r["markers"], r["zero_force"]))
