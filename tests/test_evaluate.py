@@ -195,6 +195,7 @@ def test_the_command_prints_a_table_and_json(files):
         "zero_force",
         "particles",
         "comparisons",  # the verdicts, one step and 10 frames ahead (test_verdict.py)
+        "holds",  # what holds the model, for the free run's advice (test_verdict.py)
     }
     assert record["model_file"] == str(TRIANGLE) and record["frames"] == [0, FRAMES]
     assert record["model"] == found.model.to_dict()
@@ -245,3 +246,36 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, args, words):
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: "), res.output
     assert words in lines[0]
+
+
+def test_a_runs_best_model_is_scored_with_the_runs_integration(files, tmp_path):
+    """``evaluate RUN/best_model.toml`` without --substeps and --integrator scores the model
+    as the fit (and its report) did: with the run's substeps and integrator, named in the
+    title; given options still win."""
+    from activebonds.identify import fit
+
+    model, own, other, _ = files
+    run = tmp_path / "run"
+    fit(
+        TRIANGLE,
+        own,
+        out=run,
+        population=8,
+        generations=2,
+        refine="none",
+        substeps=3,
+        integrator="verlet",
+    )
+    best = run / "best_model.toml"
+    res = _run(best, other, "--json")
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    assert (record["substeps"], record["integrator"]) == (3, "verlet")
+    found = evaluate(load_model(best), read_trajectory(other), substeps=3, integrator="verlet")
+    assert record["model"] == found.model.to_dict()
+    table = _run(best, other)
+    assert "(3 verlet substeps per frame)" in table.output
+    given = json.loads(_run(best, other, "--json", "--substeps", "1").stdout)
+    assert (given["substeps"], given["integrator"]) == (1, "verlet")
+    plain = json.loads(_run(TRIANGLE, other, "--json").stdout)
+    assert (plain["substeps"], plain["integrator"]) == (1, "euler")

@@ -215,3 +215,178 @@ def test_cli_writes_the_file_and_nothing_on_refusal(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.strip() == "error: --format: expected mjcf, got 'urdf'"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["triangle.xml"]
+
+
+def test_export_from_a_recording_starts_with_the_velocity_that_lands_on_the_next_frame(tmp_path):
+    """``export --from TRAJ --frame 0``, as documented: the velocity from which the model's
+    step lands on frame 1, not the forward difference. A triangle damped strongly for its
+    100 Hz frames (c dt / m = 3), where the cheap fixed point diverges: Newton's method finds
+    the recording's own start velocity, MuJoCo from the exported keyframe lands on frame 1,
+    and the command says how the velocity was found. (It wrote the forward difference here,
+    silently: 0.28 m/s off.)"""
+    import re
+
+    from activebonds.data import write_trajectory
+    from helpers import cli_in_process
+
+    text = re.sub(r"damping = \{[^}]*\}", "damping = 300.0", TRIANGLE.read_text())
+    model = loads_model(text)
+    recording = simulate(model, 20, RATE)
+    write_trajectory(recording, tmp_path / "rec.csv")
+    (tmp_path / "damped.toml").write_text(text)
+    out = tmp_path / "damped.xml"
+    proc = cli_in_process(
+        "export",
+        tmp_path / "damped.toml",
+        "--out",
+        out,
+        "--rate",
+        RATE,
+        "--from",
+        tmp_path / "rec.csv",
+        "--frame",
+        "0",
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (
+        "initial velocities at frame 0: the velocity from which the model's step lands on the "
+        "next frame (by Newton's method: the step's damping is strong for the frame rate)"
+    ) in proc.stdout
+    m = mujoco.MjModel.from_xml_path(str(out))
+    qvel = m.key_qvel.reshape(3, 3)
+    _, truth = model.initial_state()
+    np.testing.assert_allclose(qvel, truth, rtol=0, atol=1e-6)  # the CSV's rounding
+    forward = (recording.positions[1] - recording.positions[0]) * RATE
+    assert np.abs(forward - truth).max() > 0.2
+    landed = mujoco_run(out.read_text(), 3, 3, 1)[1]
+    np.testing.assert_allclose(landed, recording.positions[1], rtol=0, atol=1e-6)
+
+
+def _ground_model(z=0.05, vx=0.0, k=1e4, c=50.0, mu=0.8, dimension=3):
+    """Two particles over the plane z = 0 (y = 0 in 2D) under gravity, each with a ground
+    contact: P (2 kg) dropped from ``z`` with velocity ``vx`` along x, Q (1 kg) beside it."""
+    up = "[0.0, 0.0, 1.0]" if dimension == 3 else "[0.0, 1.0]"
+    g = "[0.0, 0.0, -9.81]" if dimension == 3 else "[0.0, -9.81]"
+
+    def at(x, h):
+        return f"[{x}, 0.0, {h}]" if dimension == 3 else f"[{x}, {h}]"
+
+    def vel(v):
+        return f"[{v}, 0.0, 0.0]" if dimension == 3 else f"[{v}, 0.0]"
+
+    text = f'name = "ground"\ndimension = {dimension}\ngravity = {g}\n'
+    for name, mass, x, v in (("P", 2.0, 0.0, vx), ("Q", 1.0, 1.0, 0.0)):
+        text += (
+            f'\n[[particle]]\nname = "{name}"\nmass = {mass}\nposition = {at(x, z)}\n'
+            f"velocity = {vel(v)}\n"
+        )
+    for name in ("P", "Q"):
+        text += (
+            f'\n[[bond]]\nkind = "contact"\ntype = "ground"\nparticles = ["{name}"]\n'
+            f"normal = {up}\nheight = 0.0\nstiffness = {k}\ndamping = {c}\nfriction = {mu}\n"
+        )
+    return loads_model(text)
+
+
+def _mujoco_frames(xml: str, frames: int, substeps: int, n: int, dim: int) -> np.ndarray:
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    out = [data.qpos.reshape(n, dim).copy()]
+    for _ in range(frames - 1):
+        for _ in range(substeps):
+            mujoco.mj_step(model, data)
+        out.append(data.qpos.reshape(n, dim).copy())
+    return np.array(out)
+
+
+def test_ground_contacts_export_as_mujoco_contact_pairs():
+    """A contact bond -> a plane geom (one per distinct plane, lowered by the spheres' radius)
+    and a sphere on the particle, joined by an explicit contact pair: solref = (-k / m,
+    -c / m), the direct stiffness and damping per kg; the least impedance; the bond's
+    friction on an elliptic cone, applied by the no-slip solver; no other collision."""
+    from activebonds.export.mjcf import IMPEDANCE, SPHERE
+
+    model = _ground_model(k=2e4, c=60.0, mu=0.7)
+    m = mujoco.MjModel.from_xml_string(to_mjcf(model, rate=100.0, substeps=10))
+    assert m.ngeom == 3 and m.npair == 2
+    assert (m.geom_contype == 0).all() and (m.geom_conaffinity == 0).all()
+    assert not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and m.opt.noslip_iterations == 10
+    plane = m.geom("ground0")
+    assert plane.type == mujoco.mjtGeom.mjGEOM_PLANE
+    np.testing.assert_allclose(plane.pos, [0.0, 0.0, -SPHERE])
+    assert m.geom("P_sphere").size[0] == SPHERE
+    for i, mass in enumerate((2.0, 1.0)):
+        np.testing.assert_allclose(m.pair_solref[i], [-2e4 / mass, -60.0 / mass])
+        np.testing.assert_allclose(m.pair_solimp[i][:2], [IMPEDANCE, IMPEDANCE])
+        np.testing.assert_allclose(m.pair_friction[i][:2], [0.7, 0.7])
+        assert m.pair_dim[i] == 3 and m.pair_margin[i] == 0.0
+
+
+def test_a_particle_resting_on_the_ground_settles_where_it_does_in_our_simulator():
+    """Dropped from 5 cm, each particle settles (3 s, 100 Hz, 10 substeps) at the depth where
+    its contact holds its weight, m g / k: 1.962 mm (P, 2 kg) and 0.981 mm (Q) at k = 1e4.
+    MuJoCo's soft contact passes the unconstrained accelerations on scaled by 1 - d, d its
+    impedance (here MuJoCo's least, 1e-4), so its depth is (1 - d) m g / k, 0.2 micrometre
+    shallower: within 1 micrometre of ours (measured 2e-7 m)."""
+    model = _ground_model()
+    ours = simulate(model, 300, 100.0, substeps=10).positions
+    theirs = _mujoco_frames(to_mjcf(model, rate=100.0, substeps=10), 300, 10, 2, 3)
+    rest = -9.81 * np.array([2.0, 1.0]) / 1e4
+    np.testing.assert_allclose(ours[-1, :, 2], rest, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(theirs[-1, :, 2], ours[-1, :, 2], rtol=0, atol=1e-6)
+    assert np.abs(theirs[-1, :, 2] - rest).max() == pytest.approx(1e-4 * 0.001962, rel=0.05)
+    # 2D: the plane y = 0 as a line, the same depths
+    flat = _ground_model(dimension=2)
+    ours2 = simulate(flat, 300, 100.0, substeps=10).positions
+    theirs2 = _mujoco_frames(to_mjcf(flat, rate=100.0, substeps=10), 300, 10, 2, 2)
+    np.testing.assert_allclose(theirs2[-1, :, 1], ours2[-1, :, 1], rtol=0, atol=1e-6)
+
+
+def test_mujoco_moves_a_contact_as_our_simulator_does_one_step_per_frame():
+    """Stepped as our one-step explicit Euler (1 kHz, one step per frame), the drop and its
+    bounces agree within a micrometre over 3 s (their laws agree term for term: a spring-
+    damper pushing only, per kg), and a particle sliding at 0.5 m/s on mu = 0.3 stops
+    within 0.2 mm of ours (ours smooths Coulomb's friction below 1 mm/s, MuJoCo's no-slip
+    solver does not; measured 0.13 mm)."""
+    drop = _ground_model(c=5.0)
+    ours = simulate(drop, 3000, 1000.0).positions
+    theirs = _mujoco_frames(to_mjcf(drop, rate=1000.0), 3000, 1, 2, 3)
+    assert np.abs(ours[:, :, 2]).max() > 0.04  # it bounced
+    np.testing.assert_allclose(theirs, ours, rtol=0, atol=1e-6)
+    slide = _ground_model(z=-0.0019, vx=0.5, mu=0.3)
+    ours = simulate(slide, 300, 1000.0).positions
+    theirs = _mujoco_frames(to_mjcf(slide, rate=1000.0), 300, 1, 2, 3)
+    stop = 0.25 / (2 * 0.3 * 9.81)  # v^2 / (2 mu g)
+    assert ours[-1, 0, 0] == pytest.approx(stop, rel=0.01)
+    assert abs(theirs[-1, 0, 0] - ours[-1, 0, 0]) < 2e-4
+    assert theirs[:, 0, 2].max() < 0.0  # not lifted off the plane while sliding
+
+
+def test_a_scaffold_on_the_ground_exports_with_its_contacts(tmp_path):
+    """``scaffold`` adds ground contacts for a body standing on the ground; ``export`` now
+    writes them (it refused every contact): one pair per foot, and MuJoCo loads the file."""
+    from activebonds.data import Trajectory
+    from activebonds.identify.scaffold import scaffold
+
+    rng = np.random.default_rng(0)
+    frames = 200
+    feet = np.array([[0.3, 0.2, 0.02], [0.3, -0.2, 0.02], [-0.3, 0.2, 0.02], [-0.3, -0.2, 0.02]])
+    top = np.array([[0.3, 0.0, 0.6], [-0.3, 0.0, 0.55]])
+    t = np.arange(frames)[:, None, None] / 100.0
+    x = np.concatenate([feet, top])[None] + np.zeros((frames, 1, 3))
+    x[:, 4:, 2:] += 0.01 * np.sin(2 * np.pi * t[:, :, :1])  # the body sways above its feet
+    x += rng.normal(0, 2e-4, x.shape)
+    names = ("FL", "FR", "HL", "HR", "Withers", "Sacrum")
+    made = scaffold(Trajectory(x, np.ones((frames, 6), bool), names, 100.0), up="+Z")
+    assert made.contacts == 4
+    path = tmp_path / "standing.toml"
+    path.write_text(made.text)
+    out = tmp_path / "standing.xml"
+    proc = cli("export", path, "--out", out, "--rate", "100")
+    assert proc.returncode == 0, proc.stderr
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.npair == 4 and [m.geom(m.pair_geom2[i]).name for i in range(4)] == [
+        f"{n}_sphere" for n in names[:4]
+    ]

@@ -211,6 +211,37 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
     assert rms(found.values) < 0.2 * rms(spline)
 
 
+@pytest.mark.parametrize("stiffness", [0.3, 3.0])
+def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffness):
+    """Every stiffness off by ``stiffness``, a 60-frame gap of a noiseless recording: the fill
+    is 11 (x0.3) and 18 mm (x3) off (RMS). The posterior standard error alone said 3.6 and 6.2 mm
+    (a third of it): the fit follows the markers present, and the model's error shows as
+    continuity defects that repeat frame after frame (tau about 10: a right model's are white).
+    Scaled by the residuals around the gap (sqrt(tau), the noise floor), the reported
+    uncertainty is of the error's order: measured 1.04 and 0.98 times it."""
+    from activebonds.identify.fill import model_fill
+
+    model = load_model(TRIANGLE)
+    truth = _truth(240)
+    genome = np.asarray(model.layout.initial(), np.float64).copy()
+    genome[0::3] += np.log(stiffness)
+    t = _traj(truth.positions, missing=[(1, 100, 160)], markers=model.markers)
+    found = model_fill(model.with_genome(genome), plan_fill(t, model.markers))
+    err = np.linalg.norm(found.values[100:160, 1] - truth.positions[100:160, 1], axis=-1)
+    real = float(np.sqrt(np.mean(err**2)))
+    reported = float(np.sqrt(np.mean(found.uncertainty[0] ** 2)))
+    assert real > 5e-3  # the model is wrong by millimetres
+    assert 0.7 * real < reported < 3.0 * real
+    (segment,) = found.segments
+    assert segment.tau > 4.0 and segment.scale >= np.sqrt(segment.tau)
+    assert "continuity defects around the gaps are correlated (tau up to" in found.note()
+    # the true model of the same gap: exact, and its uncertainty too (the noise floor of a
+    # noiseless record: the motion's own fourth difference, under a micrometre)
+    right = model_fill(model, plan_fill(t, model.markers))
+    assert right.uncertainty[0].max() < 1e-6
+    assert right.segments[0].tau < 4.0 and "correlated" not in right.note()
+
+
 # ----------------------------------------------------------------------------- the command
 
 
@@ -269,6 +300,24 @@ def test_hard_cases_are_one_line_and_write_nothing(tmp_path, args, line):
     assert res.returncode == 2
     assert res.stderr.count("\n") == 1 and line in res.stderr, res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gappy.trc"]
+
+
+def test_fill_takes_a_step_limit_and_says_when_a_stretch_stops_there(tmp_path):
+    """--max-steps bounds the Levenberg-Marquardt steps of each fitted stretch; a stretch that
+    stops at it is counted as not converged, and the line names the option."""
+    from activebonds.cli.fill_cmd import MAX_STEPS
+    from activebonds.identify import fill
+
+    assert MAX_STEPS == fill.MAX_STEPS
+    src, _ = _gappy(tmp_path)
+    res = cli_in_process("fill", TRIANGLE, src, "--out", tmp_path / "f.trc", "--max-steps", "1")
+    assert res.returncode == 0, res.stderr
+    assert (
+        "1 not converged (stopped at the step limit (1) before converging); raise the limit "
+        "with --max-steps" in res.stdout
+    )
+    bad = cli_in_process("fill", TRIANGLE, src, "--out", tmp_path / "g.trc", "--max-steps", "0")
+    assert bad.returncode == 2 and "--max-steps" in bad.stderr
 
 
 def test_a_marker_never_present_is_refused_by_name(tmp_path):

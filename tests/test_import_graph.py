@@ -190,6 +190,10 @@ def kind_names_in_code(path: Path, kinds: set[str]) -> list[tuple[int, str]]:
     ]
 
 
+# Words of another program that happen to be a kind's name: (module, the exact string).
+OTHER_VOCABULARY = {("export/mjcf.py", "contact")}  # MJCF's <contact> section (its pairs)
+
+
 def outside_bonds() -> list[Path]:
     """Every module of the package but those of ``bonds/``."""
     return [
@@ -218,6 +222,7 @@ def test_no_module_outside_bonds_names_a_bond_kind_in_its_code(path):
     assert {"unary", "binary", "ternary", "contact"} <= set(bonds.names())
     found = kind_names_in_code(path, set(bonds.names()))
     where = path.relative_to(SRC / PACKAGE).as_posix()
+    found = [f for f in found if (where, f[1]) not in OTHER_VOCABULARY]
     assert not found, f"{where} names bond kinds (use the registry): {found}"
 
 

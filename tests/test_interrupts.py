@@ -34,6 +34,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from activebonds.identify import rundir
@@ -257,11 +258,97 @@ def test_an_interrupt_acted_on_in_process_says_resume_only_for_a_run(tmp_path, m
 
     write_trajectory(simulate(load_model(ex / "triangle.toml"), n_frames=30, rate=60.0), data)
     run = tmp_path / "R"
+    before = signal.getsignal(signal.SIGINT)  # Python's own, or SIG_IGN in a background job
     res = CliRunner().invoke(app, ["fit", str(ex / "triangle.toml"), str(data), "--out", str(run)])
     assert res.exit_code == 130
     assert res.stderr.strip().endswith("interrupted before the run started; nothing was written")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tri.csv"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # left as it was
+    assert signal.getsignal(signal.SIGINT) is before  # left as it was
+
+
+def _noisy_triangle():
+    from activebonds.data import Trajectory
+    from activebonds.model import load_model
+    from activebonds.simulation import simulate
+
+    ex = Path(__file__).resolve().parents[1] / "src" / "activebonds" / "examples"
+    rec = simulate(load_model(ex / "triangle.toml"), 100, 100.0)
+    noise = np.random.default_rng(0).normal(0.0, 5e-4, rec.positions.shape)
+    return ex / "triangle.toml", Trajectory(rec.positions + noise, rec.mask, rec.markers, rec.rate)
+
+
+class _Flag:
+    """A simulated Ctrl-C: the stop check says yes from its ``after``-th poll on."""
+
+    def __init__(self, after: int):
+        self.after, self.polls = after, 0
+
+    def __call__(self) -> bool:
+        self.polls += 1
+        return self.polls >= self.after
+
+
+def test_ctrl_c_during_the_refinement_stops_within_one_step_and_resumes(tmp_path):
+    """The refinement's Levenberg-Marquardt loop polls for a Ctrl-C between two steps (the
+    command line registers its guard's flag, here a simulated one): the first poll that says
+    yes ends the fit (a KeyboardInterrupt), the stage saved where it got to, the run's status
+    "interrupted"; ``resume`` continues that stage and ends where an uninterrupted fit ends
+    (multiple shooting, converged: the same genome)."""
+    from activebonds import runtime
+    from activebonds.identify import fit, resume
+    from activebonds.identify.refine import StageInterrupted
+
+    model, data = _noisy_triangle()
+    options = dict(population=8, generations=2, cost="shooting", horizon=(10,))
+    flag = _Flag(after=3)
+    runtime.on_stop_request(flag)
+    try:
+        with pytest.raises(StageInterrupted) as stopped:
+            fit(model, data, out=tmp_path / "R", **options)
+    finally:
+        runtime.on_stop_request(None)
+    assert isinstance(stopped.value, KeyboardInterrupt)
+    assert flag.polls == 3  # no step after the poll that said stop
+    record = json.loads((tmp_path / "R" / "refine.json").read_text())
+    assert record["stages"] == []
+    partial = record["interrupted"]
+    assert (partial["horizon"], partial["cost"], partial["steps"]) == (10, "shooting", 3)
+    assert partial["message"] == "interrupted after 3 steps (Ctrl-C); resume continues from here"
+    assert len(partial["genome"]) == 9
+    assert RunDir(tmp_path / "R").status()["status"] == "interrupted"
+    resumed = resume(tmp_path / "R")
+    (stage,) = resumed.records["refine"]["stages"]
+    assert stage["message"].startswith("continued after an interrupt at step 3: converged")
+    assert "interrupted" not in json.loads((tmp_path / "R" / "refine.json").read_text())
+    straight = fit(model, data, out=tmp_path / "S", **options)
+    assert np.allclose(resumed.genome, straight.genome, rtol=0, atol=1e-9)
+
+
+def test_the_command_line_says_resume_after_a_ctrl_c_in_the_refinement(tmp_path):
+    """The same simulated Ctrl-C through ``activebonds fit`` (in-process): exit 130, one
+    line advising resume, the run resumable."""
+    from typer.testing import CliRunner
+
+    from activebonds import runtime
+    from activebonds.cli.main import app
+    from activebonds.data import write_trajectory
+
+    model, data = _noisy_triangle()
+    write_trajectory(data, tmp_path / "tri.csv")
+    run = tmp_path / "R"
+    argv = ["fit", str(model), str(tmp_path / "tri.csv"), "--out", str(run)]
+    argv += ["--population", "8", "--generations", "2", "--cost", "shooting", "--horizon", "10"]
+    runtime.on_stop_request(_Flag(after=2))
+    try:
+        res = CliRunner().invoke(app, argv)
+    finally:
+        runtime.on_stop_request(None)
+    assert res.exit_code == 130, res.output
+    assert (
+        res.stderr.strip().splitlines()[-1]
+        == f"error: interrupted; continue with: activebonds resume {run}"
+    )
+    assert json.loads((run / "refine.json").read_text())["interrupted"]["steps"] == 2
 
 
 def main(argv: list[str]) -> int:

@@ -184,7 +184,9 @@ def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path
     run = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
         activebonds.fit(model_path, data, out=run, **options)
-    assert rundir.read_status(run)["status"] == "refining"
+    assert (
+        rundir.read_status(run)["status"] == "interrupted"
+    )  # Ctrl-C in the refinement: saved, resumable
     assert len(rundir.read_record(run, "refine")["stages"]) == 1
     monkeypatch.undo()
     resumed = activebonds.resume(run)

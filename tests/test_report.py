@@ -153,7 +153,8 @@ def test_a_diverging_free_run_counts_as_an_infinite_error(triangle):
     spec = model.spec.model_copy(
         update={"bond": [b.model_copy(update={"stiffness": 1e9}) for b in model.spec.bond]}
     )
-    pred = predict(load_model_from_spec(spec), traj, fit_frames=100)
+    # fitted 0:60, beyond 60:120: each its own free run (as evaluate), long enough to diverge
+    pred = predict(load_model_from_spec(spec), traj, fit_frames=60)
     assert pred.diverged_at is not None and 2 < pred.diverged_at < 100
     assert np.isnan(pred.free_run[pred.diverged_at :]).all()
     assert np.isinf(pred.free_run_rms_mm).all() and np.isinf(pred.free_run_rms_mm_beyond).all()
@@ -499,3 +500,80 @@ def test_report_shows_the_fit_beside_its_baselines(neural_run):
     assert not any(k.startswith("exact least squares") for k in rows)
     text = _html(report)
     assert "zero force (constant velocity)" in text and "momentum floor" in text
+
+
+def test_the_report_and_evaluate_give_the_same_free_run_and_the_wall_time_is_the_runs(
+    tmp_path,
+):
+    """A small fit of frames 0:60 of a 120-frame recording (the triangle's bonds 30 % too
+    stiff and fixed, so the free run drifts), its report over 120 frames, and ``evaluate`` of its
+    best model on 0:60 and on 60:120: the same free-run RMS per particle, to rounding. The
+    frames beyond the fit get a free run of their own, as ``evaluate --frames 60:120`` starts
+    one (the report continued the fitted window's run there: a different number). The
+    report's wall time is the run's over its sessions: the fit's whole call (compilation,
+    refinement, stages: not only the search), then a resumed session's added."""
+    import time
+
+    from activebonds import runtime
+    from activebonds.data import read_trajectory, write_trajectory
+    from activebonds.identify import resume
+    from activebonds.report.evaluate import evaluate
+
+    write_trajectory(simulate(load_model(TRIANGLE), 120, 60.0), tmp_path / "rec.csv")
+    truth = read_trajectory(tmp_path / "rec.csv")
+    stiff = re.sub(  # every stiffness fixed 30 % too high: the free run drifts
+        r"stiffness = \{ value = ([\d.]+)[^}]*\}",
+        lambda m: f"stiffness = {1.3 * float(m.group(1))!r}",
+        TRIANGLE.read_text(),
+    )
+    run = tmp_path / "run"
+    flag = iter([False] * 2 + [True] * 1000)  # a Ctrl-C in the refinement's third step
+    runtime.on_stop_request(lambda: next(flag))
+    started = time.time()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            fit(
+                loads_model(stiff),
+                tmp_path / "rec.csv",
+                out=run,
+                frames=(0, 60),
+                population=8,
+                generations=3,
+                cost="restart",
+                horizon=(1,),
+            )
+    finally:
+        runtime.on_stop_request(None)
+    first = time.time() - started
+    first_wall = json.loads((run / "status.json").read_text())["wall_seconds"]
+    assert first - 1.0 < first_wall <= first  # the whole call, not the search alone
+    started = time.time()
+    resume(run)
+    second = time.time() - started
+    wall = json.loads((run / "status.json").read_text())["wall_seconds"]
+    assert first_wall + second - 1.0 < wall <= first_wall + second
+    record = load_run(run)
+    rows = dict(summary_table(record, predict_run(record)[0]).rows)
+    assert rows["wall time (the run's, every session)"] == f"{wall:.4g} s"
+
+    pred, _ = predict_run(record, 120)
+    best = load_model(run / "best_model.toml")
+    fitted = evaluate(best, truth, frames=(0, 60))
+    beyond = evaluate(best, truth, frames=(60, 120))
+    assert pred.extended and pred.fit_frames == 60
+    np.testing.assert_allclose(
+        pred.free_run_rms_mm, [p.free_run_rms_mm for p in fitted.particles], rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        pred.free_run_rms_mm_beyond, [p.free_run_rms_mm for p in beyond.particles], rtol=1e-12
+    )
+    assert (pred.free_run_rms_mm_beyond > 1.0).all()  # millimetres: a real number to compare
+    # and the overall figure of the report's free-run table is evaluate's
+    table = html_free_run_rows(record)
+    assert table[0][3] == pytest.approx(fitted.model.free_run_rms_mm, rel=1e-12)
+
+
+def html_free_run_rows(record):
+    from activebonds.report.html import free_run_table
+
+    return free_run_table(record).rows

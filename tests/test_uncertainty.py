@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -294,3 +295,57 @@ def test_the_intervals_say_where_they_cannot_be_trusted():
     assert "--substeps 4" in one_step[1] and "64 % coverage" in one_step[1]
     assert warnings("shooting", 20, 4) == []
     assert warnings("restart", 10, 4) == []
+
+
+def test_a_fit_that_rejected_shooting_is_not_told_to_refit_with_shooting(tmp_path):
+    """The triangle with a gravity nothing holds, fitted with --cost shooting: its best
+    10-frame predictions lose to constant velocity, so the shooting stage is not kept and a
+    one-step stage is refined in its place. The uncertainty warning says so, from the stage
+    records, and does not send the user to --cost shooting."""
+    from activebonds.identify import fit
+    from activebonds.identify.uncertainty import shooting_rejected, warnings
+    from activebonds.model import loads_model
+    from activebonds.simulation import simulate
+
+    recording = simulate(load_model(TRIANGLE), 100, 100.0)
+    falling = loads_model(
+        TRIANGLE.read_text().replace("dimension = 3", "dimension = 3\ngravity = [0.0, 0.0, -9.81]")
+    )
+    result = fit(
+        falling,
+        recording,
+        out=tmp_path / "run",
+        population=8,
+        generations=2,
+        cost="shooting",
+        horizon=(10,),
+    )
+    (stage,) = result.records["refine"]["stages"]
+    assert (stage["cost"], stage["horizon"], stage["accepted"]) == ("restart", 1, True)
+    why = stage["instead_of_shooting"]
+    assert re.fullmatch(
+        r"not shot: the model's best 10-frame predictions are no better than constant "
+        r"velocity's \([\d.]+ vs [\d.]+ mm\)",
+        why,
+    )
+    one_step = result.records["uncertainty"]["warnings"][0]
+    assert one_step == (
+        "these intervals come from the one-step cost: on noisy markers they can be up to 18 "
+        "times too wide and blind to the bias noise puts in the damping (5-7 standard errors); "
+        f"this fit tried shooting and did not keep it ({why}), so refitting with --cost "
+        "shooting would not help: the model does not predict the recording over the shooting "
+        "windows better than constant velocity; a model that does (see the free run's advice) "
+        "comes first"
+    )
+    assert not any("refit with --cost shooting" in line for line in result.lines())
+    assert f"uncertainty: warning: {one_step}" in result.lines()
+    # a shooting stage rejected on its own objective, from a record (older ones lack the field)
+    diverged = {"cost": "shooting", "horizon": 20, "accepted": False, "message": "it diverged"}
+    assert shooting_rejected([diverged]) == ["horizon 20: it diverged"]
+    assert warnings("restart", 1, 4, ["horizon 20: it diverged"])[0].endswith(
+        "this fit tried shooting and did not keep it (horizon 20: it diverged), so refitting "
+        "with --cost shooting alone would not give intervals that hold"
+    )
+    assert warnings("restart", 1, 4)[0].endswith(
+        "refit with --cost shooting for intervals that hold"
+    )

@@ -189,6 +189,9 @@ def test_a_fit_says_its_verdict_on_fitted_and_held_out_frames(recording, tmp_pat
     assert found["fitted"][0].zero_force_mm == pytest.approx(
         result.records["baselines"]["fitted"]["zero_force"]["one_step_rms_mm"], rel=1e-12
     )
+    # what holds the model, kept for the free run's advice (report and resume read it back)
+    held = {"gravity": False, "contacts": 0, "anchors": 0, "drive": False}
+    assert result.records["baselines"]["holds"] == held
     from activebonds.sweep.summary import row
 
     columns = row(tmp_path / "run")
@@ -198,7 +201,8 @@ def test_a_fit_says_its_verdict_on_fitted_and_held_out_frames(recording, tmp_pat
 
 def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
     """The triangle with gravity and nothing to hold it: its free run falls metres in a
-    second; evaluate says so once, with what to add. The true model gets no advice."""
+    second; evaluate says so once, with what to add: ground contacts first (it has none). The
+    true model gets no advice."""
     from activebonds.identify.verdict import free_run_advice
     from activebonds.report.evaluate import evaluate
 
@@ -207,14 +211,68 @@ def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
     )
     found = evaluate(falling, recording)
     assert found.model.free_run_rms_mm > 1000.0
+    assert found.holds == {"gravity": True, "contacts": 0, "anchors": 0, "drive": False}
     advice = [line for line in found.lines() if line.startswith("advice:")]
-    assert len(advice) == 1
-    assert f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS)" in advice[0]
-    assert "contacts" in advice[0] and "anchors" in advice[0] and "drive" in advice[0]
+    far = f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS) from the recording"
+    assert advice == [
+        f"advice: the free run {far}: the model has gravity and no ground contacts, so the "
+        "body falls; add ground contacts (activebonds scaffold writes them), anchors (unary "
+        "springs) or a rhythmic drive ([drive] and neural bonds)"
+    ]
+    assert found.record()["holds"] == found.holds
     assert not any(
         line.startswith("advice:") for line in evaluate(load_model(TRIANGLE), recording).lines()
     )
     assert free_run_advice(999.0) is None and "non-finite" in free_run_advice(float("inf"))
+
+
+CONTACT = """
+[[bond]]
+kind = "contact"
+particles = ["A"]
+normal = [0.0, 0.0, 1.0]
+height = -50.0
+stiffness = 1000.0
+damping = 10.0
+friction = 0.8
+"""
+
+
+def test_a_model_with_contacts_that_diverges_is_not_told_to_add_contacts(recording):
+    """The falling triangle with a ground contact too far below to catch it: the advice names
+    what it lacks (anchors, a drive), stiffer contacts and a shorter horizon, never contacts
+    to add."""
+    from activebonds.identify.verdict import free_run_advice
+    from activebonds.report.evaluate import evaluate
+
+    text = TRIANGLE.read_text().replace(
+        "dimension = 3", "dimension = 3\ngravity = [0.0, 0.0, -9.81]"
+    )
+    found = evaluate(loads_model(text + CONTACT), recording)
+    assert found.holds == {"gravity": True, "contacts": 1, "anchors": 0, "drive": False}
+    advice = [line for line in found.lines() if line.startswith("advice:")]
+    far = f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS) from the recording"
+    assert advice == [
+        f"advice: the free run {far} although the model has 1 ground contact: they do not "
+        "hold it on the recording's path; add anchors (unary springs) or a rhythmic drive "
+        "([drive] and neural bonds), make the contacts stiffer (raise their stiffness and its "
+        "bounds), or judge it over a shorter horizon (evaluate --horizon, the frames-ahead "
+        "comparison) than a free run of the whole window"
+    ]
+    assert "add ground contacts" not in advice[0]
+    # anchors and a drive present: only what it lacks is named
+    both = {"gravity": True, "contacts": 4, "anchors": 1, "drive": True}
+    assert free_run_advice(2000.0, both) == (
+        "advice: the free run ends 2 m (RMS) from the recording although the model has 4 "
+        "ground contacts: they do not hold it on the recording's path; make the contacts "
+        "stiffer (raise their stiffness and its bounds), or judge it over a shorter horizon "
+        "(evaluate --horizon, the frames-ahead comparison) than a free run of the whole window"
+    )
+    bare = {"gravity": False, "contacts": 0, "anchors": 0, "drive": False}
+    assert free_run_advice(2000.0, bare) == (
+        "advice: the free run ends 2 m (RMS) from the recording: nothing holds the body or "
+        "drives it; add anchors (unary springs) or a rhythmic drive ([drive] and neural bonds)"
+    )
 
 
 def test_the_report_marks_the_markers_worse_than_zero_force_in_red(recording):

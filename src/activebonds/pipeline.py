@@ -554,7 +554,9 @@ class _Scored:
         self.record = record
         self.frames = tuple(record["frames"])
         self.comparisons = comparisons_from(record["comparisons"])
-        self._advice = free_run_advice(record["model"].get("free_run_rms_mm", math.nan))
+        self._advice = free_run_advice(
+            record["model"].get("free_run_rms_mm", math.nan), record.get("holds")
+        )
 
     def lines(self) -> list[str]:
         a, b = self.frames

@@ -1,7 +1,9 @@
 """Process-wide settings, applied by entry points (the command line, the benchmarks, the
 tests), never by importing the package. The one exception is :func:`keep_compiled`, which
 ``fit`` and ``resume`` call so that a notebook's second fit of the same shapes starts without
-compiling (it only turns on JAX's persistent cache where the process has none).
+compiling (it only turns on JAX's persistent cache where the process has none). An entry point
+that handles Ctrl-C itself registers how to ask whether the user wants to stop
+(:func:`on_stop_request`); the package's long loops poll it (:func:`stop_requested`).
 
 XLA's CPU backend routes small reductions through YNNPACK fusions, which cost 2-3x more than
 its own loops on the tiny arrays of this problem (measured: ``benchmarks/profile.py``).
@@ -73,3 +75,20 @@ def keep_compiled() -> None:
 
     if jax.config.jax_compilation_cache_dir is None:
         compilation_cache()
+
+
+_stop_check = None  # the entry point's "has the user asked to stop?" (the command line's Ctrl-C)
+
+
+def on_stop_request(check) -> None:
+    """Register ``check() -> bool``: whether the user has asked the process to stop (the
+    command line's Ctrl-C, :mod:`activebonds.cli.interrupts`). Long loops without a chunked
+    safe point poll it between their steps (:func:`stop_requested`: the refinement's
+    Levenberg-Marquardt) and end there, saving what they have. None unregisters."""
+    global _stop_check
+    _stop_check = check
+
+
+def stop_requested() -> bool:
+    """Whether the registered check says the user asked to stop (False without one)."""
+    return _stop_check is not None and bool(_stop_check())

@@ -158,6 +158,58 @@ def simulate_to_file(
 
 START_ROUNDS = 50  # fixed-point rounds of the start velocity
 START_TOLERANCE = 1e-9  # of the frame's displacement: the start velocity's step lands there
+NEWTON_ROUNDS = 10  # Newton rounds of the start velocity, where the fixed point fails
+
+
+def landing_velocity(step, x0: np.ndarray, x1: np.ndarray, dt: float):
+    """(v, how): the velocity from which ``step(v)`` (the model's step over one frame from
+    ``x0``) lands on ``x1``, and how it was found, in words. First the fixed point
+    ``v <- v + (x1 - step(v)) / dt`` from the forward difference (cheap: no Jacobian; it
+    converges while the step's damping is weak, ``dt c / m < 1``); where it does not, Newton's
+    method on ``step(v) = x1`` (the step's Jacobian in v, forward mode): a damping strong for
+    the frame rate, or stiff contacts. Converged means landing within
+    :data:`START_TOLERANCE` of the frame's displacement (1e-3 of it at least). Where neither
+    converges: the forward difference ``(x1 - x0) / dt``, and ``how`` says so."""
+    forward = (x1 - x0) / dt
+    scale = float(np.sqrt(np.sum((x1 - x0) ** 2))) + 1e-12
+
+    def miss_of(v):
+        return x1 - np.asarray(step(jnp.asarray(v)), np.float64)
+
+    def landed(miss, tolerance):
+        return bool(np.all(np.isfinite(miss)) and np.sqrt(np.sum(miss**2)) <= tolerance * scale)
+
+    with jax.enable_x64(True):
+        v = forward
+        for _ in range(START_ROUNDS):
+            miss = miss_of(v)
+            if not np.all(np.isfinite(miss)):
+                break
+            v = v + miss / dt
+            if landed(miss, START_TOLERANCE):
+                break
+        if np.all(np.isfinite(v)) and landed(miss_of(v), 1e-3):
+            return v, "the velocity from which the model's step lands on the next frame"
+        v = forward
+        jacobian = jax.jacfwd(lambda u: step(u).reshape(-1))
+        for _ in range(NEWTON_ROUNDS):
+            miss = miss_of(v)
+            if not np.all(np.isfinite(miss)) or landed(miss, START_TOLERANCE):
+                break
+            jac = np.asarray(jacobian(jnp.asarray(v)), np.float64).reshape(v.size, v.size)
+            try:
+                v = v + np.linalg.solve(jac, miss.reshape(-1)).reshape(v.shape)
+            except np.linalg.LinAlgError:
+                break
+        if np.all(np.isfinite(v)) and landed(miss_of(v), 1e-3):
+            return v, (
+                "the velocity from which the model's step lands on the next frame (by Newton's "
+                "method: the step's damping is strong for the frame rate)"
+            )
+    return forward, (
+        "the forward difference to the next frame (the model's step lands there from no "
+        "velocity found: it diverges or does not converge)"
+    )
 
 
 def start_at(
@@ -167,15 +219,16 @@ def start_at(
     substeps: int = 1,
     integrator: str = "euler",
     where: str = "--frame",
+    notes: list[str] | None = None,
 ) -> Model:
     """The model with every particle's ``position`` and ``velocity`` at ``frame`` of
     ``recording`` (its markers, the model's): the position recorded there, and the velocity
     from which the model's own step (``substeps``, ``integrator``) lands on the next frame
-    (a fixed-point iteration, ``v <- v + (x_next - x_end) / dt``, from the forward
-    difference; the forward difference itself where it does not converge). So ``simulate``
-    from the model file reproduces the recording's next frame, and ``export`` starts there.
-    Time in the model's forces starts at 0 at that frame. InputError (naming ``where``) when
-    the frame or the next one misses a model marker or is outside the recording."""
+    (:func:`landing_velocity`). So ``simulate`` from the model file reproduces the recording's
+    next frame, and ``export`` starts there. Time in the model's forces starts at 0 at that
+    frame. ``notes``: a list that gets one line saying how the velocity was found. InputError
+    (naming ``where``) when the frame or the next one misses a model marker or is outside the
+    recording."""
     data = recording.select(list(model.markers))
     n = data.n_frames
     if not 0 <= frame < n - 1:
@@ -200,19 +253,9 @@ def start_at(
         topo = model.topology
         return advance(model.params, topo, x0, v, dt, substeps, integrator, 0.0, psi)[0]
 
-    forward = (x1 - x0) / dt
-    v = forward
-    scale = float(np.sqrt(np.sum((x1 - x0) ** 2))) + 1e-12
-    with jax.enable_x64(True):
-        for _ in range(START_ROUNDS):
-            miss = x1 - np.asarray(step(jnp.asarray(v)), np.float64)
-            if not np.all(np.isfinite(miss)):
-                break
-            v = v + miss / dt
-            if np.sqrt(np.sum(miss**2)) <= START_TOLERANCE * scale:
-                break
-    if not (np.all(np.isfinite(v)) and np.sqrt(np.sum(miss**2)) <= 1e-3 * scale):
-        v = forward
+    v, how = landing_velocity(step, x0, x1, dt)
+    if notes is not None:
+        notes.append(f"initial velocities at frame {frame}: {how}")
     particles = [
         p.model_copy(
             update={"position": [float(a) for a in x0[i]], "velocity": [float(a) for a in v[i]]}

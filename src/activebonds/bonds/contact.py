@@ -77,6 +77,18 @@ def forces(params, topology, x, v):
     return accumulate(x.shape[0], [(idx, 1, f)])
 
 
+def _mujoco_refusal(bond) -> str | None:
+    """A moving surface (a treadmill belt): MuJoCo's planes do not move."""
+    velocity = bond.surface_velocity
+    if velocity is None:
+        return None
+    values = velocity if isinstance(velocity, list) else getattr(velocity, "value", velocity)
+    values = values if isinstance(values, list) else [values]
+    if not any(float(getattr(v, "value", v)) != 0.0 for v in values):
+        return None
+    return "contact bonds with a moving surface (surface_velocity: MuJoCo's planes stand still)"
+
+
 def _height_bounds(v):
     return (v - 0.1, v + 0.1)
 
@@ -115,7 +127,7 @@ KIND = BondKind(
     internal=False,
     what="contacts",
     noun="contact",
-    mujoco=MujocoForm(why="MuJoCo's contacts are solver constraints, not this penalty law"),
+    mujoco=MujocoForm("pair", lambda bond: _mujoco_refusal(bond)),
     reach=reach,
     stiff_in_velocity=True,
 )

@@ -112,13 +112,14 @@ class MujocoForm:
 
     ``element``: ``"tendon"`` (a spatial tendon between the bond's two particles, from its
     ``stiffness``, ``damping`` and ``rest_length``), ``"anchor"`` (springs of the particle's
-    slide joints to a fixed ``anchor``, from its ``stiffness``, ``damping`` and ``anchor``) or
-    None (MuJoCo cannot express the kind: its bonds are refused as '<kind> bonds', ``why``
-    added to the message). ``refuse(bond)`` names, in words, a bond of the model file (a
+    slide joints to a fixed ``anchor``, from its ``stiffness``, ``damping`` and ``anchor``),
+    ``"pair"`` (a contact pair of a sphere on the particle and a plane, from its ``normal``,
+    ``height``, ``stiffness``, ``damping`` and ``friction``) or None (MuJoCo cannot express the
+    kind: its bonds are refused as '<kind> bonds', ``why`` added to the message). ``refuse(bond)`` names, in words, a bond of the model file (a
     ``[[bond]]`` entry) that MuJoCo cannot express although its kind maps (``"neural
     bonds"``), or returns None."""
 
-    element: Literal["tendon", "anchor"] | None = None
+    element: Literal["tendon", "anchor", "pair"] | None = None
     refuse: Callable[[object], str | None] = lambda bond: None
     why: str = ""
 

@@ -29,11 +29,19 @@ def evaluate(
     ] = None,
     frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
     substeps: Annotated[
-        int, typer.Option(help="Integration substeps per frame (as the model was fitted).")
-    ] = 1,
+        int | None,
+        typer.Option(
+            help="Integration substeps per frame, as the model was fitted (default: the run's "
+            "for a RUN/best_model.toml, else 1)."
+        ),
+    ] = None,
     integrator: Annotated[
-        str, typer.Option(help="euler or verlet (as the model was fitted).")
-    ] = "euler",
+        str | None,
+        typer.Option(
+            help="euler or verlet, as the model was fitted (default: the run's for a "
+            "RUN/best_model.toml, else euler)."
+        ),
+    ] = None,
     horizon: Annotated[
         int,
         typer.Option(
@@ -87,6 +95,7 @@ def evaluate(
     from ..report.gait_runs import parse_up
 
     try:
+        substeps, integrator = _integration(model, substeps, integrator)
         window = parse_option_frames(frames, parse_frames)
         chosen = parse_markers(markers)
         loaded = load_model(model)
@@ -110,7 +119,8 @@ def evaluate(
         return
     m, z = found.model, found.zero_force
     a, b = found.frames
-    table = Table(title=f"{model} on {traj}, frames {a}:{b}")
+    how = f"{found.substeps} {found.integrator} substep{'s' * (found.substeps > 1)} per frame"
+    table = Table(title=f"{model} on {traj}, frames {a}:{b} ({how})")
     table.add_column("")
     table.add_column("model", justify="right")
     table.add_column("zero force", justify="right")
@@ -167,6 +177,21 @@ def evaluate(
         out.print(line, markup=False, highlight=False, emoji=False)
     if found.gait is not None:
         _print_gait(found.gait)
+
+
+def _integration(model: Path, substeps: int | None, integrator: str | None):
+    """(substeps, integrator): as given, else the run's where ``model`` is a fit's
+    RUN/best_model.toml (so that evaluate scores it as the fit and its report did), else 1
+    and euler."""
+    if substeps is None or integrator is None:
+        from ..identify.rundir import RunDir
+
+        run = RunDir(model.parent)
+        if model.name == "best_model.toml" and run.is_run():
+            settings = run.settings()
+            substeps = settings.substeps if substeps is None else substeps
+            integrator = settings.integrator if integrator is None else integrator
+    return (1 if substeps is None else substeps), (integrator or "euler")
 
 
 def _print_gait(found) -> None:

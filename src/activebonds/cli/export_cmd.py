@@ -30,18 +30,22 @@ def export(
         Path | None,
         typer.Option(
             "--from",
-            help="Start from this recording: the positions at --frame and the velocity the "
-            "model's step carries to the next frame (instead of the model file's).",
+            help="Start from this recording: the positions at --frame and the velocity from "
+            "which the model's step lands on the next frame (the forward difference where none "
+            "does; the command says which), instead of the model file's.",
         ),
     ] = None,
     frame: Annotated[int, typer.Option(help="The frame of --from to start at.")] = 0,
 ):
-    """Write the model for MuJoCo: point masses, gravity, binary spring-dampers (tendons) and
-    fixed unary anchors (joint springs); neural, ternary and contact bonds are refused. The
+    """Write the model for MuJoCo: point masses, gravity, binary spring-dampers (tendons),
+    fixed unary anchors (joint springs) and ground contacts (a plane, a sphere per particle
+    and a contact pair matching the bond's stiffness, damping and friction); neural and
+    ternary bonds and contacts with a moving surface are refused. The
     start is the model file's positions and velocities, or --from a recording's --frame."""
     from ..export import FORMATS, write_mjcf
     from ..model import load_model
 
+    notes: list[str] = []
     try:
         if fmt not in FORMATS:
             raise InputError("--format", f"expected {' or '.join(FORMATS)}, got '{fmt}'")
@@ -62,7 +66,7 @@ def export(
                 raise InputError(
                     start, f"is {recording.dimension}D but the model is {m.dimension}D"
                 )
-            m = start_at(m, recording, frame, substeps, where="--frame")
+            m = start_at(m, recording, frame, substeps, where="--frame", notes=notes)
         elif frame != 0:
             raise InputError("--frame", "needs --from TRAJ (the recording to start from)")
         write_mjcf(m, out_path, rate=rate, substeps=substeps, source=str(model))
@@ -74,3 +78,5 @@ def export(
         markup=False,
         highlight=False,
     )
+    for note in notes:
+        out.print(note, markup=False, highlight=False)

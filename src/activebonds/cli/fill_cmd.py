@@ -12,6 +12,7 @@ from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
 
 METHODS = ("model", "spline", "linear", "pca")
+MAX_STEPS = 200  # identify.fill.MAX_STEPS (not imported here: the command line starts fast)
 
 
 def record_path(out_path: Path) -> Path:
@@ -81,6 +82,14 @@ def fill(
             "0.3 for a model that explains none to 100 for one that explains them all).",
         ),
     ] = None,
+    max_steps: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Levenberg-Marquardt steps per fitted stretch, at most (a stretch that stops "
+            "there is counted as not converged: raise it).",
+        ),
+    ] = MAX_STEPS,
     substeps: Annotated[
         int, typer.Option(min=1, help="Integration substeps per frame (as the model was fitted).")
     ] = 1,
@@ -91,7 +100,9 @@ def fill(
         Path | None,
         typer.Option(
             help="The sidecar CSV listing every sample of every gap: frame, marker, filled or "
-            "left, method, estimated uncertainty (default: OUT's name with .gaps.csv)."
+            "left, method, estimated uncertainty (model: its standard error scaled by the "
+            "residuals around the gap, see the gap-filling how-to; default: OUT's name with "
+            ".gaps.csv)."
         ),
     ] = None,
     report: Annotated[
@@ -155,7 +166,7 @@ def fill(
             )
         plan = plan_fill(data, chosen, window, max_gap)
         values, uncertainty, note = _fill_values(
-            m, plan, method, denoise, context, horizon, substeps, integrator, continuity
+            m, plan, method, denoise, context, horizon, substeps, integrator, continuity, max_steps
         )
         from ..data.fill import apply_fill, record_csv
 
@@ -178,7 +189,9 @@ def fill(
         say(f"wrote {report} (the filled gaps drawn, the spline's fill beside)")
 
 
-def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrator, continuity):
+def _fill_values(
+    m, plan, method, denoise, context, horizon, substeps, integrator, continuity, max_steps
+):
     """(values [F, M, D] of the window, per gap to fill its uncertainty in metres, a note)."""
     if method == "model":
         from ..identify.fill import model_fill
@@ -192,6 +205,7 @@ def _fill_values(m, plan, method, denoise, context, horizon, substeps, integrato
             integrator=integrator,
             denoise=denoise,
             continuity=continuity,
+            max_steps=max_steps,
         )
         return found.values, found.uncertainty, found.note()
     from ..data.fill import baseline_uncertainty, fill_baseline

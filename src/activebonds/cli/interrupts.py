@@ -16,14 +16,17 @@ this package) handles SIGINT itself:
   ``rundir.CREATING``, the lock under which a run directory is created (and its folder probed),
   so the claim is true: no run, no hidden partial folder.
 * Once the run exists: the first Ctrl-C is recorded and said ("stopping at the end of this
-  step"); the main thread acts on it at its next safe point (:func:`check`, after each chunk of
-  generations), where the driver writes a checkpoint; then "interrupted;
-  continue with: activebonds resume RUN", exit 130. A second Ctrl-C ends the process at once
-  with the same advice: a run killed at any moment resumes to the uninterrupted result
-  (docs/RELIABILITY.md section 1).
+  step"); the main thread acts on it at its next safe point: after each chunk of generations
+  (:func:`check`), where the driver writes a checkpoint, and between two Levenberg-Marquardt
+  steps of the refinement (polled through :func:`activebonds.runtime.stop_requested`), where
+  the refinement saves its finished stages and the one under way; then "interrupted;
+  continue with: activebonds resume RUN", exit 130 (``resume`` continues the refinement from
+  there). A second Ctrl-C ends the process at once with the same advice: a run killed at any
+  moment resumes to the uninterrupted result (docs/RELIABILITY.md section 1).
 * After the fit has returned, its results saved (while its summary is printed), or if Ctrl-C
-  was pressed in its last phases (refinement, uncertainty, which have no safe point): the
-  process ends at once, "interrupted after the fit completed; its results are in RUN".
+  was pressed in its last phases after the refinement (baselines, uncertainty, which have no
+  safe point): the process ends at once, "interrupted after the fit completed; its results
+  are in RUN".
 
 Every end on an interrupt leaves through :func:`exit_now`: output flushed, then ``os._exit``,
 never the interpreter's teardown.
@@ -149,8 +152,16 @@ def install() -> bool:
     except (ValueError, OSError, AttributeError):  # not the main interpreter; no such pipe
         return False
     _guard = guard
+    from .. import runtime
+
+    runtime.on_stop_request(_pending)  # the refinement's steps poll it (a safe point each)
     threading.Thread(target=guard.watch, name="activebonds-sigint", daemon=True).start()
     return True
+
+
+def _pending() -> bool:
+    """Whether a Ctrl-C waits for the main thread to act on it."""
+    return _guard is not None and _guard.pending
 
 
 def _ignore(signum, frame) -> None:
@@ -174,7 +185,7 @@ def resuming(run: Path) -> None:
 
 def fit_returned(outcome: str) -> None:
     """The fit has returned with status ``outcome``, everything saved: an interrupt pressed
-    during its last phases (refinement, uncertainty: no safe point there) ends the command now,
+    during its last phases (baselines, uncertainty: no safe point there) ends the command now,
     without the summary; from here on Ctrl-C ends at once."""
     if _guard is None:
         return

@@ -69,6 +69,7 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
             "height": ground.height,
             "clear": ground.clear,
             "lowest_marker": ground.lowest,
+            "feet": list(ground.feet),
             "text": ground.describe(gravity),
             "doubts": vertical_doubts(ground, gravity),
         },

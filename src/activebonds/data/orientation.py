@@ -29,8 +29,9 @@ acceleration counts too) is the guess; when none is, there is no guess ("no flig
 found"), never a forced one.
 
 The vertical is **uncertain** (:func:`vertical_doubts`, :meth:`Ground.describe` given the
-gravity guess, "(uncertain: why)") when the ground guess has a doubt, or when the two guesses
-disagree or the second is missing; :func:`confident` says when it is not.
+gravity guess, "(uncertain: why)") when the ground guess has a doubt, when the feet cue
+disagrees with it and the flight does not confirm it, or when the two guesses disagree or the
+second is missing; :func:`confident` says when it is not.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ FLIGHT_MARGIN = 0.03  # m: in flight, the lowest marker is at least this far abo
 MIN_PHASE = 5  # frames: the shortest flight phase used (a parabola needs a few frames)
 GRAVITY_TOLERANCE = 0.25  # the flight acceleration is within this fraction of g of -g * up
 MIN_COMPLETE = 10  # frames with every marker needed to check a guess made through gaps
+LOW_PERCENTILE = 10  # %: a marker's low level is the height it is at or below this often
+FOOT_REACH = 0.02  # m: a foot's low level is within this of the lowest marker's
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,10 @@ class Ground:
     lowest: str  # the marker most often lowest (a foot)
     # why the guess may be wrong, from the recording alone (see :func:`ground_doubts`)
     doubts: tuple[str, ...] = ()
+    feet: tuple[str, ...] = ()  # the markers the ground rests on (:func:`feet`)
+    # the feet cue disagreeing (the ground rests on one marker, another direction has several
+    # feet), or "": a doubt unless the acceleration in flight confirms the guess
+    against: str = ""
 
     @property
     def normal(self) -> list[float]:
@@ -82,7 +89,10 @@ class Ground:
         there is a doubt: the ground's own (:attr:`doubts`) and, given the ``gravity`` guess,
         :func:`vertical_doubts`."""
         text = f"up = {self.up_text}, ground at {self.height:.4f} m (lowest: {self.lowest})"
-        doubts = list(self.doubts) if gravity is None else vertical_doubts(self, gravity)
+        if gravity is None:
+            doubts = list(self.doubts) + ([self.against] if self.against else [])
+        else:
+            doubts = vertical_doubts(self, gravity)
         return text + (f" (uncertain: {'; '.join(doubts)})" if doubts else "")
 
 
@@ -127,6 +137,28 @@ def _frames(traj: Trajectory, keep: np.ndarray) -> Trajectory:
     )
 
 
+def feet(h: np.ndarray) -> np.ndarray:
+    """The indices of the markers the ground rests on, given their heights ``h`` [F, P] along a
+    candidate up (NaN where missing): those whose low level (the :data:`LOW_PERCENTILE` th
+    percentile of their heights) is within :data:`FOOT_REACH` of the lowest low level. A
+    marker that is lowest in fewer than that share of its frames is no foot."""
+    present = ~np.isnan(h).all(axis=0)
+    low = np.full(h.shape[1], np.inf)
+    if present.any():
+        low[present] = np.nanpercentile(h[:, present], LOW_PERCENTILE, axis=0)
+    return np.flatnonzero(low <= low.min() + FOOT_REACH)
+
+
+def ground_level(h: np.ndarray, on: np.ndarray | None = None) -> float:
+    """The ground's height along up: the 5th percentile of the lowest of the feet ``on``
+    (default :func:`feet`) in each frame where one of them is present; ``h`` [F, P] the
+    heights along up, NaN where missing."""
+    on = feet(h) if on is None else on
+    hf = h[:, on]
+    some = ~np.isnan(hf).all(axis=1)
+    return float(np.percentile(np.nanmin(hf[some], axis=1), 5))
+
+
 def _guess_ground(traj: Trajectory) -> Ground | None:
     x = np.asarray(traj.positions, np.float64)  # [F, P, D], NaN where missing
     if x.shape[1] < 2 or x.shape[0] < 2:
@@ -137,35 +169,62 @@ def _guess_ground(traj: Trajectory) -> Ground | None:
     rows = present.sum(axis=1) >= 2
     if rows.sum() < 2:
         return None
-    scores, signs = [], []
+    scores, signs, on_feet = [], [], []
     for a in range(d):
         spread = float(np.nanmax(means[:, a]) - np.nanmin(means[:, a]))
-        # the lowest marker along +a and along -a, per frame
-        low_pos = np.nanmin(x[rows, :, a], axis=1)
-        low_neg = np.nanmax(x[rows, :, a], axis=1)
         best = []
-        for sign, low in ((1.0, low_pos), (-1.0, low_neg)):
-            score = float(np.std(low)) / spread if spread > 0 else np.inf
-            best.append((score, sign))
-        score, sign = min(best)
+        for sign in (1.0, -1.0):
+            # the lowest foot along sign * a, per frame where a foot is present
+            h = sign * x[rows, :, a]
+            on = feet(h)
+            some = ~np.isnan(h[:, on]).all(axis=1)
+            low = np.nanmin(h[some][:, on], axis=1)
+            score = float(np.std(low)) / spread if spread > 0 and some.any() else np.inf
+            best.append((score, sign, on))
+        score, sign, on = min(best, key=lambda b: (b[0], -b[1]))
         scores.append(score)
         signs.append(sign)
-    order = np.argsort(scores)
+        on_feet.append(on)
+    order = np.argsort(scores, kind="stable")
     axis = int(order[0])
     up = signs[axis]
     coord = up * x[rows, :, axis]
-    low = np.nanmin(coord, axis=1)
     lowest_marker = np.nanargmin(np.where(np.isnan(coord), np.inf, coord), axis=1)
     counts = np.bincount(lowest_marker, minlength=x.shape[1])
-    height = up * float(np.percentile(low, 5))
+    on = on_feet[axis]
     second = float(scores[order[1]]) if d > 1 else np.inf
     return Ground(
         axis=axis,
         up=up,
-        height=height,
+        height=up * ground_level(coord, on),
         flatness=tuple(float(s) for s in scores),
         clear=bool(scores[axis] <= CLEAR * second),
         lowest=traj.markers[int(np.argmax(counts))],
+        feet=tuple(traj.markers[i] for i in on),
+        against=_against(traj, x[rows], axis, up, on),
+    )
+
+
+def _against(traj: Trajectory, x: np.ndarray, axis: int, up: float, on: np.ndarray) -> str:
+    """The feet cue's disagreement with the flattest direction, or "" (see the module)."""
+    if len(on) != 1:
+        return ""
+    best = None
+    for a in range(x.shape[2]):
+        for sign in (1.0, -1.0):
+            if (a, sign) == (axis, up):
+                continue
+            other = feet(sign * x[:, :, a])
+            if len(other) >= 2 and (best is None or len(other) > len(best[2])):
+                best = (a, sign, other)
+    if best is None:
+        return ""
+    a, sign, other = best
+    names = ", ".join(traj.markers[i] for i in other)
+    return (
+        f"the ground rests on {traj.markers[on[0]]} alone, but along "
+        f"{'+' if sign > 0 else '-'}{AXES[a]} {len(other)} markers ({names}) reach the "
+        f"lowest height in at least {LOW_PERCENTILE:g} % of their frames"
     )
 
 
@@ -277,9 +336,12 @@ def guess_gravity(traj: Trajectory) -> Gravity:
 
 
 def vertical_doubts(ground: Ground, gravity: Gravity) -> list[str]:
-    """Why the vertical may be wrong: the ground guess's own doubts, and the second guess
-    (the acceleration in flight) disagreeing or missing."""
+    """Why the vertical may be wrong: the ground guess's own doubts, the feet cue disagreeing
+    with it (:attr:`Ground.against`) unless the acceleration in flight confirms it, and the
+    second guess (the acceleration in flight) disagreeing or missing."""
     out = list(ground.doubts)
+    if ground.against and not agree(ground, gravity):
+        out.append(ground.against)
     if not gravity.found:
         out.append("no flight phase to check it against")
     elif not agree(ground, gravity):

@@ -1,4 +1,5 @@
-"""A model as MuJoCo MJCF: point masses on slide joints, tendons, joint springs and gravity.
+"""A model as MuJoCo MJCF: point masses on slide joints, tendons, joint springs, gravity and
+ground contacts.
 
 What maps, exactly (the MuJoCo model's forces are the model's, term for term):
 
@@ -18,19 +19,32 @@ What maps, exactly (the MuJoCo model's forces are the model's, term for term):
   tendon to a world site: a tendon's damper acts along the line only, the unary damper in
   every direction. A site on the world body marks each anchor (no force).
 * **gravity** -> ``<option gravity>`` (m g on every body).
+* **contact bond** (a particle against a still plane) -> a plane geom per distinct plane
+  (``normal``, ``height``; lowered by :data:`SPHERE`), a sphere of radius :data:`SPHERE` on the
+  particle's body, and an explicit contact ``pair`` per bond (every geom's ``contype`` and
+  ``conaffinity`` 0: nothing else collides). MuJoCo's soft contact with ``solref = (-k / m,
+  -c / m)`` (its direct stiffness and damping: a reference acceleration, so per kg of the
+  particle) and a constant impedance ``d`` = :data:`IMPEDANCE` (``solimp``) accelerates the
+  penetration ``delta`` as ``(1 - d) a0 + (k delta - c v) / m``, ``a0`` the other forces'
+  acceleration along the normal: the bond's ``max(0, k d - c n.v)`` but for ``1 - d``
+  (measured: its rest depth is ``(1 - d) m g / k``). The friction coefficient is the pair's
+  on an elliptic cone (``condim`` 3, 1 without friction), applied by the no-slip solver
+  (``noslip_iterations``): Coulomb's friction, where the bond smooths it below 1 mm/s; the
+  friction rows' damping in the main solve is :data:`FRICTION_DAMPING`, next to nothing
+  (a larger one asks for more friction than the cone holds, and the cone's projection lifts a
+  sliding particle). What differs, in docs/howto/export-mujoco.md.
 * **integrator**: MuJoCo's ``Euler`` with ``eulerdamp`` disabled is the semi-implicit Euler
   of ``simulate`` (``v += h F / m``, then ``x += h v``, every force explicit); the timestep is
-  ``1 / (rate * substeps)``, MuJoCo's default (2 ms) without a rate. No geoms, contacts
-  disabled: nothing else acts.
+  ``1 / (rate * substeps)``, MuJoCo's default (2 ms) without a rate. Without contacts no
+  geoms and contacts disabled: nothing else acts.
 
 Refused (:class:`~activebonds.errors.InputError`, one line naming them; nothing written):
 neural bonds (a neuron's tension depends on every other bond's state: no MJCF element),
 ternary (flexion) bonds (an energy in the cosine of an angle at three particles), contacts
-(MuJoCo's contacts are soft constraints solved by its constraint solver, with solref/solimp
-and a friction cone, not the penalty spring-damper ``max(0, k d - c n.v)`` with smoothed
-Coulomb friction: it cannot reproduce them faithfully), unary bonds with a moving anchor
-(``anchor_velocity`` != 0) and any other kind. Optional bonds identified as absent and bonds
-of disabled kinds exert no force and are left out.
+with a moving surface (``surface_velocity`` != 0, a treadmill belt: MuJoCo's planes do not
+move), unary bonds with a moving anchor (``anchor_velocity`` != 0) and any other kind.
+Optional bonds identified as absent and bonds of disabled kinds exert no force and are left
+out.
 
 Each kind declares its MuJoCo form (:class:`~activebonds.bonds.kind.MujocoForm`: a tendon, a
 fixed anchor or none, and which of its bonds are refused); this module names no kind.
@@ -50,7 +64,18 @@ from ..errors import InputError
 AXES = "xyz"
 INERTIA = 1e-6  # kg m^2: the bodies' rotational inertia (no rotational joint: it never acts)
 SITE_SIZE = "0.01"  # m, the sites' drawn radius (no physics)
-EXPRESSIBLE = "point masses, gravity, binary spring-dampers and fixed unary anchors"
+EXPRESSIBLE = (
+    "point masses, gravity, binary spring-dampers, fixed unary anchors and contacts with a "
+    "still plane"
+)
+SPHERE = 0.01  # m: a contact particle's sphere (its plane is lowered by as much: no effect)
+IMPEDANCE = 0.0001  # MuJoCo's least constraint impedance (mjMINIMP): the softest constraint
+MJCF_PAIRS = "contact"  # MJCF's section of explicit contact pairs (MuJoCo's word, not a kind)
+NOSLIP_ITERATIONS = 10  # MuJoCo's no-slip solver: Coulomb friction within the cone, exactly
+# 1/s, per kg: the friction rows' damping in MuJoCo's main solve, next to nothing, so that it
+# never asks for more friction than the cone holds (which lifts a sliding particle): the
+# no-slip solver applies the friction, the normal forces fixed
+FRICTION_DAMPING = 0.01
 
 
 def _num(x) -> str:
@@ -120,7 +145,8 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
 
     Args:
         model: a :class:`~activebonds.model.Model` of point masses, gravity, binary (not
-            neural) bonds and unary bonds with fixed anchors, every particle with a position.
+            neural) bonds, unary bonds with fixed anchors and contacts with a still plane,
+            every particle with a position.
         rate: frame rate in Hz; the MuJoCo timestep is ``1 / (rate * substeps)``, so that
             MuJoCo's semi-implicit Euler steps as ``simulate(model, n, rate,
             substeps=substeps)`` does. ``None``: MuJoCo's default timestep.
@@ -149,6 +175,7 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
     c_sum = np.zeros(n)
     anchors: list[tuple[int, list[float]]] = []  # (bond index, anchor) for the world sites
     tendons: list[tuple[int, str, str, float, float, float]] = []
+    contacts: list[tuple[int, int, np.ndarray, float, float, float, float]] = []
     names = {p.name: i for i, p in enumerate(model.spec.particle)}
     counters: dict[str, int] = {}
     for i, b in enumerate(model.spec.bond):
@@ -166,6 +193,19 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
             ka_sum[p] += k * anchor
             c_sum[p] += float(values["damping"][pos])
             anchors.append((i, _pad3(anchor)))
+        elif element == "pair":
+            normal = np.asarray(values["normal"][pos], np.float64)
+            contacts.append(
+                (
+                    i,
+                    names[b.particles[0]],
+                    normal / np.linalg.norm(normal),
+                    float(values["height"][pos]),
+                    float(values["stiffness"][pos]),
+                    float(values["damping"][pos]),
+                    float(values["friction"][pos]),
+                )
+            )
         elif element == "tendon":
             tendons.append(
                 (
@@ -189,10 +229,18 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
     option = ET.SubElement(root, "option", integrator="Euler", gravity=_vec(gravity))
     if rate is not None:
         option.set("timestep", _num(1.0 / (float(rate) * int(substeps))))
-    # eulerdamp off: dampers explicit, as in simulate; no geoms and no contacts.
-    ET.SubElement(option, "flag", eulerdamp="disable", contact="disable")
+    if contacts:  # Coulomb's cone itself; friction by the no-slip solver
+        option.set("cone", "elliptic")
+        if any(c[6] > 0 for c in contacts):
+            option.set("noslip_iterations", str(NOSLIP_ITERATIONS))
+    # eulerdamp off: dampers explicit, as in simulate; no contacts but the explicit pairs.
+    if contacts:
+        ET.SubElement(option, "flag", eulerdamp="disable")
+    else:
+        ET.SubElement(option, "flag", eulerdamp="disable", contact="disable")
 
     world = ET.SubElement(root, "worldbody")
+    planes = _planes(world, contacts)
     for i, anchor in anchors:
         site = ET.SubElement(world, "site", pos=_vec(anchor), size=SITE_SIZE, rgba="1 0 0 1")
         if f"bond{i}_anchor" not in names:  # site names must not clash with the particles'
@@ -220,6 +268,17 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
             body, "inertial", pos="0 0 0", mass=_num(masses[p]), diaginertia=_vec([INERTIA] * 3)
         )
         ET.SubElement(body, "site", name=particle.name, pos="0 0 0", size=SITE_SIZE)
+        if any(c[1] == p for c in contacts):
+            ET.SubElement(
+                body,
+                "geom",
+                name=f"{particle.name}_sphere",
+                type="sphere",
+                size=_num(SPHERE),
+                contype="0",
+                conaffinity="0",
+                rgba="0.2 0.6 0.2 1",
+            )
 
     if tendons:
         tendon = ET.SubElement(root, "tendon")
@@ -236,6 +295,24 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
             ET.SubElement(spatial, "site", site=a)
             ET.SubElement(spatial, "site", site=b)
 
+    if contacts:
+        pairs = ET.SubElement(root, MJCF_PAIRS)
+        for i, p, normal, height, k, c, mu in contacts:
+            m = float(masses[p])
+            pair = ET.SubElement(
+                pairs,
+                "pair",
+                name=f"bond{i}",
+                geom1=planes[(tuple(normal), height)],
+                geom2=f"{model.spec.particle[p].name}_sphere",
+                condim="3" if mu > 0 else "1",
+                friction=_vec([mu, mu, 0.0, 0.0, 0.0]),
+                solref=_vec([-k / m, -c / m]),
+                solreffriction=_vec([-k / m, -FRICTION_DAMPING]),
+                solimp=_vec([IMPEDANCE, IMPEDANCE, 0.001, 0.5, 2.0]),
+            )
+            pair.set("margin", "0")
+
     keyframe = ET.SubElement(root, "keyframe")
     ET.SubElement(
         keyframe,
@@ -247,6 +324,33 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
     )
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _planes(world, contacts) -> dict:
+    """A plane geom per distinct (normal, height) of the contacts, on the world body, lowered
+    by the spheres' radius (so that MuJoCo's distance, the sphere's surface to the plane, is
+    the contact's ``n . x - height``); {(normal, height): its name}."""
+    found: dict = {}
+    for _, _, normal, height, *_ in contacts:
+        key = (tuple(normal), height)
+        if key in found:
+            continue
+        name = f"ground{len(found)}"
+        found[key] = name
+        n3 = _pad3(normal)
+        ET.SubElement(
+            world,
+            "geom",
+            name=name,
+            type="plane",
+            size="0 0 1",
+            pos=_vec(np.asarray(n3) * (height - SPHERE)),
+            zaxis=_vec(n3),
+            contype="0",
+            conaffinity="0",
+            rgba="0.8 0.8 0.8 1",
+        )
+    return found
 
 
 def write_mjcf(

@@ -194,14 +194,37 @@ def fit(
                  progress=lambda g, total, rms: seen.append((g, rms)))
     ```
     """
+    clock = Clock()
     settings = settings or FitSettings(**options)
     keep_compiled()  # a second fit of the same shapes loads this one's programs
     with _precision(settings), shown(progress, status) as (progress, status):
-        return _fit(model, data, settings, out, overwrite, progress, status, command)
+        return _fit(model, data, settings, out, overwrite, progress, status, command, clock)
+
+
+class Clock:
+    """The run's wall time over all its sessions (status.json's ``wall_seconds``): the total
+    of the sessions before this one (read when it resumes) plus this one's, counted from the
+    call of ``fit`` or ``resume``: reading, compiling, the search and every post-fit stage.
+    Written at each checkpoint and after each post-fit stage (a killed session loses the time
+    since its last write)."""
+
+    def __init__(self, before: float = 0.0):
+        self.before, self.start = float(before), time.time()
+
+    def seconds(self) -> float:
+        return round(self.before + time.time() - self.start, 3)
 
 
 def _fit(
-    model, data, settings: FitSettings, out, overwrite: bool, progress, status=None, command=None
+    model,
+    data,
+    settings: FitSettings,
+    out,
+    overwrite: bool,
+    progress,
+    status=None,
+    command=None,
+    clock=None,
 ):
     model_path = Path(model) if isinstance(model, str | Path) else None
     many = isinstance(data, list | tuple)
@@ -217,7 +240,7 @@ def _fit(
         run = _create_run(
             out, model_text, ident, settings, model_path, paths, overwrite, command, held_out
         )
-    return _evolve(ident, settings, run, progress, status=status, held_out=held_out)
+    return _evolve(ident, settings, run, progress, status=status, held_out=held_out, clock=clock)
 
 
 def validation_frames(model: Model, recording: Trajectory, settings: FitSettings):
@@ -296,17 +319,21 @@ def resume(
         if generations < 1:
             raise InputError("--generations", "must be at least 1")
         settings = settings.model_copy(update={"generations": generations})
+    before = run.status().get("wall_seconds")
+    clock = Clock(before if isinstance(before, int | float) else 0.0)
     keep_compiled()
     with _precision(settings), shown(progress, status) as (progress, status):
-        return _resume(run, meta, settings, progress, status)
+        return _resume(run, meta, settings, progress, status, clock)
 
 
-def _resume(run: RunDir, meta: dict, settings: FitSettings, progress, status=None) -> FitResult:
+def _resume(
+    run: RunDir, meta: dict, settings: FitSettings, progress, status=None, clock=None
+) -> FitResult:
     ident = _stored_identification(run, settings)
     if meta.get("upgraded_from"):  # a run of an older format continues in the current one
         run.write_meta({k: v for k, v in meta.items() if k != "upgraded_from"})
     held_out = run.held_out()
-    return _evolve(ident, settings, run, progress, True, status, held_out=held_out)
+    return _evolve(ident, settings, run, progress, True, status, held_out=held_out, clock=clock)
 
 
 def _skipped(skipped: list[str]) -> str:
@@ -322,6 +349,7 @@ def _evolve(
     status=None,
     *,
     held_out=None,
+    clock: Clock | None = None,
 ):
     """Start (or, with a run directory holding a checkpoint, continue) the run and evolve it
     to ``settings.generations``, checkpointing every ``checkpoint_every`` generations and on
@@ -353,12 +381,12 @@ def _evolve(
         history = {c.name: np.zeros(0) for c in loop.columns}
         if not np.isfinite(float(strategy.best(state.strategy)[1])):
             failed = "failed: every candidate's simulation went non-finite"
-            args = (ident, settings, run, strategy, state, history, integer, failed)
+            args = (ident, settings, run, strategy, state, history, integer, failed, clock)
             return _finish(*args, held_out=held_out)
         if run is not None:
-            _checkpoint(run, ident, settings, strategy, state, history, integer, "running")
+            args = (run, ident, settings, strategy, state, history, integer)
+            _checkpoint(*args, "running", clock)
     gen = last_ckpt = int(state.generation)
-    started = time.time()
     if progress is not None and gen > 0 and len(history["best_rms_mm"]):
         progress(gen, total, float(history["best_rms_mm"][-1]))  # a resumed run starts here
     if status is not None and gen < total:
@@ -373,14 +401,14 @@ def _evolve(
                 progress(gen, total, float(history["best_rms_mm"][-1]))
             if run is not None and (gen - last_ckpt >= settings.checkpoint_every) and gen < total:
                 args = (run, ident, settings, strategy, state, history, integer)
-                _checkpoint(*args, "running", started)
+                _checkpoint(*args, "running", clock)
                 last_ckpt = gen
     except KeyboardInterrupt:
         if run is not None:
             args = (run, ident, settings, strategy, state, history, integer)
-            _checkpoint(*args, "interrupted", started)
+            _checkpoint(*args, "interrupted", clock)
         raise
-    args = (ident, settings, run, strategy, state, history, integer, "completed", started)
+    args = (ident, settings, run, strategy, state, history, integer, "completed", clock)
     return _finish(*args, say=status, held_out=held_out)
 
 
@@ -434,7 +462,7 @@ def _best(strategy, state) -> tuple[np.ndarray, float, np.ndarray]:
     return np.asarray(genome, np.float64), float(cost), np.asarray(local, np.float64)
 
 
-def _checkpoint(run, ident, settings, strategy, state, history, integer, status, started=None):
+def _checkpoint(run, ident, settings, strategy, state, history, integer, status, clock=None):
     run.save_checkpoint(rundir.flatten_state(state), history)
     run.write_history(history, integer)
     genome, cost, _ = _best(strategy, state)
@@ -448,7 +476,7 @@ def _checkpoint(run, ident, settings, strategy, state, history, integer, status,
         best_rms_mm=float(display(cost)) if np.isfinite(cost) else None,
         failed_evaluations=int(state.failed_total),
         job=settings.job(),
-        wall_seconds=None if started is None else round(time.time() - started, 3),
+        wall_seconds=None if clock is None else clock.seconds(),
     )
 
 
@@ -461,7 +489,7 @@ def _finish(
     history,
     integer,
     status,
-    started=None,
+    clock=None,
     *,
     say=None,
     held_out=None,
@@ -469,7 +497,7 @@ def _finish(
     genome, cost, local = _best(strategy, state)
     display = Display(ident.windows.n_terms)
     if run is not None:
-        _checkpoint(run, ident, settings, strategy, state, history, integer, status, started)
+        _checkpoint(run, ident, settings, strategy, state, history, integer, status, clock)
     es_genome = genome
     fit = stages.Fit(ident, settings, genome, int(state.generation), status, run, held_out, say)
     records: dict[str, dict] = {}
@@ -477,7 +505,7 @@ def _finish(
         for stage in stages.stages():
             if not stage.applies(fit):
                 continue
-            new = _run_stage(stage, fit, records)
+            new = _run_stage(stage, fit, records, clock)
             if new is not None:  # a better model (the refinement)
                 cost, local = (
                     np.asarray(a, np.float64) for a in jax.jit(ident.problem.evaluate)(new)
@@ -510,21 +538,33 @@ def _finish(
     )
 
 
-def _run_stage(stage, fit: stages.Fit, records: dict) -> np.ndarray | None:
+def _wall(clock) -> dict:
+    return {} if clock is None else {"wall_seconds": clock.seconds()}
+
+
+def _run_stage(stage, fit: stages.Fit, records: dict, clock=None) -> np.ndarray | None:
     """Run one post-fit stage (continuing from what it saved), save its record, hand its
-    product on; returns its genome if it changed the best model."""
+    product on, the run's wall time brought up to date; returns its genome if it changed the
+    best model."""
     run = fit.run
     if run is not None and stage.state is not None:
         run.update_status(status=stage.state)
     if fit.say is not None:
         fit.say(stage.doing(fit))
     saved, arrays = run.load_record(stage.name) if run is not None else (None, {})
-    outcome = stage.run(fit, saved, arrays)
+    try:
+        outcome = stage.run(fit, saved, arrays)
+    except KeyboardInterrupt:  # Ctrl-C at a stage's safe point: it saved what it had
+        if run is not None:
+            run.update_status(status="interrupted", **_wall(clock))
+        raise
     records[stage.name] = outcome.record
     if run is not None:
         run.save_record(stage.name, outcome.record, arrays=outcome.arrays, files=outcome.files)
         if stage.state is not None:
             run.update_status(status=fit.status)
+        if clock is not None:
+            run.update_status(**_wall(clock))
     if outcome.product is not None:
         fit.products[stage.name] = outcome.product
     return None if outcome.genome is None else np.asarray(outcome.genome, np.float64)

@@ -14,12 +14,27 @@ block is never solved: only the block-tridiagonal state system is), from the rec
 into the gaps; with ``denoise`` the whole window is one segment and its positions are written
 everywhere.
 
-The uncertainty of a filled sample is the Gauss-Newton standard error of the fitted position
-(3-D, the square root of the trace of its covariance): ``sigma^2 G T^-1 G^T``, with ``T`` the
-states' J^T J at the solution, ``G`` the position's derivative with respect to its window's
-start state and ``sigma^2`` the residuals' variance (sum of squares over the residuals less the
-unknowns). It measures what the markers present leave undetermined and the marker noise; the
-model's own error is not in it.
+The uncertainty of a filled sample starts from the Gauss-Newton standard error of the fitted
+position (3-D, the square root of the trace of its covariance): ``s^2 G T^-1 G^T``, with ``T``
+the states' J^T J at the solution and ``G`` the position's derivative with respect to its
+window's start state. That posterior assumes the model is right; the residuals of the fit on
+the present samples around the gap say how far it is not, and scale it (:func:`error_scale`):
+
+* ``s = max(sigma_noise, sigma_fit)``: ``sigma_fit^2`` the residuals' variance (sum of squares
+  over the residuals less the unknowns: positions and continuity defects), ``sigma_noise`` the
+  markers' noise estimated from the record alone (:func:`noise_estimate`: the fourth difference
+  of the present samples, robustly). A fit closer to the markers than their noise (a model
+  that explains little, its low continuity weight letting the trajectory follow the noise) is
+  given the noise: the posterior SD at the noise estimate times ``max(1, sqrt(chi^2 / dof))``
+  of the context residuals in units of it;
+* times ``sqrt(tau)``, ``tau`` the integrated autocorrelation of the continuity defects in
+  position (``1 + 2 sum rho_lag`` over lags up to the segment's longest gap, while ``rho`` is
+  positive): a right model leaves white defects (``tau`` about 1), which the posterior
+  assumes; a wrong one leaves the same defect frame after frame, whose sum across a gap grows
+  with its length rather than its square root.
+
+So a model that explains the context leaves the standard error as it was, and a wrong model's
+fill reports an uncertainty of the order of its error (tests/test_fill.py measures both).
 """
 
 from __future__ import annotations
@@ -53,6 +68,7 @@ RATIO_FRAMES = 8  # frames ahead of the prediction that sets the continuity weig
 HORIZON = 1  # frames per shooting window: every frame's state its own unknown
 CONTINUITY = 0.3  # least weight of a continuity defect against a position error (metres each)
 RTOL, ATOL = 1e-10, 1e-12
+TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +81,8 @@ class Segment:
     message: str
     rms_mm: float  # of the present samples, at the solution
     continuity: float = CONTINUITY_WEIGHT  # weight of a continuity defect
+    scale: float = 1.0  # the posterior SD's scale (:func:`error_scale`)
+    tau: float = 1.0  # the continuity defects' integrated autocorrelation
 
     def record(self) -> dict:
         return {
@@ -73,6 +91,8 @@ class Segment:
             "steps": self.steps,
             "message": self.message,
             "rms_mm": self.rms_mm,
+            "uncertainty_scale": self.scale,
+            "defect_correlation": self.tau,
         }
 
 
@@ -95,7 +115,57 @@ class ModelFill:
         )
         if unconverged:
             text += f"; {len(unconverged)} not converged ({unconverged[0].message})"
+            if "step limit" in unconverged[0].message:
+                text += "; raise the limit with --max-steps"
+        tau = max(s.tau for s in self.segments)
+        if tau >= TAU_NOTE:
+            text += (
+                f"; the model's continuity defects around the gaps are correlated (tau up to "
+                f"{tau:.3g}): it does not explain the motion there, and the uncertainties are "
+                f"scaled by sqrt(tau)"
+            )
         return text
+
+
+def noise_estimate(positions: np.ndarray, mask: np.ndarray) -> float:
+    """The markers' noise (m, per coordinate) from the record alone: the fourth difference of
+    every marker's present samples (five consecutive frames), whose standard deviation is
+    ``sqrt(70)`` times the noise's for white noise on a motion smooth at the frame rate; its
+    median absolute value (over 0.6745, robust to impacts) over ``sqrt(70)``. NaN with fewer
+    than 10 such differences."""
+    x, m = positions, mask
+    ok = m[:-4] & m[1:-3] & m[2:-2] & m[3:-1] & m[4:]
+    d4 = x[4:] - 4 * x[3:-1] + 6 * x[2:-2] - 4 * x[1:-3] + x[:-4]
+    values = np.abs(d4[ok]).ravel()
+    if values.size < 10:
+        return float("nan")
+    return float(np.median(values) / 0.6745 / np.sqrt(70.0))
+
+
+def defect_correlation(defects: np.ndarray, longest: int) -> float:
+    """The integrated autocorrelation ``tau = 1 + 2 sum rho_lag`` of the continuity defects
+    ``defects`` [K, n] (one series per coordinate, each less its mean), over lags 1 to
+    ``longest`` - 1 while ``rho`` stays positive; at least 1."""
+    e = defects - defects.mean(axis=0)
+    v = float(np.mean(e**2))
+    if not v > 0.0:
+        return 1.0
+    tau = 1.0
+    for lag in range(1, min(int(longest), len(e))):
+        rho = float(np.mean(e[lag:] * e[:-lag])) / v
+        if not rho > 0.0:
+            break
+        tau += 2.0 * rho
+    return tau
+
+
+def error_scale(sigma_fit: float, sigma_noise: float, tau: float) -> float:
+    """The factor on the posterior SD at ``sigma_fit`` (see the module's docstring):
+    ``max(sigma_noise, sigma_fit) / sigma_fit * sqrt(tau)``; with ``sigma_fit`` 0 (an exact
+    fit), 1 (the SD is 0 and the noise floor is applied by the caller)."""
+    floor = sigma_noise if np.isfinite(sigma_noise) else 0.0
+    level = max(floor, sigma_fit) / sigma_fit if sigma_fit > 0.0 else 1.0
+    return float(level * np.sqrt(max(tau, 1.0)))
 
 
 def segments_of(gaps, n_frames: int, context: int) -> list[tuple[int, int]]:
@@ -232,6 +302,7 @@ def model_fill(
                 integrator,
             )
             weight = continuity_weight(ratio)
+        inside = [g.stop - g.start for g in gaps if a <= g.start and g.stop <= b]
         xs, sd, seg = _fit_segment(
             model,
             genome,
@@ -245,8 +316,10 @@ def model_fill(
             integrator,
             max_steps,
             weight / CONTINUITY_WEIGHT,
+            longest=max(inside, default=b - a),
         )
-        seg = Segment(a, b, *seg, continuity=weight)
+        steps, message, rms, scale, tau = seg
+        seg = Segment(a, b, steps, message, rms, continuity=weight, scale=scale, tau=tau)
         segments.append(seg)
         values[a:b] = xs
         sigma[a:b] = sd
@@ -325,8 +398,11 @@ def _fit_segment(
     integrator,
     max_steps,
     link=1.0,
+    longest=1,
 ):
-    """(positions [S, M, D], their standard errors [S, M], (steps, message, RMS mm))."""
+    """(positions [S, M, D], their uncertainties [S, M] (the standard errors scaled by the
+    residuals, :func:`error_scale`; ``longest`` the segment's longest gap in frames), (steps,
+    message, RMS mm, scale, tau))."""
     n_frames, n_markers, dim = positions.shape
     local = shooting_windows(positions, mask, dt, horizon)
     x0, v0 = start_states(local, [states])
@@ -371,6 +447,12 @@ def _fit_segment(
     rms_mm = float(np.sqrt(np.sum(measured**2) / max(1, terms))) * 1000.0
     # the standard errors of the fitted positions: sigma^2 G T^-1 G^T
     variance = float(np.sum(r**2)) / max(1, terms * dim - z.shape[1])
+    defects = r[measured.size : measured.size + (k - 1) * n_markers * dim]
+    tau = defect_correlation(defects.reshape(k - 1, -1), longest) if k > 2 else 1.0
+    noise = noise_estimate(positions, mask)
+    scale = error_scale(np.sqrt(variance), noise, tau)
+    if variance == 0.0 and np.isfinite(noise):  # an exact fit: the noise estimate's SD
+        variance = noise**2
     system = programs.normal(z, genome, *data)
     diag = np.asarray(system.diag)
     jitter = 1e-12 * float(np.max(np.abs(np.diagonal(diag, axis1=1, axis2=2))))
@@ -378,4 +460,4 @@ def _fit_segment(
     g = jac[kk, jj]  # [S, M D, n]
     var = np.einsum("smn,snp,smp->sm", g, cov[kk], g)  # per coordinate
     sd = np.sqrt(np.maximum(variance * var.reshape(n_frames, n_markers, dim).sum(-1), 0.0))
-    return xs, sd, (steps, message, rms_mm)
+    return xs, scale * sd, (steps, message, rms_mm, scale, tau)

@@ -27,6 +27,11 @@ compares them in standard errors), by fewer steps:
   ``atol + rtol |y|`` and every residual by less than ``atol + rtol |r|`` (Cauchy
   termination, max norm), or at ``max_steps`` evaluations (the first being the start's).
 
+Between two steps it asks ``stop()`` (default :func:`activebonds.runtime.stop_requested`: the
+command line's Ctrl-C) whether to stop; if so it raises :class:`Interrupted`, a
+``KeyboardInterrupt`` that carries the last accepted point and the steps taken, so the caller
+can save them. A long solve thus stops within one step of a Ctrl-C.
+
 One rule of ours is added, where the caller gives the system's ``scale``: it also stops
 when the estimate is known to a small fraction of its own uncertainty. The undamped
 (Gauss-Newton) step d = -(J^T J)^-1 J^T r is d^T J^T J d / sigma^2 standard deviations
@@ -50,6 +55,15 @@ import numpy as np
 LOW = 0.01  # share of the predicted reduction that accepts a step
 PRECISION = 0.05  # standard deviations: a Gauss-Newton step shorter than this ends the solve
 JITTER = 1e-12  # of the system's scale: the Gauss-Newton step's damping (unseen directions)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A stop asked between two steps: ``value`` the last accepted point, ``steps`` the
+    evaluations made."""
+
+    def __init__(self, value, steps: int):
+        super().__init__(f"interrupted after {steps} Levenberg-Marquardt steps")
+        self.value, self.steps = value, steps
 
 
 def _dot(a, b):
@@ -91,6 +105,7 @@ def levenberg_marquardt(
     linear_enough: Callable | None = None,
     diagonal: Callable | None = None,
     damping: float = 1.0,
+    stop: Callable[[], bool] | None = None,
 ):
     """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y, r) -> (system,
     gradient J^T r)``, ``step(system, damping) -> d`` (``damping`` a number, times I, or a
@@ -99,7 +114,11 @@ def levenberg_marquardt(
     entry of J^T J, for the precision test (none without it); ``linear_enough(y)``: whether
     the Gauss-Newton model can be trusted that far at y (else the test waits: e.g. a variable
     whose transform is flat at a bound); ``diagonal(system)``: J^T J's diagonal (a pytree like
-    y), for Marquardt's scaling D (without it, D = I)."""
+    y), for Marquardt's scaling D (without it, D = I). ``stop()``: asked between two steps
+    (default: :func:`activebonds.runtime.stop_requested`); True raises :class:`Interrupted`
+    with the last accepted point."""
+    if stop is None:
+        from ..runtime import stop_requested as stop
     y = y0
     r = residual(y)
     loss = 0.5 * float(_dot(r, r))
@@ -112,6 +131,8 @@ def levenberg_marquardt(
     if on_step:
         on_step(steps, loss)
     while steps < max_steps:
+        if stop():
+            raise Interrupted(y, steps)
         d = step(system, damping if scaling is None else _times(damping, scaling))
         y_new = jax.tree.map(jnp.add, y, d)
         r_new = residual(y_new)
@@ -141,7 +162,10 @@ def levenberg_marquardt(
         variance = 2.0 * loss / dof  # sigma^2
         trusted = linear_enough is None or linear_enough(y)
         if scale is not None and -change < 0.5 * variance and trusted:
-            gauss_newton = step(system, JITTER * float(scale(system)))
+            jitter = JITTER * float(scale(system))
+            if scaling is not None:  # as a diagonal: the step's program compiled once
+                jitter = _times(jitter, jax.tree.map(jnp.ones_like, scaling))
+            gauss_newton = step(system, jitter)
             distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
             if distance < precision**2:
                 return (

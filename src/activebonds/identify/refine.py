@@ -35,7 +35,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from .cost import constant_velocity_cost, join_windows, make_residuals, make_windows, rms_mm
-from .lm import levenberg_marquardt
+from .lm import Interrupted, levenberg_marquardt
 from .problem import Identification
 from .settings import FitSettings
 from .shooting import (
@@ -69,9 +69,20 @@ class Stage:
     continuity_mm: float | None  # largest continuity defect in position (shooting), at the end
     seconds: float
     genome: list[float] = field(default_factory=list)  # the result (the start if rejected)
+    # why shooting was not kept, when this one-step stage was refined in its place, else ""
+    instead_of_shooting: str = ""
 
     def record(self) -> dict:
         return asdict(self)
+
+
+class StageInterrupted(KeyboardInterrupt):
+    """Ctrl-C between two steps of a stage: ``stage`` what it had reached (its genome the best
+    so far, its message "interrupted after N steps"), for the run to save and resume from."""
+
+    def __init__(self, stage: Stage):
+        super().__init__(stage.message)
+        self.stage = stage
 
 
 class Bounded:
@@ -96,6 +107,10 @@ class Bounded:
     def inside(self, genome) -> bool:
         g = np.asarray(genome)
         return bool(np.all((g >= self.lower) & (g <= self.lower + self.span)))
+
+
+def _interrupted(steps: int) -> str:
+    return f"interrupted after {steps} steps (Ctrl-C); resume continues from here"
 
 
 def _sum_squares(tree) -> float:
@@ -189,19 +204,22 @@ def _solve_shooting(residual, normal, y0, max_steps: int, interior=None):
         return system, (system.grad_u, system.grad_s)
 
     z0 = (u0, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
-    z, steps, message = levenberg_marquardt(
-        flat,
-        linearize,
-        damped_step,
-        z0,
-        max_steps,
-        RTOL,
-        ATOL,
-        scale=_normal_scale,
-        linear_enough=None if interior is None else (lambda z: interior(z[0])),
-        diagonal=marquardt_diagonal,
-        damping=INITIAL_DAMPING,
-    )
+    try:
+        z, steps, message = levenberg_marquardt(
+            flat,
+            linearize,
+            damped_step,
+            z0,
+            max_steps,
+            RTOL,
+            ATOL,
+            scale=_normal_scale,
+            linear_enough=None if interior is None else (lambda z: interior(z[0])),
+            diagonal=marquardt_diagonal,
+            damping=INITIAL_DAMPING,
+        )
+    except Interrupted as stop:  # the last accepted point, in the caller's form
+        raise Interrupted(split(stop.value), stop.steps) from None
     return split(z), steps, message
 
 
@@ -226,10 +244,15 @@ class Refinement:
             max_steps = getattr(self.settings, "max_steps", MAX_STEPS)
         started = time.time()
         genome = np.asarray(genome, np.float64)
-        if self.settings.cost == "shooting":
-            stage = self._shooting(horizon, genome, max_steps)
-        else:
-            stage = self._restart(horizon, genome, max_steps)
+        try:
+            if self.settings.cost == "shooting":
+                stage = self._shooting(horizon, genome, max_steps)
+            else:
+                stage = self._restart(horizon, genome, max_steps)
+        except StageInterrupted as stop:  # as the stage of this horizon, where it got to
+            stop.stage.horizon, stop.stage.cost = int(horizon), self.settings.cost
+            stop.stage.seconds = round(time.time() - started, 3)
+            raise
         stage.seconds = round(time.time() - started, 3)
         return stage
 
@@ -259,23 +282,33 @@ class Refinement:
         residual = jax.jit(plain)  # compiled once per stage
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
-        start = _sum_squares(residual(u0))
+        # the start's and the end's costs by the shared program (the checks against constant
+        # velocity reuse it; a start that diverges compiles nothing more)
+        start = _sum_squares(residuals(to_genome(u0)))
+        stopped = None
         if not np.isfinite(start):  # no step can be judged from a non-finite cost
             u, steps, message = u0, 1, "not started"
         else:
-            if self.solver == "dense":  # optimistix compiles the function it is given
-                u, steps, message = _solve_dense(plain, u0, max_steps)
-            else:
-                u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
-        end = _sum_squares(residual(u))
+            try:
+                if self.solver == "dense":  # optimistix compiles the function it is given
+                    u, steps, message = _solve_dense(plain, u0, max_steps)
+                else:
+                    u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
+            except Interrupted as stop:
+                stopped = stop
+                u, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
         result = np.asarray(to_genome(u), np.float64)
+        end = _sum_squares(residuals(jnp.asarray(result)))
 
         def mm(c):
             return float(rms_mm(c, windows.n_terms)) if np.isfinite(c) else float("inf")
 
-        return self._judge(
+        stage = self._judge(
             horizon, genome, result, (start, end), (mm(start), mm(end)), steps, message
         )
+        if stopped is not None:
+            raise StageInterrupted(stage) from None
+        return stage
 
     def _shooting(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
@@ -283,7 +316,7 @@ class Refinement:
         # state is a variable), so the shooting solve starts near its optimum rather than
         # at the one-step cost's, which marker noise biases (dampings several times over).
         original = genome
-        warm = self._restart(horizon, genome, max_steps)
+        warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
         if warm.accepted:
             genome = np.asarray(warm.genome)
             # the restart cost's optimum at this horizon (its RMS already measured by the
@@ -308,15 +341,20 @@ class Refinement:
 
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
         start_tree = residual(y0)
+        stopped = None
         if self.solver == "dense":
             y, steps, message = _solve_dense(plain, y0, max_steps)
         else:
             normal = jax.jit(
                 make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome)
             )
-            y, steps, message = _solve_shooting(
-                residual, normal, y0, max_steps, self.bounded.interior
-            )
+            try:
+                y, steps, message = _solve_shooting(
+                    residual, normal, y0, max_steps, self.bounded.interior
+                )
+            except Interrupted as stop:
+                stopped = stop
+                y, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
         end_tree = residual(y)
         result = np.asarray(to_genome(y[0]), np.float64)
 
@@ -332,6 +370,10 @@ class Refinement:
             warm.steps + steps,
             message,
         )
+        if stopped is not None:  # what it reached, its states kept for the resumed stage
+            if stage.accepted:
+                self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
+            raise StageInterrupted(stage) from None
         unfit = stage.accepted and self._versus_constant_velocity(result, (1, horizon))
         if unfit:
             return self._one_step_instead(f"the shot model was rejected: {unfit}", original)
@@ -367,6 +409,7 @@ class Refinement:
         stage = self._restart(1, genome, getattr(self.settings, "max_steps", MAX_STEPS))
         stage.cost = "restart"
         stage.message = f"{why}; refined on the one-step cost instead: {stage.message}"
+        stage.instead_of_shooting = why
         return stage
 
     def _judge(self, horizon, start_genome, result, objective, rms, steps, message):

@@ -7,7 +7,9 @@ Layout of RUN/::
     model.toml          the input model file as given (for the record and for resume --force)
     data.npz            the recorded window that is fitted (selected markers and frames)
     history.csv         one row per generation (deterministic: no wall-clock fields)
-    status.json         state, generation, best RMS, wall times (not part of the result)
+    status.json         state, generation, best RMS, the run's wall time over every session
+                        (``wall_seconds``: reading, compiling, search, post-fit stages; not
+                        part of the result)
     best_model.toml     the best model so far, in the model-file format
     held_out.npz        the validation frames (``fit --validate``), optional
     data-2.npz, ...     further recordings fitted at once (``fit MODEL A B ...``)

@@ -47,12 +47,14 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
     second difference of its length over ``dt^2``) and ``c`` = 10 % of the critical damping
     ``2 sqrt(k mu)``, each clipped into its bounds.
 * **Gravity** (``-9.81`` m/s^2 along the vertical) only where the vertical is confident: the
-  ground guess is clear and the acceleration guess does not contradict it
+  ground guess is clear, the acceleration guess does not contradict it, and, without a flight
+  phase to confirm it, the feet do not (a ground resting on one marker while along another
+  direction several markers reach the lowest height often)
   (:mod:`activebonds.data.orientation`); otherwise none, and the summary says so (``--up``
   names the vertical, ``--no-gravity`` leaves it out). A flat recording (2D, or with no
   extent along an axis) has no vertical to guess.
 * **Ground contacts** (with gravity): one per marker within :data:`CONTACT_REACH` of the
-  ground in at least :data:`CONTACT_SHARE` of the frames, the plane at the guessed ground
+  ground (above or below) in at least :data:`CONTACT_SHARE` of the frames, the plane at the guessed ground
   (height free within :data:`HEIGHT_RANGE`); stiffness ``M g / (n delta)`` (the whole weight
   ``M g`` shared by the ``n`` contacts at a penetration ``delta`` = :data:`PENETRATION`),
   bounds a factor 100 either way; damping 10 % of critical for a mass ``M / n``, bounds a
@@ -202,10 +204,16 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
         return None
     ground = guess_ground(traj)
     fall = guess_gravity(traj)
-    sure = ground is not None and ground.clear and agree(ground, fall) is not False
+    agrees = agree(ground, fall)
+    sure = (
+        ground is not None
+        and ground.clear
+        and agrees is not False
+        and not (ground.against and agrees is None)
+    )
     if not sure:
         said = "no guess" if ground is None else ground.describe()
-        if ground is not None and agree(ground, fall) is False:
+        if ground is not None and agrees is False:
             said += f", but the acceleration in flight says {fall.describe()}"
         elif ground is not None and not ground.clear:
             said += " (not clearly flatter than another axis)"
@@ -220,10 +228,11 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
 
 
 def _ground(x: np.ndarray, axis: int, sign: float) -> float:
-    """The ground along up: the 5th percentile of the per-frame lowest marker."""
-    h = sign * x[:, :, axis]
-    some = ~np.isnan(h).all(axis=1)
-    return float(np.percentile(np.nanmin(h[some], axis=1), 5))
+    """The ground along up: the 5th percentile of the lowest foot of each frame (the feet:
+    the markers that reach the lowest height often, :func:`~activebonds.data.orientation.feet`)."""
+    from ..data.orientation import ground_level
+
+    return ground_level(sign * x[:, :, axis])
 
 
 def _delaunay(x: np.ndarray) -> set[tuple[int, int]]:
@@ -502,7 +511,9 @@ def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     """The ground contacts' [[bond]] blocks (the markers that reach the guessed ground)."""
     h = sign * x[:, :, axis]  # [F, P] height along up, NaN where missing
     ground = _ground(x, axis, sign)
-    near = (h - ground) < CONTACT_REACH  # False where missing (NaN compares False)
+    # within reach above or below (False where missing: NaN compares False); a marker far
+    # below the ground (a dip, a swapped label) does not touch it
+    near = np.abs(h - ground) < CONTACT_REACH
     share = near.sum(axis=0) / np.maximum(mask.sum(axis=0), 1)
     touching = [i for i in range(len(names)) if share[i] >= CONTACT_SHARE]
     if not touching:
@@ -550,7 +561,7 @@ def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
             f"particles = [{_q(names[i])}]",
             f"normal = {_vec(normal)}  # up, as guessed (or --up)",
             f"height = {_param(height, height - HEIGHT_RANGE, height + HEIGHT_RANGE)}  # m: the "
-            f"5th percentile of the lowest marker of each frame, +-{HEIGHT_RANGE * 100:g} cm",
+            f"5th percentile of the lowest foot of each frame, +-{HEIGHT_RANGE * 100:g} cm",
             f"stiffness = {_param(k, k / 100, k * 100)}  # N/m: the weight {total:.4g} kg x g "
             f"over {n} contacts at {PENETRATION * 1000:g} mm; bounds x/100 .. x100",
             f"damping = {_param(c, c / 100, c * 100)}  # N s/m: 10 % of critical for "

@@ -31,6 +31,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 
 import jax
@@ -261,16 +262,47 @@ def _span(gene) -> float:
     return gene.upper - gene.lower
 
 
-def warnings(cost: str, horizon: int, substeps: int) -> list[str]:
+def shooting_rejected(stages) -> list[str]:
+    """Why the refinement's shooting stages were not kept (``stages``: its
+    :class:`~activebonds.identify.refine.Stage` records or their dicts), one line each: a
+    shooting stage rejected, or a one-step stage refined in its place."""
+    out = []
+    for s in stages:
+        s = s if isinstance(s, dict) else s.record()
+        if s.get("instead_of_shooting"):
+            out.append(s["instead_of_shooting"])
+        elif s.get("cost") == "shooting" and not s.get("accepted"):
+            out.append(f"horizon {s['horizon']}: {s['message']}")
+    return out
+
+
+def warnings(cost: str, horizon: int, substeps: int, rejected: Sequence[str] = ()) -> list[str]:
     """Where the intervals of a fit on cost ``cost`` at ``horizon`` with ``substeps`` cannot
-    be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle)."""
+    be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle). ``rejected``: why
+    the fit's shooting stages were not kept (:func:`shooting_rejected`); then the one-step
+    warning says so, instead of sending the user to a shooting fit that was already tried."""
     out = []
     if cost == "restart" and int(horizon) == 1:
-        out.append(
+        head = (
             "these intervals come from the one-step cost: on noisy markers they can be up to "
             "18 times too wide and blind to the bias noise puts in the damping (5-7 standard "
-            "errors); refit with --cost shooting for intervals that hold"
+            "errors); "
         )
+        if rejected:
+            tried = f"this fit tried shooting and did not keep it ({'; '.join(rejected)})"
+            if any("constant velocity" in r for r in rejected):
+                then = (
+                    ", so refitting with --cost shooting would not help: the model does not "
+                    "predict the recording over the shooting windows better than constant "
+                    "velocity; a model that does (see the free run's advice) comes first"
+                )
+            else:
+                then = (
+                    ", so refitting with --cost shooting alone would not give intervals that hold"
+                )
+            out.append(head + tried + then)
+        else:
+            out.append(head + "refit with --cost shooting for intervals that hold")
     if int(substeps) == 1:
         out.append(
             "the integrator takes one step per frame: if the motion is finer than the frames, "

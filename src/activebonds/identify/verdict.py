@@ -207,17 +207,78 @@ def lines(label: str, comparisons: Sequence[Comparison]) -> list[str]:
     return [line for c in comparisons for line in c.lines(label)]
 
 
-def free_run_advice(free_run_rms_mm) -> str | None:
+def holds(model) -> dict:
+    """What holds or drives a model's body, for :func:`free_run_advice`: ``gravity`` (a
+    nonzero gravity), ``contacts`` (its ground contacts), ``anchors`` (its unary springs) and
+    ``drive`` (a rhythmic drive). Plain JSON values, kept in the records."""
+    import numpy as np
+
+    from .. import bonds
+
+    counts = model.bond_counts()
+    return {
+        "gravity": bool(np.linalg.norm(np.asarray(model.params.gravity, float)) > 0),
+        "contacts": int(counts.get(bonds.contact.KIND.name, 0)),
+        "anchors": int(counts.get(bonds.unary.KIND.name, 0)),
+        "drive": model.spec.drive is not None,
+    }
+
+
+def free_run_advice(free_run_rms_mm, held: dict | None = None) -> str | None:
     """One line of advice for a free run that leaves the recording by metres (RMS above
-    :data:`ADVICE_MM`, or non-finite), None otherwise."""
+    :data:`ADVICE_MM`, or non-finite), None otherwise. It depends on what holds the model
+    (``held``, from :func:`holds`; None: not known, as in older records):
+
+    * with ground contacts: they did not keep it on the recording; anchors or a drive (what it
+      lacks of them), stiffer contacts, or judging it over a shorter horizon;
+    * gravity and no contacts: the body falls; ground contacts (``scaffold`` writes them),
+      anchors or a drive;
+    * neither: nothing holds or drives it; anchors or a drive.
+    """
     x = _number(free_run_rms_mm)
     if math.isnan(x) or x <= ADVICE_MM:
         return None
     far = "goes non-finite" if math.isinf(x) else f"ends {x / 1000:.3g} m (RMS) from the recording"
-    return (
-        f"advice: the free run {far}: nothing holds the body or drives it; add ground "
-        "contacts (gravity without support falls), anchors (unary springs) or a rhythmic drive"
-    )
+    if held is None:
+        return (
+            f"advice: the free run {far}: nothing holds the body or drives it; add ground "
+            "contacts (gravity without support falls), anchors (unary springs) or a rhythmic "
+            "drive"
+        )
+    lacks = [
+        what
+        for what, has in (
+            ("anchors (unary springs)", held.get("anchors")),
+            ("a rhythmic drive ([drive] and neural bonds)", held.get("drive")),
+        )
+        if not has
+    ]
+    n = int(held.get("contacts") or 0)
+    if n:
+        add = f"add {_either(lacks)}, " if lacks else ""
+        return (
+            f"advice: the free run {far} although the model has {n} ground contact"
+            f"{'s' if n != 1 else ''}: they do not hold it on the recording's path; {add}"
+            "make the contacts stiffer (raise their stiffness and its bounds), or judge it "
+            "over a shorter horizon (evaluate --horizon, the frames-ahead comparison) than a "
+            "free run of the whole window"
+        )
+    if held.get("gravity"):
+        options = ["ground contacts (activebonds scaffold writes them)", *lacks]
+        return (
+            f"advice: the free run {far}: the model has gravity and no ground contacts, so "
+            f"the body falls; add {_either(options)}"
+        )
+    if not lacks:
+        return (
+            f"advice: the free run {far} although the model has anchors and a rhythmic "
+            "drive: stiffer anchors, or judge it over a shorter horizon (evaluate --horizon)"
+        )
+    return f"advice: the free run {far}: nothing holds the body or drives it; add {_either(lacks)}"
+
+
+def _either(options: list[str]) -> str:
+    return options[0] if len(options) == 1 else f"{', '.join(options[:-1])} or {options[-1]}"
 
 
 def judged_comparisons(records: dict) -> dict[str, list[Comparison]]:

@@ -48,7 +48,7 @@ from ..identify.metrics import (
     window_metrics,
 )
 from ..identify.predictions import rms_mm
-from ..identify.verdict import Comparison, Verdict, free_run_advice
+from ..identify.verdict import Comparison, Verdict, free_run_advice, holds
 from ..model import Model
 from .gait_runs import GaitEvaluation, gait_evaluation
 from .predict import predict
@@ -81,6 +81,7 @@ class Evaluation:
     particles: tuple[ParticleScore, ...]
     comparisons: tuple[Comparison, ...] = ()  # one step, then `horizon` frames ahead
     gait: GaitEvaluation | None = None  # asked for: the free runs scored as a gait
+    holds: dict | None = None  # what holds the model (identify.verdict.holds): the advice's
     body_markers: tuple[str, ...] = ()  # asked for: the markers whose errors alone count
     body: dict[str, FreeRunMetrics] | None = None  # their numbers: "model", "zero_force"
 
@@ -93,7 +94,7 @@ class Evaluation:
         """The verdicts in words: overall and per marker, one step and K frames ahead."""
         a, b = self.frames
         out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
-        advice = free_run_advice(self.model.free_run_rms_mm)
+        advice = free_run_advice(self.model.free_run_rms_mm, self.holds)
         return out + ([advice] if advice else [])
 
     def record(self) -> dict:
@@ -124,6 +125,7 @@ class Evaluation:
                 for p in self.particles
             ],
             "comparisons": [c.to_dict() for c in self.comparisons],
+            "holds": self.holds,
             **({"gait": self.gait.record()} if self.gait is not None else {}),
             **(
                 {
@@ -232,6 +234,7 @@ def evaluate(
         )
         if gait
         else None,
+        holds=holds(model),
         body_markers=tuple(model.particle_names[i] for i in picked),
         body=body_found,
     )

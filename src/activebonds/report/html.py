@@ -240,7 +240,10 @@ def summary_table(record: RunRecord, pred: Prediction) -> Table:
         ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),
         ("best RMS per particle (one-step)", f"{per} mm"),
         ("failed evaluations", st.get("failed_evaluations", "—")),
-        ("wall time", "—" if wall is None else f"{float(wall):.4g} s"),
+        (
+            "wall time (the run's, every session)",
+            "—" if wall is None else f"{float(wall):.4g} s",
+        ),
         ("versions", versions),
         ("backend", f"{be.get('backend', '?')} ({be.get('platform', '?')}), x64 {be.get('x64')}"),
         ("created", meta.get("created", "—")),
@@ -294,6 +297,11 @@ def errors_table(pred: Prediction, caption: str = "RMS position error per partic
             ]
         rows.append(row)
     caption += f"; red: {WORSE} (the constant-velocity predictor, same terms)"
+    if pred.extended:
+        caption += (
+            "; free run beyond: a run of its own from the first two frames beyond the fit, as "
+            "evaluate --frames scores those frames"
+        )
     return Table(columns=cols, rows=rows, caption=caption)
 
 
@@ -308,7 +316,7 @@ def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
     out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
     if "fitted" in fitted:
         run = FreeRunMetrics.from_dict(fitted["fitted"]["model"]).free_run_rms_mm
-        out += [a for a in (free_run_advice(run),) if a is not None]
+        out += [a for a in (free_run_advice(run, fitted.get("holds")),) if a is not None]
     held = record.records.get(validation.NAME)
     if held is not None and "judged" in held:
         a, b = held["frames"]

@@ -154,8 +154,10 @@ class Prediction:
     free_run: np.ndarray  # [F, P, D]
     activation: np.ndarray  # [F, B] along the free run
     one_step_rms_mm: np.ndarray  # [P] over the fitted window
-    free_run_rms_mm: np.ndarray  # [P] over the fitted window
+    free_run_rms_mm: np.ndarray  # [P] over the fitted window (:func:`free_run_rms_mm`)
     one_step_rms_mm_beyond: np.ndarray | None  # [P] beyond the fitted window
+    # [P] beyond the fitted window: a free run of their own, from their first two frames, as
+    # ``evaluate --frames`` scores them (:func:`free_run_rms_mm`)
     free_run_rms_mm_beyond: np.ndarray | None
     saturated_share: float  # NaN without neurons
     saturated_per_neuron: np.ndarray  # [B]
@@ -204,13 +206,12 @@ def predict(
     diverged = int(np.argmax(free_failed)) if free_failed.any() else None
     one_failed = np.zeros(n, bool)
     one_failed[2:] = pairs[:-1] & ~np.isfinite(one[2:]).all(axis=(1, 2))
-    free_pred = _model_only(xs, first_run)
 
     def one_rms(lo, hi):
         return _counted_rms(one, rec, lo, hi, one_failed)
 
-    def free_rms(lo, hi):
-        return _counted_rms(free_pred, rec, lo, hi, free_failed)
+    def free_rms(lo, hi):  # the frames' own free run, as evaluate scores them
+        return free_run_rms_mm(model, rec[lo:hi], dt, substeps, method)
 
     return Prediction(
         names=model.particle_names,
@@ -233,6 +234,26 @@ def predict(
         near_zero_weight_share=near_zero_share(model),
         diverged_at=diverged,
     )
+
+
+@float64
+def free_run_rms_mm(
+    model: Model, positions: np.ndarray, dt: float, substeps: int = 1, method: str = "euler"
+) -> np.ndarray:
+    """Per particle, the RMS error (mm) of the model's free run along ``positions`` [F, P, D]
+    (markers in the model's particle order): one run from their first two complete frames,
+    time 0 at their first frame, over the frames after those two; a prediction that went
+    non-finite where the particle was recorded counts as infinite. The one function behind
+    ``evaluate``'s per-particle free run and the report's (the fitted frames, and the frames
+    beyond them: a run of their own, as ``evaluate --frames`` starts one)."""
+    rec = np.asarray(positions, np.float64)
+    n = rec.shape[0]
+    xs, _ = free_run(model, rec, dt, n, substeps, method)
+    complete = np.isfinite(rec).all(axis=(1, 2))
+    pairs = complete[1:] & complete[:-1]
+    first_run = int(np.argmax(pairs)) + 1 if pairs.any() else n
+    failed = (np.arange(n) > first_run) & ~np.isfinite(xs).all(axis=(1, 2))
+    return _counted_rms(_model_only(xs, first_run), rec, 0, n, failed)
 
 
 def _counted_rms(pred, rec, lo: int, hi: int, failed: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from ...errors import InputError
 from ..ahead import DEFAULT_AHEAD, comparisons
 from ..baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..metrics import FreeRunMetrics, censored_text, window_metrics
-from ..verdict import comparisons_from, free_run_advice, verdict
+from ..verdict import comparisons_from, free_run_advice, holds, verdict
 from ..verdict import lines as verdict_lines
 from .base import Fit, Outcome
 
@@ -50,6 +50,7 @@ class BaselinesStage:
         record["fitted"] = {k: m.to_dict() for k, m in found.items()}
         judged = comparisons(model, data, DEFAULT_AHEAD, substeps=s.substeps, method=s.integrator)
         record["judged"] = [c.to_dict() for c in judged]
+        record["holds"] = holds(model)
         return Outcome(record)
 
     def lines(self, record: dict) -> list[str]:
@@ -57,7 +58,8 @@ class BaselinesStage:
         if "fitted" in record:
             found = _metrics(record["fitted"])
             out.append(metrics_line("fitted frames", found))
-            if (advice := free_run_advice(found["model"].free_run_rms_mm)) is not None:
+            advice = free_run_advice(found["model"].free_run_rms_mm, record.get("holds"))
+            if advice is not None:
                 out.append(advice)
         out += verdict_lines("fitted frames", comparisons_from(record.get("judged")))
         return out

@@ -1,14 +1,16 @@
 """The refinement stage (``fit --refine lm``): Levenberg-Marquardt from the search's best, one
 stage per horizon of the curriculum (:mod:`activebonds.identify.refine`). Each stage is saved
 as it ends (RUN/refine.json and refine.npz with the shooting states), so a resumed run
-continues with the next one."""
+continues with the next one. Ctrl-C between two steps of a stage saves it where it got to
+(the record's ``interrupted``: its best genome so far, the shooting states) and ends the fit;
+a resumed run continues that stage from there."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ...document import Section, Table
-from ..refine import Refinement, Stage
+from ..refine import Refinement, Stage, StageInterrupted
 from .base import Fit, Outcome
 
 NAME = "refine"
@@ -51,6 +53,7 @@ class RefinementStage:
         settings, start = fit.settings, [float(g) for g in fit.genome]
         refinement = Refinement(fit.ident, settings)
         stages: list[Stage] = []
+        partial = None  # a stage interrupted by Ctrl-C, continued from where it got to
         if (
             saved is not None
             and saved.get("from_generation") == fit.generation
@@ -58,10 +61,28 @@ class RefinementStage:
         ):
             stages = [Stage(**r) for r in saved["stages"]][: len(settings.horizon)]
             refinement.states = _states(arrays)
+            if saved.get("interrupted") and len(stages) < len(settings.horizon):
+                partial = Stage(**saved["interrupted"])
         current = np.asarray(stages[-1].genome) if stages else fit.genome
+        if partial is not None:
+            current = np.asarray(partial.genome)
         outcome = self._outcome(fit, start, stages, refinement, current)
         for horizon in settings.horizon[len(stages) :]:
-            stage = refinement.stage(horizon, current)
+            try:
+                stage = refinement.stage(horizon, current)
+            except StageInterrupted as stop:  # saved where it got to, as the ES's checkpoint
+                outcome = self._outcome(fit, start, stages, refinement, current)
+                outcome.record["interrupted"] = stop.stage.record()
+                if fit.run is not None:
+                    fit.run.save_record(NAME, outcome.record, arrays=outcome.arrays)
+                raise
+            if partial is not None:  # the interrupted stage, continued
+                stage.message = (
+                    f"continued after an interrupt at step {partial.steps}: {stage.message}"
+                )
+                stage.steps += partial.steps
+                stage.seconds = round(stage.seconds + partial.seconds, 3)
+                partial = None
             stages.append(stage)
             current = np.asarray(stage.genome)
             outcome = self._outcome(fit, start, stages, refinement, current)

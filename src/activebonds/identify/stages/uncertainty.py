@@ -37,7 +37,9 @@ class UncertaintyStage:
         except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
             return Outcome({"not_computed": str(err)}, files={"csv": None})
         record = report.record()
-        record["warnings"] = uncertainty.warnings(cost, horizon, fit.settings.substeps)
+        record["warnings"] = uncertainty.warnings(
+            cost, horizon, fit.settings.substeps, uncertainty.shooting_rejected(stages)
+        )
         return Outcome(record, files={"csv": report.csv_text()})
 
     def lines(self, record: dict) -> list[str]:
