@@ -417,9 +417,7 @@ def scaffold(
         acc = acc[np.isfinite(acc)]
         rms_s = float(np.sqrt(np.nanmean(stretch**2)))
         rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
-        k_raw = mu * rms_a / rms_s if rms_s > 0 else k_hi
-        k0 = float(np.clip(k_raw, k_lo, k_hi))
-        c0 = float(np.clip(0.1 * 2 * math.sqrt(k0 * mu), c_lo, c_hi))
+        k0, c0 = _start_values(mu, rms_a, rms_s, (k_lo, k_hi), (c_lo, c_hi))
         bond_blocks.append(
             "\n".join(
                 [
@@ -481,9 +479,7 @@ def _anchors(x, names, m, limits, dt, extent) -> list[str]:
         acc = acc[np.isfinite(acc)]
         rms_d = float(np.sqrt(np.mean(dist**2))) if dist.size else 0.0
         rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
-        k_raw = m * rms_a / rms_d if rms_d > 0 else k_hi
-        k0 = float(np.clip(k_raw, k_lo, k_hi))
-        c0 = float(np.clip(0.1 * 2 * math.sqrt(k0 * m), c_lo, c_hi))
+        k0, c0 = _start_values(m, rms_a, rms_d, (k_lo, k_hi), (c_lo, c_hi))
         out.append(
             "\n".join(
                 [
@@ -606,3 +602,13 @@ def neural_text(found, recording=None) -> str:
         f"# {found}'s present bonds as mechanical-neural bonds (activebonds scaffold --neural);\n"
         "# its absent candidates dropped.\n" + dumps_model(neural)
     )
+
+
+def _start_values(mass, rms_acc, rms_disp, k_bounds, c_bounds):
+    """(stiffness, damping) start values of a bond: the stiffness that explains the RMS
+    acceleration by the RMS displacement (the upper bound without displacement), and a tenth
+    of the critical damping, each clipped to its bounds."""
+    k_lo, k_hi = k_bounds
+    k_raw = mass * rms_acc / rms_disp if rms_disp > 0 else k_hi
+    k0 = float(np.clip(k_raw, k_lo, k_hi))
+    return k0, float(np.clip(0.1 * 2 * math.sqrt(k0 * mass), *c_bounds))
