@@ -170,9 +170,8 @@ UNROLLED = 8  # substeps written out in the program (fastest to run); more run a
 # kg), so 3 rounds left every such start 1e-3 off (NaN: +inf cost, a shot model rejected) and
 # 12 reach the 1e-6 tolerance up to a contraction of 0.3
 START_ITERATIONS = 12
-NEWTON_ITERATIONS = (
-    3  # ... of its Newton's method (a stiff kind): quadratic, it stalls only at kinks
-)
+# ... and of its Newton's method (a stiff kind): quadratic, it stalls only at kinks
+NEWTON_ITERATIONS = 3
 START_TOLERANCE = 1e-6  # largest last residual, relative to the frame's displacement
 START_ATOL = 1e-10  # m: ... plus this (a particle at rest has no displacement to be relative to)
 
