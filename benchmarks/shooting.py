@@ -2,10 +2,12 @@
 path (normal equations by window, states eliminated), side by side in one run.
 
     python benchmarks/shooting.py [--cases tetra,horse7,walk,body300,body600]
-                                  [--paths dense,structured] [--json out.json]
+                                  [--paths dense,structured] [--warm] [--json out.json]
 
 Each (case, path) runs in its own process, one after another, so its peak memory (RSS) is
-its own. One shooting stage from the same start (the one-step optimum, solved exactly) on
+its own, with JAX's persistent compilation cache off (every program compiled in the stage's
+time); ``--warm`` also runs it twice more with a cache of its own and records the second
+(``warm_seconds``: a repeated fit of the same shapes, the command line's default cache). One shooting stage from the same start (the one-step optimum, solved exactly) on
 the same data; per path: the stage's seconds (the warm start on the restart cost, then the
 shooting solve, compilation included), its Levenberg-Marquardt steps, peak RSS, the final
 objective and RMS; per case: the largest difference of a parameter between paths, relative
@@ -27,9 +29,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -96,6 +100,10 @@ def child(name: str, path: str) -> dict:
     fast_cpu_flags()  # as the command line does, before JAX's first computation
     import jax
 
+    from activebonds.runtime import compilation_cache
+
+    compilation_cache()  # the parent's choice: off, or a folder of its own (--warm)
+
     from activebonds.identify.cost import make_windows
     from activebonds.identify.lsq import least_squares
     from activebonds.identify.problem import identification
@@ -135,12 +143,30 @@ def child(name: str, path: str) -> dict:
     }
 
 
+def _run_child(name: str, path: str, cache: str) -> dict:
+    """One (case, path) in its own process, JAX's persistent cache ``cache`` (a folder, or
+    "off")."""
+    env = {**os.environ, "ACTIVEBONDS_CACHE": cache}
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", name, path], capture_output=True, text=True, env=env
+    )
+    line = [ln for ln in out.stdout.splitlines() if ln.startswith("RESULT ")]
+    if not line:
+        return {"failed": out.stderr.strip().splitlines()[-1:]}
+    return json.loads(line[0][7:])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="tetra")
     parser.add_argument("--paths", default="dense,structured")
     parser.add_argument("--max-gb", type=float, default=0.5, help="largest dense Jacobian run")
     parser.add_argument("--json", type=Path)
+    parser.add_argument(
+        "--warm",
+        action="store_true",
+        help="also time each path with JAX's persistent cache warm (a repeated fit)",
+    )
     parser.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -164,16 +190,13 @@ def main() -> None:
                 row[path] = {"skipped": f"its Jacobian alone needs {need:.1f} GB"}
                 print(f"{name} {path}: skipped ({need:.1f} GB Jacobian)", flush=True)
                 continue
-            out = subprocess.run(
-                [sys.executable, __file__, "--child", name, path],
-                capture_output=True,
-                text=True,
-            )
-            line = [ln for ln in out.stdout.splitlines() if ln.startswith("RESULT ")]
-            if not line:
-                row[path] = {"failed": out.stderr.strip().splitlines()[-1:]}
-            else:
-                row[path] = json.loads(line[0][7:])
+            row[path] = _run_child(name, path, "off")
+            if args.warm and "seconds" in row[path]:  # a second run loads the first's programs
+                with tempfile.TemporaryDirectory() as cache:
+                    _run_child(name, path, cache)
+                    warm = _run_child(name, path, cache)
+                row[path]["warm_seconds"] = warm.get("seconds")
+                row[path]["warm_steps"] = warm.get("steps")
             hidden = ("genome", "natural", "std_errors")
             shown = {k: v for k, v in row[path].items() if k not in hidden}
             print(f"{name} {path}: {shown}", flush=True)
@@ -186,6 +209,9 @@ def main() -> None:
                 na, nb = np.asarray(a["natural"]), np.asarray(b["natural"])
                 row["max_param_diff_sd"] = float(np.max(np.abs(na - nb) / np.asarray(se)))
             row["speedup"] = round(a["seconds"] / b["seconds"], 2)
+            if a.get("warm_seconds") and b.get("warm_seconds"):
+                row["warm_speedup"] = round(a["warm_seconds"] / b["warm_seconds"], 2)
+                print(f"{name}: compilation cache warm, {row['warm_speedup']}x")
             print(
                 f"{name}: {row['speedup']}x, max rel diff {row['max_rel_param_diff']:.2e}, "
                 f"{row.get('max_param_diff_sd', float('nan')):.3g} standard deviations"

@@ -34,6 +34,7 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from .compile_ahead import ahead
 from .cost import constant_velocity_cost, join_windows, make_residuals, make_windows, rms_mm
 from .lm import Interrupted, levenberg_marquardt
 from .problem import Identification
@@ -46,7 +47,7 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import damped_step, floored, make_normal, marquardt_diagonal
+from .shooting_normal import Normal, damped_step, floored, make_normal, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
@@ -185,7 +186,7 @@ def _normal_scale(normal):
     )
 
 
-def _solve_shooting(residual, normal, y0, max_steps: int, interior=None):
+def _solve_shooting(residual, normal, y0, max_steps: int, interior=None, step=damped_step):
     """Levenberg-Marquardt on a shooting stage's structured normal equations
     (:mod:`.shooting_normal`): as :func:`_solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
     u0, x0, v0 = y0
@@ -208,7 +209,7 @@ def _solve_shooting(residual, normal, y0, max_steps: int, interior=None):
         z, steps, message = levenberg_marquardt(
             flat,
             linearize,
-            damped_step,
+            step,
             z0,
             max_steps,
             RTOL,
@@ -276,10 +277,8 @@ class Refinement:
         windows, residuals = self._restart_residuals(horizon)
         to_genome = self.bounded.to_genome
 
-        def plain(u):
+        def plain(u):  # the shared program after the bounds' transform: nothing to compile
             return residuals(to_genome(u))
-
-        residual = jax.jit(plain)  # compiled once per stage
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
         # the start's and the end's costs by the shared program (the checks against constant
@@ -293,7 +292,7 @@ class Refinement:
                 if self.solver == "dense":  # optimistix compiles the function it is given
                     u, steps, message = _solve_dense(plain, u0, max_steps)
                 else:
-                    u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
+                    u, steps, message = _solve(plain, u0, max_steps, self.bounded.interior)
             except Interrupted as stop:
                 stopped = stop
                 u, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
@@ -316,14 +315,6 @@ class Refinement:
         # state is a variable), so the shooting solve starts near its optimum rather than
         # at the one-step cost's, which marker noise biases (dampings several times over).
         original = genome
-        warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
-        if warm.accepted:
-            genome = np.asarray(warm.genome)
-            # the restart cost's optimum at this horizon (its RMS already measured by the
-            # warm start): shooting cannot do better there
-            unfit = self._versus_constant_velocity(genome, (horizon,), warm.end_rms_mm)
-            if unfit:
-                return self._one_step_instead(f"not shot: the model's best {unfit[4:]}", original)
         windows = join_shooting(
             [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
         )
@@ -337,20 +328,29 @@ class Refinement:
             u, xs, vs = y
             return residuals(to_genome(u), (xs, vs))
 
-        residual = jax.jit(plain)  # compiled once per stage
-
+        # the shooting's programs compile in the background while the warm start runs
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
+        residual = ahead(jax.jit(plain), y0)
+        if self.solver != "dense":
+            normal, step = self._shooting_programs(windows, y0)
+        self._check_ahead(1, y0[0])
+        warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
+        if warm.accepted:
+            genome = np.asarray(warm.genome)
+            # the restart cost's optimum at this horizon (its RMS already measured by the
+            # warm start): shooting cannot do better there
+            unfit = self._versus_constant_velocity(genome, (horizon,), warm.end_rms_mm)
+            if unfit:
+                return self._one_step_instead(f"not shot: the model's best {unfit[4:]}", original)
+            y0 = (jnp.asarray(self.bounded.from_genome(genome)), y0[1], y0[2])
         start_tree = residual(y0)
         stopped = None
         if self.solver == "dense":
             y, steps, message = _solve_dense(plain, y0, max_steps)
         else:
-            normal = jax.jit(
-                make_normal(self.ident.model, windows, s.substeps, s.integrator, to_genome)
-            )
             try:
                 y, steps, message = _solve_shooting(
-                    residual, normal, y0, max_steps, self.bounded.interior
+                    residual, normal, y0, max_steps, self.bounded.interior, step
                 )
             except Interrupted as stop:
                 stopped = stop
@@ -382,6 +382,34 @@ class Refinement:
             stage.continuity_mm = gap / CONTINUITY_WEIGHT * 1000.0
             self.states = trajectory(to_genome(y[0]), (y[1], y[2]))
         return stage
+
+    def _shooting_programs(self, windows, y0):
+        """(normal equations, damped step) of a shooting stage, compiled in the background
+        for its unknowns ``y0`` = (u [p], X [K, P, D], V [K, P, D])."""
+        s = self.settings
+        make = make_normal(
+            self.ident.model, windows, s.substeps, s.integrator, self.bounded.to_genome
+        )
+        u, x = y0[0], y0[1]
+        k, p, n = x.shape[0], u.shape[0], 2 * x[0].size
+        f = u.dtype
+
+        def shape(*dims):
+            return jax.ShapeDtypeStruct(dims, f)
+
+        normal = ahead(jax.jit(make), shape(p), shape(k, n))
+        system = Normal(
+            shape(k, n, n), shape(k - 1, n, n), shape(k, n, p), shape(p, p), shape(k, n), shape(p)
+        )
+        return normal, ahead(damped_step, system, (shape(p), shape(k, n)))
+
+    def _check_ahead(self, horizon: int, u) -> None:
+        """The restart residuals at ``horizon`` (the check against constant velocity),
+        compiled in the background unless already built."""
+        if horizon not in self._residuals:
+            windows, residuals = self._restart_residuals(horizon)
+            genome = jax.ShapeDtypeStruct(u.shape, u.dtype)
+            self._residuals[horizon] = (windows, ahead(residuals, genome))
 
     def _versus_constant_velocity(self, genome, horizons, known_mm=None) -> str | None:
         """Why ``genome`` loses to the zero-force predictor, or None: its restart predictions
