@@ -276,11 +276,16 @@ def shooting_rejected(stages) -> list[str]:
     return out
 
 
-def warnings(cost: str, horizon: int, substeps: int, rejected: Sequence[str] = ()) -> list[str]:
+def warnings(
+    cost: str, horizon: int, substeps: int, rejected: Sequence[str] = (), checked=None
+) -> list[str]:
     """Where the intervals of a fit on cost ``cost`` at ``horizon`` with ``substeps`` cannot
     be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle). ``rejected``: why
     the fit's shooting stages were not kept (:func:`shooting_rejected`); then the one-step
-    warning says so, instead of sending the user to a shooting fit that was already tried."""
+    warning says so, instead of sending the user to a shooting fit that was already tried.
+    ``checked``: the fit moved to finer substeps (:func:`.integrator_check.check`: its result,
+    or why it was not made); where it was made, its numbers replace the warning in words (and
+    a fit that does not move gets none)."""
     out = []
     if cost == "restart" and int(horizon) == 1:
         head = (
@@ -303,7 +308,10 @@ def warnings(cost: str, horizon: int, substeps: int, rejected: Sequence[str] = (
             out.append(head + tried + then)
         else:
             out.append(head + "refit with --cost shooting for intervals that hold")
-    if int(substeps) == 1:
+    if int(substeps) == 1 and hasattr(checked, "warning"):
+        if checked.warning():
+            out.append(checked.warning())
+    elif int(substeps) == 1:
         out.append(
             "the integrator takes one step per frame: if the motion is finer than the frames, "
             "the parameters can sit several standard errors off with no visible symptom (64 % "

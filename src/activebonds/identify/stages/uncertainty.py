@@ -9,7 +9,7 @@ import numpy as np
 
 from ...document import Section, Table
 from ...model.names import labeller
-from .. import uncertainty
+from .. import integrator_check, uncertainty
 from .base import Fit, Outcome
 
 NAME = "uncertainty"
@@ -37,8 +37,16 @@ class UncertaintyStage:
         except (MemoryError, ValueError, np.linalg.LinAlgError) as err:
             return Outcome({"not_computed": str(err)}, files={"csv": None})
         record = report.record()
+        checked = None
+        if fit.settings.substeps == 1:  # is one step per frame enough?
+            checked = integrator_check.check(
+                fit.ident, fit.settings, fit.genome, horizon, report.estimates, report.cost, states
+            )
+            record["substeps_check"] = (
+                checked.record() if hasattr(checked, "record") else {"not_made": checked}
+            )
         record["warnings"] = uncertainty.warnings(
-            cost, horizon, fit.settings.substeps, uncertainty.shooting_rejected(stages)
+            cost, horizon, fit.settings.substeps, uncertainty.shooting_rejected(stages), checked
         )
         return Outcome(record, files={"csv": report.csv_text()})
 
@@ -51,6 +59,7 @@ class UncertaintyStage:
             f"uncertainty: {ok} of {len(est)} parameters determined, 95 % intervals (from the "
             f"{record['cost']} cost, horizon {record['horizon']}) in uncertainty.csv",
             *(f"uncertainty: warning: {w}" for w in record.get("warnings", [])),
+            *checked_line(record.get("substeps_check")),
         ]
 
     def sections(self, record: dict, report) -> list[Section]:
@@ -61,6 +70,17 @@ class UncertaintyStage:
             return {}
         est = record.get("estimates", [])
         return {"determined_parameters": sum(bool(e["determined"]) for e in est)}
+
+
+def checked_line(check: dict | None) -> list[str]:
+    """The substeps check in one line where it found nothing to warn about."""
+    if not check or "not_made" in check or check["moved"]:
+        return []
+    return [
+        f"uncertainty: checked at --substeps {check['substeps']}: every parameter moves by less "
+        f"than its 95 % interval (at most {check['largest_sd']:.2f} standard errors, "
+        f"{check['parameter']})"
+    ]
 
 
 def section(rec: dict, spec) -> Section:
@@ -90,6 +110,10 @@ def section(rec: dict, spec) -> Section:
         "is biased and no interval describes that.",
     ]
     text += [f"Warning: {w}." for w in rec.get("warnings", [])]
+    text += [
+        line.removeprefix("uncertainty: ").capitalize() + "."
+        for line in checked_line(rec.get("substeps_check"))
+    ]
     text += [f"Not determined: {d}." for d in rec.get("directions", [])]
     table = Table(("parameter", "value", "standard error", "95 % interval", "note"), rows)
     return Section("Uncertainty", text=text, tables=[table], anchor="uncertainty")

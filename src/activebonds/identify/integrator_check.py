@@ -1,0 +1,170 @@
+"""Is one integrator step per frame fine enough for a fit? Ask the data at 4 substeps.
+
+A fit with one integrator step per frame (``--substeps 1``) of a motion that is finer than the
+frames can sit several standard errors off with no visible symptom (64 % coverage of the 95 %
+intervals measured on the triangle, docs/EXPERIMENTS.md): the integrator's own error is
+absorbed by the parameters. The check moves the fit to the same cost at ``FINER`` substeps by
+one Gauss-Newton step from its optimum, ``d = -J^+ r`` with r and J the residuals and their
+Jacobian at 4 substeps (to first order the optimum at 4 substeps), and holds
+every determined parameter's move against its standard error (a parameter on a bound is
+not judged): a move beyond the 95 %
+interval's half-width (1.96 standard errors) means the intervals do not describe the
+integrator's error, and the fit says so with the numbers.
+
+For the restart cost (the one-step cost and its horizons: a dense Jacobian of at most
+``MAX_BYTES``) and for multiple shooting (the step from the normal equations by window, the
+window states eliminated, from the fit's states), and for at most ``MAX_GENES`` parameters;
+otherwise the check is not made and the warning stays in words.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .cost import join_windows, make_residuals, make_windows
+from .lm import JITTER
+from .problem import Identification
+from .settings import FitSettings
+from .shooting import join_shooting, shooting_windows, start_states
+from .shooting_normal import damped_step, make_normal
+
+FINER = 4  # substeps of the check
+Z95 = 1.959963984540054
+MAX_BYTES = 2**28  # the check's dense Jacobian at most (256 MiB)
+MAX_GENES = 200  # a larger model is not checked (the check would compile longer than it fits)
+AT_BOUND = 1e-6  # of its span: a parameter this close to a bound is held there, not judged
+
+
+@dataclass(frozen=True)
+class SubstepsCheck:
+    """How far the parameters move at :data:`FINER` substeps, in their standard errors."""
+
+    substeps: int
+    largest_sd: float  # the largest |move| / standard error over the determined parameters
+    parameter: str  # ... of this parameter (as people read it)
+    name: str  # ... its key in the model's layout
+    before: float  # its value at the fit's substeps
+    after: float  # ... and at FINER substeps (first order)
+    moved: int  # determined parameters that move by more than 1.96 standard errors
+    determined: int
+
+    def record(self) -> dict:
+        return asdict(self)
+
+    def warning(self) -> str | None:
+        """One sentence where the intervals do not hold at one substep, else None."""
+        if not self.moved:
+            return None
+        return (
+            f"at --substeps {self.substeps} the parameters move: {self.moved} of "
+            f"{self.determined} by more than their 95 % interval, the most {self.parameter} "
+            f"({self.before:.6g} -> {self.after:.6g}, {self.largest_sd:.1f} standard errors); "
+            "one step per frame is too coarse for this motion and these intervals do not "
+            f"describe it: refit with --substeps {self.substeps}"
+        )
+
+
+def check(
+    ident: Identification,
+    settings: FitSettings,
+    genome,
+    horizon: int,
+    estimates,
+    cost: str = "restart",
+    states=None,
+) -> SubstepsCheck | str:
+    """The check of a fit ``genome`` (search space) on ``cost`` ("restart", or "shooting"
+    with the refinement's per-frame ``states``) at ``horizon``, its ``estimates``
+    (:class:`.uncertainty.Estimate`, natural units); or why it was not made."""
+    if ident.model.layout.n_genes > MAX_GENES:
+        return f"more than {MAX_GENES} parameters (its compilation would outlast the fit's)"
+    with jax.enable_x64(True):
+        if cost == "shooting":
+            after = _shooting_step(ident, settings, genome, horizon, states)
+        else:
+            after = _restart_step(ident, settings, genome, horizon)
+    if isinstance(after, str):
+        return after
+    g, lo, hi = np.asarray(genome, np.float64), ident.problem.lower, ident.problem.upper
+    inside = np.minimum(g - lo, hi - g) > AT_BOUND * (hi - lo)  # a bound holds the others
+    rows = [
+        (abs(a - e.value) / e.std_error, e, a)
+        for e, a, free in zip(estimates, after, inside, strict=True)
+        if e.determined and e.std_error and free
+    ]
+    if not rows:
+        return "no parameter is determined"
+    sd, worst, value = max(rows, key=lambda row: row[0])
+    return SubstepsCheck(
+        substeps=FINER,
+        largest_sd=float(sd),
+        parameter=worst.label or worst.name,
+        name=worst.name,
+        before=float(worst.value),
+        after=float(value),
+        moved=int(sum(bool(row[0] > Z95) for row in rows)),
+        determined=len(rows),
+    )
+
+
+NOT_COMPUTED = (
+    f"the predictions at {FINER} substeps cannot be computed at these parameters "
+    "(a start velocity or a prediction diverged)"
+)
+
+
+def _restart_step(ident, settings, genome, horizon) -> np.ndarray | str:
+    """The natural parameters after one Gauss-Newton step of the restart cost at FINER
+    substeps (least squares over the parameters, columns scaled)."""
+    layout = ident.model.layout
+    windows = join_windows(
+        [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in ident.all_data]
+    )
+    size = 8.0 * windows.target.size * layout.n_genes
+    if size > MAX_BYTES:
+        return f"its Jacobian would take {size / 2**20:.0f} MiB"
+    residuals = make_residuals(ident.model, windows, FINER, settings.integrator)
+    log = jnp.asarray(layout.log)
+
+    def flat(theta):  # natural units, as the standard errors
+        return residuals(jnp.where(log, jnp.log(theta), theta)).ravel()
+
+    theta = jnp.asarray(layout.natural(np.asarray(genome, np.float64)), jnp.float64)
+    r = np.asarray(jax.jit(flat)(theta), np.float64)
+    if not np.all(np.isfinite(r)):
+        return NOT_COMPUTED
+    jac = np.asarray(jax.jit(jax.jacfwd(flat))(theta), np.float64)
+    if not np.all(np.isfinite(jac)):
+        return f"the Jacobian at {FINER} substeps is not finite"
+    norms = np.linalg.norm(jac, axis=0)
+    norms[norms == 0] = 1.0  # a parameter without effect does not move
+    return np.asarray(theta) + np.linalg.lstsq(jac / norms, -r, rcond=None)[0] / norms
+
+
+def _shooting_step(ident, settings, genome, horizon, states) -> np.ndarray | str:
+    """The natural parameters after one Gauss-Newton step of multiple shooting at FINER
+    substeps from the fit's parameters and window states (the normal equations by window,
+    the states eliminated: :mod:`.shooting_normal`)."""
+    from .refine import Bounded
+
+    if states is None:
+        return "the shooting fit's states are not at hand"
+    windows = join_shooting(
+        [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in ident.all_data]
+    )
+    bounded = Bounded(ident.problem.lower, ident.problem.upper)
+    make = make_normal(ident.model, windows, FINER, settings.integrator, bounded.to_genome)
+    x0, v0 = start_states(windows, states)
+    k = x0.shape[0]
+    u = jnp.asarray(bounded.from_genome(np.asarray(genome, np.float64)))
+    system = jax.jit(make)(u, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
+    scale = float(jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2))))
+    du, _ = damped_step(system, JITTER * max(scale, float(jnp.max(jnp.diag(system.params)))))
+    after = np.asarray(bounded.to_genome(u + du), np.float64)
+    if not np.all(np.isfinite(after)):
+        return NOT_COMPUTED
+    return np.asarray(ident.model.layout.natural(after), np.float64)
