@@ -264,3 +264,27 @@ def test_a_shooting_fit_from_the_exact_start_searches_on_the_one_step_cost(trian
     assert rel_error(model, result.genome, truth) < 1e-6
     line = result.records["refine"]["costs"]
     assert "one-step cost (1 Euler substep" in line and "multiple shooting (4 verlet" in line
+
+
+def test_a_model_whose_predictions_cannot_be_computed_is_not_said_to_lose():
+    """Dampings no two Verlet substeps at 60 Hz can carry (h c / m of 4): the start velocity's
+    fixed point diverges, and the check against constant velocity says so instead of printing
+    "nan vs X mm"."""
+    from activebonds.identify.problem import identification
+    from activebonds.identify.settings import FitSettings
+    from activebonds.simulation import simulate
+
+    text = (EXAMPLES / "triangle.toml").read_text().replace("max = 10.0", "max = 1000.0")
+    model = loads_model(text, "triangle")
+    recording = simulate(load_model(EXAMPLES / "triangle.toml"), 60, 60.0)
+    settings = FitSettings(cost="shooting", substeps=2, integrator="verlet", horizon=(10,))
+    ident = identification(model, recording, settings)
+    layout = ident.model.layout
+    genome = np.array(layout.initial(), np.float64)
+    damping = [i for i, g in enumerate(layout.genes) if g.name.endswith("damping")]
+    genome[damping] = np.where(layout.log[damping], np.log(500.0), 500.0)
+    why = refine_mod.Refinement(ident, settings)._versus_constant_velocity(genome, (1,))
+    assert why == (
+        "its 1-frame predictions cannot be computed at these parameters (a start velocity or a "
+        "prediction diverged: more --substeps may hold them)"
+    )

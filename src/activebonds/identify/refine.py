@@ -425,6 +425,11 @@ class Refinement:
                 cost = _sum_squares(residuals(jnp.asarray(genome)))
                 model = float(rms_mm(cost, windows.n_terms))
             baseline = float(rms_mm(constant_velocity_cost(windows), windows.n_terms))
+            if not np.isfinite(model):  # not a loss to constant velocity: no number at all
+                return (
+                    f"its {h}-frame predictions cannot be computed at these parameters (a "
+                    "start velocity or a prediction diverged: more --substeps may hold them)"
+                )
             if not model < baseline:
                 return (
                     f"its {h}-frame predictions are no better than constant velocity's "
