@@ -277,7 +277,7 @@ class Refinement:
         windows, residuals = self._restart_residuals(horizon)
         to_genome = self.bounded.to_genome
 
-        def plain(u):  # the shared program after the bounds' transform: nothing to compile
+        def plain(u):
             return residuals(to_genome(u))
 
         u0 = jnp.asarray(self.bounded.from_genome(genome))
@@ -292,7 +292,10 @@ class Refinement:
                 if self.solver == "dense":  # optimistix compiles the function it is given
                     u, steps, message = _solve_dense(plain, u0, max_steps)
                 else:
-                    u, steps, message = _solve(plain, u0, max_steps, self.bounded.interior)
+                    # compiled with the bounds' transform: an eager transform rounds
+                    # otherwise, and near a bound the steps follow the rounding
+                    residual = jax.jit(plain)
+                    u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
             except Interrupted as stop:
                 stopped = stop
                 u, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
