@@ -133,11 +133,14 @@ def _restart_step(ident, settings, genome, horizon) -> np.ndarray | str:
     def flat(theta):  # natural units, as the standard errors
         return residuals(jnp.where(log, jnp.log(theta), theta)).ravel()
 
+    def both(theta):  # the residuals beside their Jacobian: one program
+        r = flat(theta)
+        return r, r
+
     theta = jnp.asarray(layout.natural(np.asarray(genome, np.float64)), jnp.float64)
-    r = np.asarray(jax.jit(flat)(theta), np.float64)
+    jac, r = (np.asarray(a, np.float64) for a in jax.jit(jax.jacfwd(both, has_aux=True))(theta))
     if not np.all(np.isfinite(r)):
         return NOT_COMPUTED
-    jac = np.asarray(jax.jit(jax.jacfwd(flat))(theta), np.float64)
     if not np.all(np.isfinite(jac)):
         return f"the Jacobian at {FINER} substeps is not finite"
     norms = np.linalg.norm(jac, axis=0)
