@@ -178,6 +178,72 @@ def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
     assert after < 0.5 * before
 
 
+def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill():
+    """The true triangle, 0.5 mm noise, a 30-frame gap: the PCA fill of three markers is far
+    off (over 50 mm), its cross-validated error says so, and as a prior it weighs almost
+    nothing against the true model's fit: the fused fill stays within the noise of the truth
+    and of the pure fill (measured 0.42 and 0.38 mm off the truth; the prior's weight 0.0065)."""
+    from activebonds.identify.fill import model_fill
+
+    model = load_model(TRIANGLE)
+    truth = _truth()
+    noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
+    t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
+    plan = plan_fill(t, model.markers)
+    fused = model_fill(model, plan, prior="pca")
+    pca = fill_baseline("pca", plan.positions, plan.mask, plan.local())
+
+    def rms(values):
+        err = values[40:70, 1] - truth.positions[40:70, 1]
+        return float(np.sqrt(np.mean(np.sum(err**2, axis=-1))))
+
+    assert rms(pca) > 0.05
+    (segment,) = fused.segments
+    assert 0.0 < segment.prior_weight < 0.05
+    assert rms(fused.values) < 5e-4
+    assert rms(fused.values - fused.pure + truth.positions) < 5e-4  # fused vs pure
+    assert "the PCA fill weighed in as a prior on 1 stretch(es)" in fused.note()
+
+
+def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
+    """Six markers moving as one body in two modes (the PCA test's motion): PCA reconstructs
+    a missing marker exactly, a spring body of every pair (untrained: stiffness 70, rest
+    lengths the mean distances) fills a 40-frame gap far off. Its cross-validated error near
+    zero, the PCA fill weighs as a recorded sample: the fused fill is within 1 mm of the
+    truth, the pure fill far off (measured 0.04 and 264 mm)."""
+    from activebonds.identify.fill import model_fill
+    from activebonds.model import loads_model
+
+    rng = np.random.default_rng(3)
+    f = np.arange(200.0)
+    modes = rng.normal(size=(2, 6, 3)) * 0.05
+    base = rng.normal(size=(6, 3)) * 0.3
+    weights = np.stack([np.sin(f / 9.0), np.cos(f / 13.0)], -1)
+    drift = np.stack([0.01 * f, np.sin(f / 30.0), 0.002 * f**1.5], -1)
+    x = base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+    names = tuple("ABCDEF")
+    lines = ['name = "six"', "dimension = 3"]
+    lines += [f'[[particle]]\nname = "{m}"\nmass = 1.0' for m in names]
+    for i in range(6):
+        for j in range(i + 1, 6):
+            rest = float(np.mean(np.linalg.norm(x[:, i] - x[:, j], axis=-1)))
+            lines.append(
+                f'[[bond]]\nkind = "binary"\nparticles = ["{names[i]}", "{names[j]}"]\n'
+                f"stiffness = 70.0\nrest_length = {rest!r}\ndamping = 0.7"
+            )
+    model = loads_model("\n".join(lines) + "\n", "<six>")
+    t = _traj(x, missing=[(2, 80, 120)], markers=names)
+    fused = model_fill(model, plan_fill(t, names), prior="pca")
+
+    def rms(values):
+        err = values[80:120, 2] - x[80:120, 2]
+        return float(np.sqrt(np.mean(np.sum(err**2, axis=-1))))
+
+    assert rms(fused.pure) > 0.1
+    assert rms(fused.values) < 1e-3
+    assert fused.segments[0].prior_weight == 1.0
+
+
 @pytest.mark.parametrize("stiffness", [0.7, 1.5])
 def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(stiffness):
     """A model whose stiffnesses are all off by ``stiffness`` explains only part of the
