@@ -62,13 +62,16 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import block_tridiagonal_solve, make_normal
+from .shooting_normal import block_tridiagonal_solve, floored, make_normal
 
 MAX_STEPS = 200
 RATIO_FRAMES = 8  # frames ahead of the prediction that sets the continuity weight
 HORIZON = 1  # frames per shooting window: every frame's state its own unknown
 CONTINUITY = 0.3  # least weight of a continuity defect against a position error (metres each)
 RTOL, ATOL = 1e-10, 1e-12
+MARQUARDT = True
+DAMPING = 1e-3
+LAPACK = True
 TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
@@ -192,13 +195,69 @@ def segments_of(gaps, n_frames: int, context: int) -> list[tuple[int, int]]:
 
 
 def _states_step(system, damping):
-    """The damped Gauss-Newton step of the states alone: (T + damping I) d = -g_s."""
+    """The damped Gauss-Newton step of the states alone: (T + D) d = -g_s, D = damping I
+    (a number) or diag(damping) ([K, n]: Marquardt's scaling)."""
     n = system.diag.shape[1]
     rhs = -system.grad_s[..., None]
-    return block_tridiagonal_solve(system.diag + damping * jnp.eye(n), system.off, rhs)[..., 0]
+    damp = jnp.asarray(damping)[..., None] * jnp.eye(n)
+    return block_tridiagonal_solve(system.diag + damp, system.off, rhs)[..., 0]
 
 
 _states_step_jit = jax.jit(_states_step)
+
+
+class _LapackStep:
+    """:func:`_states_step` by LAPACK (SciPy), the system copied out of JAX once per
+    linearization: on a 41-marker body (blocks of 246) XLA's scan of triangular solves took
+    2 s a step, LAPACK 1 s (``benchmarks/gaps.py``'s human walk; docs/EXPERIMENTS.md)."""
+
+    def __init__(self):
+        self._system, self._arrays = None, None
+
+    def __call__(self, system, damping):
+        if system is not self._system:
+            self._system = system
+            self._arrays = tuple(np.asarray(a) for a in (system.diag, system.off, system.grad_s))
+        diag, off, grad = self._arrays
+        damp = np.asarray(damping)
+        if damp.ndim == 0:
+            damp = np.full(grad.shape, float(damp))
+        k, n = grad.shape
+        blocks = diag + damp[..., None] * np.eye(n)
+        return jnp.asarray(block_tridiagonal_lapack(blocks, off, -grad))
+
+
+def block_tridiagonal_lapack(diag: np.ndarray, off: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve T Z = rhs ([K, n]) for a symmetric positive definite block-tridiagonal T
+    (``diag`` [K, n, n], ``off`` [K - 1, n, n] = T_k,k+1): the block Cholesky recursion of
+    :func:`.shooting_normal.block_tridiagonal_solve`, by LAPACK."""
+    from scipy.linalg import cholesky, solve_triangular
+
+    k = len(diag)
+    chol = np.empty_like(diag)
+    sub = np.zeros_like(diag)  # sub[i] = L_i,i-1
+    z = np.empty_like(rhs)
+    for i in range(k):
+        d, r = diag[i], rhs[i]
+        if i:
+            sub[i] = solve_triangular(chol[i - 1], off[i - 1], lower=True, check_finite=False).T
+            d = d - sub[i] @ sub[i].T
+            r = r - sub[i] @ z[i - 1]
+        chol[i] = cholesky(d, lower=True, check_finite=False)
+        z[i] = solve_triangular(chol[i], r, lower=True, check_finite=False)
+    x = np.empty_like(rhs)
+    for i in range(k - 1, -1, -1):
+        r = z[i] - sub[i + 1].T @ x[i + 1] if i < k - 1 else z[i]
+        x[i] = solve_triangular(chol[i], r, lower=True, trans="T", check_finite=False)
+    return x
+
+
+@jax.jit
+def _states_diagonal(system):
+    """T's diagonal [K, n], floored (:func:`.shooting_normal.floored`): Marquardt's scaling of
+    the damping, so that a velocity (whose defect weighs ``dt`` times a position's) is damped
+    in its own units."""
+    return floored(jnp.diagonal(system.diag, axis1=1, axis2=2))
 
 
 def inverse_diagonal_blocks(diag: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -560,7 +619,16 @@ def _fit_segment(
             f"{first}:{first + n_frames}; try a shorter --horizon",
         )
     z, steps, message = levenberg_marquardt(
-        flat, linearize, _states_step_jit, z0, max_steps, RTOL, ATOL, scale=scale
+        flat,
+        linearize,
+        _LapackStep() if LAPACK else _states_step_jit,
+        z0,
+        max_steps,
+        RTOL,
+        ATOL,
+        scale=scale,
+        diagonal=_states_diagonal if MARQUARDT else None,
+        damping=DAMPING,
     )
     pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1]))
     kk = np.minimum(np.arange(n_frames) // h, k - 1)
