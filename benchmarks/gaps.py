@@ -212,6 +212,7 @@ def run(args) -> dict:
             "context": args.context,
             "horizon": args.horizon,
             "model": args.model,
+            "fitted_on": args.fitted_on,
             "command": " ".join(sys.argv),
         },
         "recordings": {},
@@ -225,7 +226,8 @@ def run(args) -> dict:
         for h, frames in enumerate(halves):
             started = time.time()
             # the model fitted on the other half: it never saw the gaps of this one
-            other = halves[1 - h]
+            # (--fitted-on same: on the gaps' own half, the set to choose a design on)
+            other = halves[1 - h] if args.fitted_on == "other" else frames
             if args.model == "auto":
                 model, rms = auto_half(traj, other)
             else:
@@ -353,6 +355,13 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--context", type=int, default=30)
     p.add_argument("--horizon", type=int, default=1)
+    p.add_argument(
+        "--fitted-on",
+        choices=("other", "same"),
+        default="other",
+        help="the half the model is fitted on: the other one (the benchmark) or the gaps' own "
+        "(gaps the model has seen: a set to choose a design on, not to report)",
+    )
     p.add_argument(
         "--model",
         choices=("springs", "auto"),

@@ -72,6 +72,7 @@ RTOL, ATOL = 1e-10, 1e-12
 MARQUARDT = True
 DAMPING = 1e-3
 LAPACK = True
+SHAPE = True
 TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
@@ -324,9 +325,10 @@ def one_step_ratio(
 PRIORS = ("pca",)
 
 
-def pca_prior(positions: np.ndarray, mask: np.ndarray, gaps) -> tuple[np.ndarray, np.ndarray]:
+def pca_prior(positions: np.ndarray, mask: np.ndarray, gaps):
     """The PCA fill as a prior on the gaps' samples: (targets [F, M, D], the standard
-    deviation per coordinate [F, M] that a sample of it is given, NaN off the gaps).
+    deviation per coordinate [F, M] that a sample of it is given, that of its motion from
+    frame t to t + 1 within the gap [F, M] (at t); NaN off the gaps).
 
     The targets are Gløersen & Federolf's reconstruction (:func:`.data.fill.fill_pca`). The
     deviation comes from the PCA fill's own errors, cross-validated: the same fill of up to
@@ -337,25 +339,37 @@ def pca_prior(positions: np.ndarray, mask: np.ndarray, gaps) -> tuple[np.ndarray
     autocorrelation along the gap (:func:`error_correlation`): the PCA fill's error is an
     offset that drifts slowly, so ``L`` samples of it know about as much as ``L / tau``
     independent ones, and fitted as independent observations they would pull the trajectory
-    as if they knew ``tau`` times more. NaN for a gap with no room for a test."""
+    as if they knew ``tau`` times more. The PCA fill's motion inside the gap (its step from
+    one frame to the next) is often better than where it puts the marker (its error is
+    mostly an offset): its steps' errors, measured the same way, give the deviation of a
+    second prior, on the missing marker's steps. NaN for a gap with no room for a test."""
     from ..data.fill import fill_pca, self_test_errors
 
     targets = fill_pca(positions, mask, gaps)
     sigma = np.full(mask.shape, np.nan)
+    shape = np.full(mask.shape, np.nan)
     noise = noise_estimate(positions, mask)
     floor = noise if np.isfinite(noise) else 0.0
-    tested: dict[tuple[int, int], float] = {}
+    tested: dict[tuple[int, int], tuple[float, float]] = {}
     for g in gaps:
         key = (g.column, g.length)
         if key not in tested:
             e = self_test_errors(fill_pca, positions, mask, g.column, g.length, others=True)
             if not len(e):
-                tested[key] = float("nan")
+                tested[key] = (float("nan"), float("nan"))
             else:
                 rms = max(float(np.sqrt(np.mean(e**2))), floor)
-                tested[key] = rms * float(np.sqrt(error_correlation(e)))
-        sigma[g.start : g.stop, g.column] = tested[key]
-    return targets, sigma
+                level = rms * float(np.sqrt(error_correlation(e)))
+                steps = np.diff(e, axis=1)  # the errors of its frame-to-frame motion
+                if steps.shape[1] and SHAPE:
+                    step_rms = max(float(np.sqrt(np.mean(steps**2))), floor * np.sqrt(2.0))
+                    step = step_rms * float(np.sqrt(error_correlation(steps)))
+                else:
+                    step = float("nan")
+                tested[key] = (level, step)
+        sigma[g.start : g.stop, g.column] = tested[key][0]
+        shape[g.start : g.stop - 1, g.column] = tested[key][1]
+    return targets, sigma, shape
 
 
 def error_correlation(errors: np.ndarray) -> float:
@@ -469,9 +483,10 @@ def model_fill(
         if guide is not None:
             pure[a:b] = xs
             w = prior_weight(solved.level, guide[1][a:b])
+            w_step = prior_weight(solved.level, guide[2][a:b])
             if np.any(w > 0):
                 steps = solved.steps
-                xs, sd, z, solved = fit(guide=(guide[0][a:b], w), start=z)
+                xs, sd, z, solved = fit(guide=(guide[0][a:b], w, w_step), start=z)
                 solved = dataclasses.replace(solved, steps=steps + solved.steps)
                 prior_w = float(np.median(w[w > 0]))
         seg = Segment(
@@ -577,11 +592,14 @@ def _fit_segment(
     n_frames, n_markers, dim = positions.shape
     frame_weight = mask.astype(np.float64)
     observed = positions
+    step_prior = None
     if guide is not None:
-        g_target, g_weight = guide
+        g_target, g_weight, g_step = guide
         use = ~mask & (g_weight > 0)
         frame_weight = np.where(use, g_weight, frame_weight)
         observed = np.where(use[..., None], g_target, positions)
+        if horizon == 1 and np.any(g_step > 0):  # every frame's state a variable
+            step_prior = (np.diff(g_target, axis=0), g_step[:-1])
     local = shooting_windows(observed, frame_weight > 0, dt, horizon)
     k, h = len(local.starts), local.horizon
     frames = np.minimum(local.starts[:, None] + np.arange(h + 1)[None, :], n_frames - 1)
@@ -597,15 +615,25 @@ def _fit_segment(
     )
 
     def flat(z):
-        return programs.residual(z, genome, *data)
+        r = programs.residual(z, genome, *data)
+        if step_prior is None:
+            return r
+        return jnp.concatenate([r, _step_residuals(z, *steps_data)])
 
     def linearize(z, _):
         system = programs.normal(z, genome, *data)
+        if step_prior is not None:
+            system = _with_steps(system, z, *steps_data)
         return system, system.grad_s
 
     def scale(system):
         return jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2)))
 
+    steps_data = None
+    if step_prior is not None:
+        # windows k, k + 1 start at frames k, k + 1 (horizon 1); the last frame is no start
+        delta, w_step = step_prior[0][: k - 1], step_prior[1][: k - 1]
+        steps_data = (jnp.asarray(np.nan_to_num(delta)), jnp.asarray(w_step))
     if start is None:
         x0, v0 = start_states(local, [states])
         z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
@@ -640,7 +668,7 @@ def _fit_segment(
     recorded = int(present.sum())
     rms_mm = float(np.sqrt(np.sum(measured[present] ** 2) / max(1, recorded))) * 1000.0
     # the standard errors of the fitted positions: sigma^2 G T^-1 G^T
-    terms = int((weight > 0).sum())
+    terms = int((weight > 0).sum()) + (0 if steps_data is None else int((w_step > 0).sum()))
     variance = float(np.sum(r**2)) / max(1, terms * dim - z.shape[1])
     defects = r[n_measured : n_measured + (k - 1) * n_markers * dim]
     tau = defect_correlation(defects.reshape(k - 1, -1), longest) if k > 2 else 1.0
@@ -649,6 +677,8 @@ def _fit_segment(
     if variance == 0.0 and np.isfinite(noise):  # an exact fit: the noise estimate's SD
         variance = noise**2
     system = programs.normal(z, genome, *data)
+    if step_prior is not None:
+        system = _with_steps(system, z, *steps_data)
     diag = np.asarray(system.diag)
     jitter = 1e-12 * float(np.max(np.abs(np.diagonal(diag, axis1=1, axis2=2))))
     cov = inverse_diagonal_blocks(diag + jitter * np.eye(diag.shape[1]), np.asarray(system.off))
@@ -657,6 +687,39 @@ def _fit_segment(
     sd = np.sqrt(np.maximum(variance * var.reshape(n_frames, n_markers, dim).sum(-1), 0.0))
     level = factor * float(np.sqrt(variance))
     return xs, factor * sd, z, _Solved(steps, message, rms_mm, factor, tau, level)
+
+
+@jax.jit
+def _step_residuals(z, delta, w_step):
+    """The step prior's residuals ``w (X_k+1 - X_k - delta_k)`` [K - 1, M, D] (flattened) of
+    window states z [K, n] (horizon 1: window k starts at frame k)."""
+    n_markers, dim = w_step.shape[1], delta.shape[2]
+    x = z[:, : n_markers * dim].reshape(len(z), n_markers, dim)
+    return (w_step[..., None] * (x[1:] - x[:-1] - delta)).ravel()
+
+
+@jax.jit
+def _with_steps(system, z, delta, w_step):
+    """The normal equations with the step prior's terms added: each residual ``w (X_k+1 -
+    X_k - delta_k)`` adds ``w^2`` to both frames' position diagonals, ``-w^2`` to their
+    coupling, and ``-+ w r`` to their gradients."""
+    n = system.diag.shape[1]
+    dim = delta.shape[2]
+    k = z.shape[0]
+    w2 = jnp.repeat(w_step**2, dim, axis=1)  # [K - 1, M D]
+    w2 = jnp.concatenate([w2, jnp.zeros((k - 1, n - w2.shape[1]))], axis=1)  # no velocity
+    r = _step_residuals(z, delta, w_step).reshape(k - 1, -1)
+    wr = jnp.repeat(w_step, dim, axis=1) * r
+    wr = jnp.concatenate([wr, jnp.zeros((k - 1, n - wr.shape[1]))], axis=1)
+    pad = jnp.zeros((1, n))
+    d = jnp.concatenate([w2, pad]) + jnp.concatenate([pad, w2])
+    g = jnp.concatenate([-wr, pad]) + jnp.concatenate([pad, wr])
+    eye = jnp.eye(n)
+    return system._replace(
+        diag=system.diag + d[:, :, None] * eye,
+        off=system.off - w2[:, :, None] * eye,
+        grad_s=system.grad_s + g,
+    )
 
 
 @dataclass(frozen=True)
