@@ -15,12 +15,27 @@ the removed samples, in mm.
 
 The model: a spring body of the recording's markers (``benchmarks/body_model.py``: every pair of
 the 7 horse markers, or each of the 41 human markers to its 6 nearest; mass 1 each, no
-gravity), its stiffness, rest lengths and dampings identified by the exact one-step least
+gravity; or ``--model auto``), its stiffness, rest lengths and dampings identified by the exact one-step least
 squares (``identify.lsq.least_squares``) on the half of the recording that does not hold the
 gap: two fits per recording, each filling the other half's gaps. The model fill is
 ``activebonds fill --method model`` (``identify.fill.model_fill``, ``--context`` 30 frames,
 ``--horizon`` 1, the continuity weight chosen from the context: ``identify.fill.continuity_weight``;
-each gap's row records it).
+each gap's row records it). ``model+pca`` is the same fill with ``--prior pca``: each stretch
+fitted again with the PCA fill of the missing samples (its positions and its frame-to-frame
+steps) as soft observations, weighed by the PCA fill's cross-validated error against the
+first fit's scaled residual SD (``identify.fill.pca_prior``); one call gives both, ``model``
+being its first fit.
+
+``--model auto`` replaces the spring body by ``activebonds auto``'s linear model of the half
+(complete graph and an anchor per marker, the variant chosen on the half's validation tail,
+exact least squares: :func:`auto_half`). ``--fitted-on same`` fits each half's model on the
+gaps' own half: gaps the model has seen, the set on which a design is chosen before the
+benchmark is run (the step prior of ``--prior pca`` was chosen so, ``--seed 1``).
+
+The figures in docs/EXPERIMENTS.md were run one thread per process (the fill's solves are
+small; under a second process's load XLA's and OpenBLAS's threads wait on each other)::
+
+    OPENBLAS_NUM_THREADS=1 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false python benchmarks/gaps.py ...
 
 JSON out: the settings, per recording the two fits (frames, one-step RMS mm), every gap
 (marker, start, length, error per method), and summaries: per method and length the median,

@@ -244,6 +244,64 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
     assert fused.segments[0].prior_weight == 1.0
 
 
+def test_the_lapack_step_solves_the_block_tridiagonal_system_as_the_jax_one():
+    from activebonds.identify.fill import block_tridiagonal_lapack
+    from activebonds.identify.shooting_normal import block_tridiagonal_solve
+
+    rng = np.random.default_rng(1)
+    k, n = 7, 5
+    a = rng.normal(size=(k * n, k * n))
+    full = a @ a.T + k * n * np.eye(k * n)
+    band = np.zeros_like(full)
+    for i in range(k):  # keep the diagonal and first off-diagonal blocks
+        for j in (i - 1, i, i + 1):
+            if 0 <= j < k:
+                band[i * n : (i + 1) * n, j * n : (j + 1) * n] = full[
+                    i * n : (i + 1) * n, j * n : (j + 1) * n
+                ]
+    diag = np.stack([band[i * n : (i + 1) * n, i * n : (i + 1) * n] for i in range(k)])
+    off = np.stack([band[i * n : (i + 1) * n, (i + 1) * n : (i + 2) * n] for i in range(k - 1)])
+    rhs = rng.normal(size=(k, n))
+    got = block_tridiagonal_lapack(diag, off, rhs)
+    assert np.max(np.abs(band @ got.ravel() - rhs.ravel())) < 1e-10
+    ref = np.asarray(block_tridiagonal_solve(diag, off, rhs[..., None]))[..., 0]
+    assert np.max(np.abs(got - ref)) < 1e-10
+
+
+def test_the_step_prior_adds_its_exact_gauss_newton_terms():
+    """The step prior's J^T J and J^T r, added by hand to the normal equations, are those of
+    its residuals by automatic differentiation (to rounding)."""
+    import jax
+    import jax.numpy as jnp
+
+    from activebonds.identify.fill import _step_residuals, _with_steps
+    from activebonds.identify.shooting_normal import Normal
+
+    rng = np.random.default_rng(2)
+    k, m, d = 6, 3, 3
+    n = 2 * m * d
+    z = jnp.asarray(rng.normal(size=(k, n)))
+    delta = jnp.asarray(rng.normal(size=(k - 1, m, d)))
+    w = jnp.asarray(np.abs(rng.normal(size=(k - 1, m))) * (rng.random((k - 1, m)) > 0.3))
+    zero = Normal(
+        jnp.zeros((k, n, n)),
+        jnp.zeros((k - 1, n, n)),
+        jnp.zeros((k, n, 1)),
+        jnp.zeros((1, 1)),
+        jnp.zeros((k, n)),
+        jnp.zeros(1),
+    )
+    got = _with_steps(zero, z, delta, w)
+    jac = jax.jacfwd(lambda y: _step_residuals(y.reshape(k, n), delta, w))(z.ravel())
+    jtj = np.asarray(jac.T @ jac)
+    grad = np.asarray(jac.T @ _step_residuals(z, delta, w))
+    for i in range(k):
+        assert np.allclose(got.diag[i], jtj[i * n : (i + 1) * n, i * n : (i + 1) * n])
+        if i < k - 1:
+            assert np.allclose(got.off[i], jtj[i * n : (i + 1) * n, (i + 1) * n : (i + 2) * n])
+    assert np.allclose(np.asarray(got.grad_s).ravel(), grad)
+
+
 @pytest.mark.parametrize("stiffness", [0.7, 1.5])
 def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(stiffness):
     """A model whose stiffnesses are all off by ``stiffness`` explains only part of the

@@ -87,8 +87,10 @@ def fill(
         str | None,
         typer.Option(
             help="With --method model: pca fits the model's trajectory again with the PCA "
-            "fill of the missing samples as a soft observation, weighed by the PCA fill's own "
-            "error on artificial gaps against the model's (default: none, the model alone).",
+            "fill of the missing samples (its positions and its steps from frame to frame) as "
+            "soft observations, weighed by the PCA fill's own error on artificial gaps against "
+            "the model's residuals (default: none, the model alone). Helps on gaps of 30 "
+            "frames and more, hurts on short ones (docs/EXPERIMENTS.md).",
         ),
     ] = None,
     max_steps: Annotated[
