@@ -15,12 +15,27 @@ the removed samples, in mm.
 
 The model: a spring body of the recording's markers (``benchmarks/body_model.py``: every pair of
 the 7 horse markers, or each of the 41 human markers to its 6 nearest; mass 1 each, no
-gravity), its stiffness, rest lengths and dampings identified by the exact one-step least
+gravity; or ``--model auto``), its stiffness, rest lengths and dampings identified by the exact one-step least
 squares (``identify.lsq.least_squares``) on the half of the recording that does not hold the
 gap: two fits per recording, each filling the other half's gaps. The model fill is
 ``activebonds fill --method model`` (``identify.fill.model_fill``, ``--context`` 30 frames,
 ``--horizon`` 1, the continuity weight chosen from the context: ``identify.fill.continuity_weight``;
-each gap's row records it).
+each gap's row records it). ``model+pca`` is the same fill with ``--prior pca``: each stretch
+fitted again with the PCA fill of the missing samples (its positions and its frame-to-frame
+steps) as soft observations, weighed by the PCA fill's cross-validated error against the
+first fit's scaled residual SD (``identify.fill.pca_prior``); one call gives both, ``model``
+being its first fit.
+
+``--model auto`` replaces the spring body by ``activebonds auto``'s linear model of the half
+(complete graph and an anchor per marker, the variant chosen on the half's validation tail,
+exact least squares: :func:`auto_half`). ``--fitted-on same`` fits each half's model on the
+gaps' own half: gaps the model has seen, the set on which a design is chosen before the
+benchmark is run (the step prior of ``--prior pca`` was chosen so, ``--seed 1``).
+
+The figures in docs/EXPERIMENTS.md were run one thread per process (the fill's solves are
+small; under a second process's load XLA's and OpenBLAS's threads wait on each other)::
+
+    OPENBLAS_NUM_THREADS=1 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false python benchmarks/gaps.py ...
 
 JSON out: the settings, per recording the two fits (frames, one-step RMS mm), every gap
 (marker, start, length, error per method), and summaries: per method and length the median,
@@ -41,7 +56,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
-METHODS = ("model", "spline", "linear", "pca")
+METHODS = ("model", "model+pca", "spline", "linear", "pca")
+MODEL_METHODS = ("model", "model+pca")
 RECORDINGS = ("horse-trot", "horse-walk", "human-walk")
 
 
@@ -58,6 +74,27 @@ def spring_model(name: str, traj):
 
     text = body_model_toml(traj) if name == "human-walk" else horse_toml(traj)
     return loads_model(text, f"<{name} springs>")
+
+
+def auto_half(traj, frames: tuple[int, int]):
+    """``activebonds auto``'s linear model of ``frames`` (issue 25, without its evolution
+    strategy): the scaffold's complete graph of the markers plus an anchor per marker
+    (``identify.scaffold``, no gravity), the variant (masses, anchors, BIC-decided or not)
+    chosen on the frames' validation tail and solved by the exact least squares on all of
+    them (``identify.structure_choice``); (model, its one-step RMS mm on ``frames``)."""
+    from activebonds.identify.predictions import one_step, rms_mm
+    from activebonds.identify.scaffold import scaffold
+    from activebonds.identify.structure_choice import Variant, choose, decide
+    from activebonds.model import build, loads_model
+
+    text = scaffold(traj, frames=frames, complete=True, gravity=False).text
+    base = loads_model(text, "<auto scaffold>")
+    choice = choose(base, traj, frames)
+    variant = choice.chosen if choice is not None else Variant()
+    model = build(decide(base, traj, frames, variant).spec)
+    part = traj.select(list(model.markers)).window(*frames)
+    one = one_step(model, np.asarray(part.positions), part.dt)
+    return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
 
 def fit_half(model, traj, frames: tuple[int, int]):
@@ -91,7 +128,8 @@ def draw_gaps(traj, length: int, count: int, rng) -> list[tuple[int, int, int]]:
 
 
 def fill_one(method, model, traj, marker: int, start: int, length: int, context, horizon):
-    """The filled samples [length, D] of one removed gap."""
+    """The filled samples [length, D] of one removed gap (``model+pca``: a dict of both
+    model fills, with and without the prior, from one call)."""
     from activebonds.data.fill import Gap, fill_baseline, plan_fill
 
     positions = np.array(traj.positions)
@@ -110,12 +148,18 @@ def fill_one(method, model, traj, marker: int, start: int, length: int, context,
     )
     plan = dataclasses.replace(plan, gaps=(gap, *others))
     extra = {}
-    if method == "model":
+    if method in MODEL_METHODS:
         from activebonds.identify.fill import model_fill
 
-        found = model_fill(model, plan, context=context, horizon=horizon)
+        prior = "pca" if method == "model+pca" else None
+        found = model_fill(model, plan, context=context, horizon=horizon, prior=prior)
+        seg = found.segments[0]
+        extra = {"continuity": seg.continuity, "steps": seg.steps}
+        if prior is not None:
+            extra["prior_weight"] = seg.prior_weight
+            both = {"model": found.pure, "model+pca": found.values}
+            return {m: v[start : start + length, column] for m, v in both.items()}, extra
         values = found.values
-        extra = {"continuity": found.segments[0].continuity, "steps": found.segments[0].steps}
     else:
         values = fill_baseline(method, plan.positions, plan.mask, plan.local())
     return values[start : start + length, column], extra
@@ -182,21 +226,27 @@ def run(args) -> dict:
             "seed": args.seed,
             "context": args.context,
             "horizon": args.horizon,
+            "model": args.model,
+            "fitted_on": args.fitted_on,
             "command": " ".join(sys.argv),
         },
         "recordings": {},
     }
     for r_index, name in enumerate(args.recordings):
         traj = recording(name)
-        base = spring_model(name, traj)
+        base = spring_model(name, traj) if args.model == "springs" else None
         mid = traj.n_frames // 2
         halves = ((0, mid), (mid, traj.n_frames))
         models, fits = [], []
         for h, frames in enumerate(halves):
             started = time.time()
             # the model fitted on the other half: it never saw the gaps of this one
-            other = halves[1 - h]
-            model, rms = fit_half(base, traj, other)
+            # (--fitted-on same: on the gaps' own half, the set to choose a design on)
+            other = halves[1 - h] if args.fitted_on == "other" else frames
+            if args.model == "auto":
+                model, rms = auto_half(traj, other)
+            else:
+                model, rms = fit_half(base, traj, other)
             models.append(model)
             fits.append(
                 {
@@ -207,6 +257,7 @@ def run(args) -> dict:
                 }
             )
         gaps = []
+        fused = "model+pca" in args.methods
         for length in args.lengths:
             # the recording's place among the bundled ones: a run of a subset draws the same gaps
             index = RECORDINGS.index(name) if name in RECORDINGS else r_index
@@ -220,22 +271,27 @@ def run(args) -> dict:
                     "error_mm": {},
                     "seconds": {},
                 }
+                done = {}
                 for method in args.methods:
                     t0 = time.time()
-                    got, extra = fill_one(
-                        method,
-                        models[half],
-                        traj,
-                        marker,
-                        start,
-                        length,
-                        args.context,
-                        args.horizon,
-                    )
-                    err = np.sqrt(np.mean(np.sum((got - truth) ** 2, axis=-1))) * 1000.0
+                    if method not in done:
+                        # with the prior, one call gives both model fills
+                        call = "model+pca" if method == "model" and fused else method
+                        got, extra = fill_one(
+                            call,
+                            models[half],
+                            traj,
+                            marker,
+                            start,
+                            length,
+                            args.context,
+                            args.horizon,
+                        )
+                        done.update(got if isinstance(got, dict) else {method: got})
+                        row.update(extra)
+                    err = np.sqrt(np.mean(np.sum((done[method] - truth) ** 2, axis=-1))) * 1000.0
                     row["error_mm"][method] = float(err)
                     row["seconds"][method] = round(time.time() - t0, 3)
-                    row.update(extra)
                 gaps.append(row)
                 print(
                     f"{name} {row['marker']} {start}:{start + length} "
@@ -251,23 +307,24 @@ def run(args) -> dict:
 
 def table(result: dict) -> str:
     """Markdown: per recording and gap length, the gaps, each method's median error (mm), the
-    winner, and the model's median over the spline's and over the PCA fill's."""
+    winner, and each model fill's median over the spline's and over the PCA fill's."""
     methods = result["settings"]["methods"]
+    ours = [m for m in MODEL_METHODS if m in methods]
+    ratios = [(m, o) for m in ours for o in ("spline", "pca") if o in methods]
     lines = [
         "| recording | gap (frames) | gaps | "
         + " | ".join(methods)
-        + " | best | model / spline | model / pca |"
+        + " | best | "
+        + " | ".join(f"{m} / {o}" for m, o in ratios)
+        + " |"
     ]
-    lines.append("|" + " --- |" * (6 + len(methods)))
+    lines.append("|" + " --- |" * (4 + len(methods) + len(ratios)))
     for name, rec in result["recordings"].items():
         for length, per in rec["by_length"].items():
             med = {m: per[m].get("median_mm", float("nan")) for m in methods}
             cells = [f"{med[m]:.3g}" if per[m].get("n") else "—" for m in methods]
             best = min(methods, key=lambda m: med[m] if med[m] == med[m] else float("inf"))
-            ratio = [
-                f"{med['model'] / med[o]:.2f}" if {"model", o} <= set(methods) else "—"
-                for o in ("spline", "pca")
-            ]
+            ratio = [f"{med[m] / med[o]:.2f}" for m, o in ratios]
             n = per[methods[0]].get("n", 0)
             lines.append(
                 f"| {name} | {length} | {n} | "
@@ -313,6 +370,20 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--context", type=int, default=30)
     p.add_argument("--horizon", type=int, default=1)
+    p.add_argument(
+        "--fitted-on",
+        choices=("other", "same"),
+        default="other",
+        help="the half the model is fitted on: the other one (the benchmark) or the gaps' own "
+        "(gaps the model has seen: a set to choose a design on, not to report)",
+    )
+    p.add_argument(
+        "--model",
+        choices=("springs", "auto"),
+        default="springs",
+        help="the fitted model: the spring body, or auto's linear model (complete graph and "
+        "anchors, issue 25)",
+    )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(
         "--merge", type=Path, nargs="+", default=None, help="join these runs' JSON into --json"

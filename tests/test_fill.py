@@ -178,6 +178,130 @@ def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
     assert after < 0.5 * before
 
 
+def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill():
+    """The true triangle, 0.5 mm noise, a 30-frame gap: the PCA fill of three markers is far
+    off (over 50 mm), its cross-validated error says so, and as a prior it weighs almost
+    nothing against the true model's fit: the fused fill stays within the noise of the truth
+    and of the pure fill (measured 0.47 and 0.39 mm off the truth; the prior's weight 0.0065)."""
+    from activebonds.identify.fill import model_fill
+
+    model = load_model(TRIANGLE)
+    truth = _truth()
+    noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
+    t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
+    plan = plan_fill(t, model.markers)
+    fused = model_fill(model, plan, prior="pca")
+    pca = fill_baseline("pca", plan.positions, plan.mask, plan.local())
+
+    def rms(values):
+        err = values[40:70, 1] - truth.positions[40:70, 1]
+        return float(np.sqrt(np.mean(np.sum(err**2, axis=-1))))
+
+    assert rms(pca) > 0.05
+    (segment,) = fused.segments
+    assert 0.0 < segment.prior_weight < 0.05
+    assert rms(fused.values) < 5e-4
+    assert rms(fused.values - fused.pure + truth.positions) < 5e-4  # fused vs pure
+    assert "the PCA fill weighed in as a prior on 1 stretch(es)" in fused.note()
+
+
+def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
+    """Six markers moving as one body in two modes (the PCA test's motion): PCA reconstructs
+    a missing marker exactly, a spring body of every pair (untrained: stiffness 70, rest
+    lengths the mean distances) fills a 40-frame gap far off. Its cross-validated error near
+    zero, the PCA fill weighs as a recorded sample: the fused fill is within 1 mm of the
+    truth, the pure fill far off (measured 0.04 and 264 mm)."""
+    from activebonds.identify.fill import model_fill
+    from activebonds.model import loads_model
+
+    rng = np.random.default_rng(3)
+    f = np.arange(200.0)
+    modes = rng.normal(size=(2, 6, 3)) * 0.05
+    base = rng.normal(size=(6, 3)) * 0.3
+    weights = np.stack([np.sin(f / 9.0), np.cos(f / 13.0)], -1)
+    drift = np.stack([0.01 * f, np.sin(f / 30.0), 0.002 * f**1.5], -1)
+    x = base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+    names = tuple("ABCDEF")
+    lines = ['name = "six"', "dimension = 3"]
+    lines += [f'[[particle]]\nname = "{m}"\nmass = 1.0' for m in names]
+    for i in range(6):
+        for j in range(i + 1, 6):
+            rest = float(np.mean(np.linalg.norm(x[:, i] - x[:, j], axis=-1)))
+            lines.append(
+                f'[[bond]]\nkind = "binary"\nparticles = ["{names[i]}", "{names[j]}"]\n'
+                f"stiffness = 70.0\nrest_length = {rest!r}\ndamping = 0.7"
+            )
+    model = loads_model("\n".join(lines) + "\n", "<six>")
+    t = _traj(x, missing=[(2, 80, 120)], markers=names)
+    fused = model_fill(model, plan_fill(t, names), prior="pca")
+
+    def rms(values):
+        err = values[80:120, 2] - x[80:120, 2]
+        return float(np.sqrt(np.mean(np.sum(err**2, axis=-1))))
+
+    assert rms(fused.pure) > 0.1
+    assert rms(fused.values) < 1e-3
+    assert fused.segments[0].prior_weight == 1.0
+
+
+def test_the_lapack_step_solves_the_block_tridiagonal_system_as_the_jax_one():
+    from activebonds.identify.fill import block_tridiagonal_lapack
+    from activebonds.identify.shooting_normal import block_tridiagonal_solve
+
+    rng = np.random.default_rng(1)
+    k, n = 7, 5
+    a = rng.normal(size=(k * n, k * n))
+    full = a @ a.T + k * n * np.eye(k * n)
+    band = np.zeros_like(full)
+    for i in range(k):  # keep the diagonal and first off-diagonal blocks
+        for j in (i - 1, i, i + 1):
+            if 0 <= j < k:
+                band[i * n : (i + 1) * n, j * n : (j + 1) * n] = full[
+                    i * n : (i + 1) * n, j * n : (j + 1) * n
+                ]
+    diag = np.stack([band[i * n : (i + 1) * n, i * n : (i + 1) * n] for i in range(k)])
+    off = np.stack([band[i * n : (i + 1) * n, (i + 1) * n : (i + 2) * n] for i in range(k - 1)])
+    rhs = rng.normal(size=(k, n))
+    got = block_tridiagonal_lapack(diag, off, rhs)
+    assert np.max(np.abs(band @ got.ravel() - rhs.ravel())) < 1e-10
+    ref = np.asarray(block_tridiagonal_solve(diag, off, rhs[..., None]))[..., 0]
+    assert np.max(np.abs(got - ref)) < 1e-10
+
+
+def test_the_step_prior_adds_its_exact_gauss_newton_terms():
+    """The step prior's J^T J and J^T r, added by hand to the normal equations, are those of
+    its residuals by automatic differentiation (to rounding)."""
+    import jax
+    import jax.numpy as jnp
+
+    from activebonds.identify.fill import _step_residuals, _with_steps
+    from activebonds.identify.shooting_normal import Normal
+
+    rng = np.random.default_rng(2)
+    k, m, d = 6, 3, 3
+    n = 2 * m * d
+    z = jnp.asarray(rng.normal(size=(k, n)))
+    delta = jnp.asarray(rng.normal(size=(k - 1, m, d)))
+    w = jnp.asarray(np.abs(rng.normal(size=(k - 1, m))) * (rng.random((k - 1, m)) > 0.3))
+    zero = Normal(
+        jnp.zeros((k, n, n)),
+        jnp.zeros((k - 1, n, n)),
+        jnp.zeros((k, n, 1)),
+        jnp.zeros((1, 1)),
+        jnp.zeros((k, n)),
+        jnp.zeros(1),
+    )
+    got = _with_steps(zero, z, delta, w)
+    jac = jax.jacfwd(lambda y: _step_residuals(y.reshape(k, n), delta, w))(z.ravel())
+    jtj = np.asarray(jac.T @ jac)
+    grad = np.asarray(jac.T @ _step_residuals(z, delta, w))
+    for i in range(k):
+        assert np.allclose(got.diag[i], jtj[i * n : (i + 1) * n, i * n : (i + 1) * n])
+        if i < k - 1:
+            assert np.allclose(got.off[i], jtj[i * n : (i + 1) * n, (i + 1) * n : (i + 2) * n])
+    assert np.allclose(np.asarray(got.grad_s).ravel(), grad)
+
+
 @pytest.mark.parametrize("stiffness", [0.7, 1.5])
 def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(stiffness):
     """A model whose stiffnesses are all off by ``stiffness`` explains only part of the

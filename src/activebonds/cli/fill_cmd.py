@@ -13,6 +13,7 @@ from .app import app, fail, out, parse_option_frames
 
 METHODS = ("model", "spline", "linear", "pca")
 MAX_STEPS = 200  # identify.fill.MAX_STEPS (not imported here: the command line starts fast)
+PRIORS = ("pca",)  # identify.fill.PRIORS
 
 
 def record_path(out_path: Path) -> Path:
@@ -82,6 +83,16 @@ def fill(
             "0.3 for a model that explains none to 100 for one that explains them all).",
         ),
     ] = None,
+    prior: Annotated[
+        str | None,
+        typer.Option(
+            help="With --method model: pca fits the model's trajectory again with the PCA "
+            "fill of the missing samples (its positions and its steps from frame to frame) as "
+            "soft observations, weighed by the PCA fill's own error on artificial gaps against "
+            "the model's residuals (default: none, the model alone). Helps on gaps of 30 "
+            "frames and more, hurts on short ones (docs/EXPERIMENTS.md).",
+        ),
+    ] = None,
     max_steps: Annotated[
         int,
         typer.Option(
@@ -129,6 +140,10 @@ def fill(
             raise InputError("--method", f"expected {', '.join(METHODS)}, got '{method}'")
         if denoise and method != "model":
             raise InputError("--denoise", f"needs --method model, not {method}")
+        if prior is not None and prior not in PRIORS:
+            raise InputError("--prior", f"expected {', '.join(PRIORS)}, got '{prior}'")
+        if prior is not None and method != "model":
+            raise InputError("--prior", f"needs --method model, not {method}")
         if continuity is not None and not continuity > 0.0:
             raise InputError("--continuity", f"expected a positive weight, got {continuity}")
         if integrator not in ("euler", "verlet"):
@@ -166,7 +181,17 @@ def fill(
             )
         plan = plan_fill(data, chosen, window, max_gap)
         values, uncertainty, note = _fill_values(
-            m, plan, method, denoise, context, horizon, substeps, integrator, continuity, max_steps
+            m,
+            plan,
+            method,
+            denoise,
+            context,
+            horizon,
+            substeps,
+            integrator,
+            continuity,
+            max_steps,
+            prior,
         )
         from ..data.fill import apply_fill, record_csv
 
@@ -190,7 +215,7 @@ def fill(
 
 
 def _fill_values(
-    m, plan, method, denoise, context, horizon, substeps, integrator, continuity, max_steps
+    m, plan, method, denoise, context, horizon, substeps, integrator, continuity, max_steps, prior
 ):
     """(values [F, M, D] of the window, per gap to fill its uncertainty in metres, a note)."""
     if method == "model":
@@ -206,6 +231,7 @@ def _fill_values(
             denoise=denoise,
             continuity=continuity,
             max_steps=max_steps,
+            prior=prior,
         )
         return found.values, found.uncertainty, found.note()
     from ..data.fill import baseline_uncertainty, fill_baseline

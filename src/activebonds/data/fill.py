@@ -254,13 +254,13 @@ def fill_baseline(method: str, positions: np.ndarray, mask: np.ndarray, gaps) ->
     return FILLS[method](positions, mask, list(gaps))
 
 
-def self_test(
+def self_test_errors(
     fill, positions: np.ndarray, mask: np.ndarray, column: int, length: int, others: bool = False
-):
-    """The RMS error (3-D distance, metres) of ``fill(positions, mask, gaps)`` at each of the
-    ``length`` positions of a gap, over up to ``TRIALS`` artificial gaps of that length placed
-    evenly where the marker is present with a present frame on each side (``others``: where
-    every marker is, as the PCA fill needs them); NaN where there is no room for one."""
+) -> np.ndarray:
+    """The errors [trials, length, D] (filled less recorded, metres) of ``fill(positions,
+    mask, gaps)`` on up to ``TRIALS`` artificial gaps of ``length`` frames placed evenly where
+    the marker is present with a present frame on each side (``others``: where every marker
+    is, as the PCA fill needs them); no trial where there is no room for one."""
     complete = mask.all(axis=1) if others else mask[:, column]
     room = [
         (a + 1, b - 1)
@@ -269,7 +269,7 @@ def self_test(
     ]
     starts = [s for a, b in room for s in range(a, b - length + 1)]
     if not starts:
-        return np.full(length, np.nan)
+        return np.zeros((0, length, positions.shape[-1]))
     pick = np.unique(np.linspace(0, len(starts) - 1, min(TRIALS, len(starts))).round().astype(int))
     errors = []
     for i in pick:
@@ -279,8 +279,20 @@ def self_test(
         p = np.where(m[..., None], positions, np.nan)
         gap = Gap(column, "", s, s + length)
         got = fill(p, m, [gap])[s : s + length, column]
-        errors.append(np.linalg.norm(got - positions[s : s + length, column], axis=-1))
-    return np.sqrt(np.mean(np.square(errors), axis=0))
+        errors.append(got - positions[s : s + length, column])
+    return np.asarray(errors)
+
+
+def self_test(
+    fill, positions: np.ndarray, mask: np.ndarray, column: int, length: int, others: bool = False
+):
+    """The RMS error (3-D distance, metres) of ``fill`` at each of the ``length`` positions of
+    a gap over the artificial gaps of :func:`self_test_errors`; NaN where there is no room for
+    one."""
+    errors = self_test_errors(fill, positions, mask, column, length, others)
+    if not len(errors):
+        return np.full(length, np.nan)
+    return np.sqrt(np.mean(np.sum(np.square(errors), axis=-1), axis=0))
 
 
 def baseline_uncertainty(method: str, positions: np.ndarray, mask: np.ndarray, gaps):

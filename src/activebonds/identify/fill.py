@@ -35,10 +35,28 @@ the present samples around the gap say how far it is not, and scale it (:func:`e
 
 So a model that explains the context leaves the standard error as it was, and a wrong model's
 fill reports an uncertainty of the order of its error (tests/test_fill.py measures both).
+
+``prior="pca"`` (``fill --prior pca``) fuses the model with the correlation of the markers:
+after the model's own fit, each stretch is fitted again (from that solution) with the PCA fill
+of the missing samples (Gløersen & Federolf 2016) as soft observations (:func:`pca_prior`):
+its positions, and its steps from one frame to the next inside the gap (horizon 1 only), each
+weighed ``level / sigma`` against a recorded sample (:func:`prior_weight`): ``level`` the first
+fit's scaled residual SD (what a position error of weight 1 stands for), ``sigma`` the PCA
+fill's own error on artificial gaps of the same marker and length, inflated by its
+autocorrelation along the gap. Where the PCA fill is unsure, the model's dynamics and the
+markers present decide; where the model is unsure (long gaps, a hoof in a trot), the PCA fill
+does. The second fit's positions and uncertainties are the fill's; the first fit's positions
+are kept (``ModelFill.pure``).
+
+The states' Levenberg-Marquardt steps are solved by LAPACK (:class:`_LapackStep`), damped
+from 1e-3 of Marquardt's diagonal: on the 41-marker human walk a 30-frame gap took 23 steps
+from a damping of 1 (velocities, whose defects weigh dt times a position's, moved a third
+further each step), 8-20 now.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass, field
 
@@ -61,13 +79,17 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import block_tridiagonal_solve, make_normal
+from .shooting_normal import block_tridiagonal_solve, floored, make_normal
 
 MAX_STEPS = 200
 RATIO_FRAMES = 8  # frames ahead of the prediction that sets the continuity weight
 HORIZON = 1  # frames per shooting window: every frame's state its own unknown
 CONTINUITY = 0.3  # least weight of a continuity defect against a position error (metres each)
 RTOL, ATOL = 1e-10, 1e-12
+MARQUARDT = True
+DAMPING = 1e-3
+LAPACK = True
+SHAPE = True
 TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
@@ -83,9 +105,11 @@ class Segment:
     continuity: float = CONTINUITY_WEIGHT  # weight of a continuity defect
     scale: float = 1.0  # the posterior SD's scale (:func:`error_scale`)
     tau: float = 1.0  # the continuity defects' integrated autocorrelation
+    prior_weight: float = float("nan")  # the median weight of a prior sample; NaN: no prior
 
     def record(self) -> dict:
         return {
+            "prior_weight": self.prior_weight,
             "continuity": self.continuity,
             "frames": f"{self.start}:{self.stop}",
             "steps": self.steps,
@@ -101,6 +125,7 @@ class ModelFill:
     values: np.ndarray  # [F, M, D] window positions: the model's where fitted, else the record's
     uncertainty: list  # per gap to fill (the plan's order): metres per sample
     segments: list[Segment] = field(default_factory=list)
+    pure: np.ndarray | None = None  # with a prior: the values of the fit without it
 
     def note(self) -> str | None:
         if not self.segments:
@@ -117,6 +142,12 @@ class ModelFill:
             text += f"; {len(unconverged)} not converged ({unconverged[0].message})"
             if "step limit" in unconverged[0].message:
                 text += "; raise the limit with --max-steps"
+        weights = [s.prior_weight for s in self.segments if np.isfinite(s.prior_weight)]
+        if weights:
+            text += (
+                f"; the PCA fill weighed in as a prior on {len(weights)} stretch(es) (weight "
+                f"{min(weights):.2g} to {max(weights):.2g} against a recorded sample)"
+            )
         tau = max(s.tau for s in self.segments)
         if tau >= TAU_NOTE:
             text += (
@@ -182,13 +213,69 @@ def segments_of(gaps, n_frames: int, context: int) -> list[tuple[int, int]]:
 
 
 def _states_step(system, damping):
-    """The damped Gauss-Newton step of the states alone: (T + damping I) d = -g_s."""
+    """The damped Gauss-Newton step of the states alone: (T + D) d = -g_s, D = damping I
+    (a number) or diag(damping) ([K, n]: Marquardt's scaling)."""
     n = system.diag.shape[1]
     rhs = -system.grad_s[..., None]
-    return block_tridiagonal_solve(system.diag + damping * jnp.eye(n), system.off, rhs)[..., 0]
+    damp = jnp.asarray(damping)[..., None] * jnp.eye(n)
+    return block_tridiagonal_solve(system.diag + damp, system.off, rhs)[..., 0]
 
 
 _states_step_jit = jax.jit(_states_step)
+
+
+class _LapackStep:
+    """:func:`_states_step` by LAPACK (SciPy), the system copied out of JAX once per
+    linearization: on a 41-marker body (blocks of 246) XLA's scan of triangular solves took
+    2 s a step, LAPACK 1 s (``benchmarks/gaps.py``'s human walk; docs/EXPERIMENTS.md)."""
+
+    def __init__(self):
+        self._system, self._arrays = None, None
+
+    def __call__(self, system, damping):
+        if system is not self._system:
+            self._system = system
+            self._arrays = tuple(np.asarray(a) for a in (system.diag, system.off, system.grad_s))
+        diag, off, grad = self._arrays
+        damp = np.asarray(damping)
+        if damp.ndim == 0:
+            damp = np.full(grad.shape, float(damp))
+        k, n = grad.shape
+        blocks = diag + damp[..., None] * np.eye(n)
+        return jnp.asarray(block_tridiagonal_lapack(blocks, off, -grad))
+
+
+def block_tridiagonal_lapack(diag: np.ndarray, off: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve T Z = rhs ([K, n]) for a symmetric positive definite block-tridiagonal T
+    (``diag`` [K, n, n], ``off`` [K - 1, n, n] = T_k,k+1): the block Cholesky recursion of
+    :func:`.shooting_normal.block_tridiagonal_solve`, by LAPACK."""
+    from scipy.linalg import cholesky, solve_triangular
+
+    k = len(diag)
+    chol = np.empty_like(diag)
+    sub = np.zeros_like(diag)  # sub[i] = L_i,i-1
+    z = np.empty_like(rhs)
+    for i in range(k):
+        d, r = diag[i], rhs[i]
+        if i:
+            sub[i] = solve_triangular(chol[i - 1], off[i - 1], lower=True, check_finite=False).T
+            d = d - sub[i] @ sub[i].T
+            r = r - sub[i] @ z[i - 1]
+        chol[i] = cholesky(d, lower=True, check_finite=False)
+        z[i] = solve_triangular(chol[i], r, lower=True, check_finite=False)
+    x = np.empty_like(rhs)
+    for i in range(k - 1, -1, -1):
+        r = z[i] - sub[i + 1].T @ x[i + 1] if i < k - 1 else z[i]
+        x[i] = solve_triangular(chol[i], r, lower=True, trans="T", check_finite=False)
+    return x
+
+
+@jax.jit
+def _states_diagonal(system):
+    """T's diagonal [K, n], floored (:func:`.shooting_normal.floored`): Marquardt's scaling of
+    the damping, so that a velocity (whose defect weighs ``dt`` times a position's) is damped
+    in its own units."""
+    return floored(jnp.diagonal(system.diag, axis1=1, axis2=2))
 
 
 def inverse_diagonal_blocks(diag: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -252,6 +339,85 @@ def one_step_ratio(
     return e_model / e_zero if e_zero > 0.0 else float("nan")
 
 
+PRIORS = ("pca",)
+
+
+def pca_prior(positions: np.ndarray, mask: np.ndarray, gaps):
+    """The PCA fill as a prior on the gaps' samples: (targets [F, M, D], the standard
+    deviation per coordinate [F, M] that a sample of it is given, that of its motion from
+    frame t to t + 1 within the gap [F, M] (at t); NaN off the gaps).
+
+    The targets are Gløersen & Federolf's reconstruction (:func:`.data.fill.fill_pca`). The
+    deviation comes from the PCA fill's own errors, cross-validated: the same fill of up to
+    ``TRIALS`` artificial gaps of the gap's length and marker placed in complete stretches of
+    the record (those frames are then not complete, so never among its training frames;
+    :func:`.data.fill.self_test_errors`). Their RMS per coordinate ``sigma`` (floored at the
+    markers' noise) is inflated by ``sqrt(tau)``, ``tau`` the errors' integrated
+    autocorrelation along the gap (:func:`error_correlation`): the PCA fill's error is an
+    offset that drifts slowly, so ``L`` samples of it know about as much as ``L / tau``
+    independent ones, and fitted as independent observations they would pull the trajectory
+    as if they knew ``tau`` times more. The PCA fill's motion inside the gap (its step from
+    one frame to the next) is often better than where it puts the marker (its error is
+    mostly an offset): its steps' errors, measured the same way, give the deviation of a
+    second prior, on the missing marker's steps. NaN for a gap with no room for a test."""
+    from ..data.fill import fill_pca, self_test_errors
+
+    targets = fill_pca(positions, mask, gaps)
+    sigma = np.full(mask.shape, np.nan)
+    shape = np.full(mask.shape, np.nan)
+    noise = noise_estimate(positions, mask)
+    floor = noise if np.isfinite(noise) else 0.0
+    tested: dict[tuple[int, int], tuple[float, float]] = {}
+    for g in gaps:
+        key = (g.column, g.length)
+        if key not in tested:
+            e = self_test_errors(fill_pca, positions, mask, g.column, g.length, others=True)
+            if not len(e):
+                tested[key] = (float("nan"), float("nan"))
+            else:
+                rms = max(float(np.sqrt(np.mean(e**2))), floor)
+                level = rms * float(np.sqrt(error_correlation(e)))
+                steps = np.diff(e, axis=1)  # the errors of its frame-to-frame motion
+                if steps.shape[1] and SHAPE:
+                    step_rms = max(float(np.sqrt(np.mean(steps**2))), floor * np.sqrt(2.0))
+                    step = step_rms * float(np.sqrt(error_correlation(steps)))
+                else:
+                    step = float("nan")
+                tested[key] = (level, step)
+        sigma[g.start : g.stop, g.column] = tested[key][0]
+        shape[g.start : g.stop - 1, g.column] = tested[key][1]
+    return targets, sigma, shape
+
+
+def error_correlation(errors: np.ndarray) -> float:
+    """How many samples of a gap's errors count as one: ``tau = 1 + 2 sum_lag (1 - lag / L)
+    rho_lag`` over lags 1 to ``L`` - 1 while ``rho`` stays positive, ``rho_lag`` the errors'
+    autocorrelation (about zero, not their mean: an offset is the correlated part), pooled
+    over ``errors`` [trials, L, D]; between 1 and ``L`` (a constant offset)."""
+    n = errors.shape[1]
+    v = float(np.mean(errors**2))
+    if not v > 0.0:
+        return 1.0
+    tau = 1.0
+    for lag in range(1, n):
+        rho = float(np.mean(errors[:, lag:] * errors[:, :-lag])) / v
+        if not rho > 0.0:
+            break
+        tau += 2.0 * (1.0 - lag / n) * rho
+    return float(np.clip(tau, 1.0, n))
+
+
+def prior_weight(level: float, sigma: np.ndarray) -> np.ndarray:
+    """The weight of a prior sample of standard deviation ``sigma`` (m per coordinate) against
+    a position error of weight 1 that stands for ``level`` m (the fit's scaled residual SD):
+    ``level / sigma``, so that the prior adds its information ``1 / sigma^2`` to the model's
+    (inverse-variance fusion); at most 1 (never more than a recorded sample), 0 where
+    ``sigma`` is NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(np.isfinite(sigma) & (sigma > 0), level / sigma, 0.0)
+    return np.clip(w, 0.0, 1.0)
+
+
 @float64
 def model_fill(
     model: Model,
@@ -263,12 +429,18 @@ def model_fill(
     denoise: bool = False,
     max_steps: int = MAX_STEPS,
     continuity: float | None = None,
+    prior: str | None = None,
 ) -> ModelFill:
-    """The model's fill of the plan's gaps (see the module docstring).
+    """The model's fill of the plan's gaps (see the module docstring). ``prior="pca"``: each
+    stretch is fitted again from the model's solution with the PCA fill of the missing
+    samples as soft position errors (:func:`pca_prior`, weights :func:`prior_weight` at the
+    first fit's scaled residual SD): the model's dynamics and the markers present decide
+    where the PCA fill is unsure; ``ModelFill.pure`` keeps the first fit's values.
 
     Raises:
         InputError: the model's trajectory goes non-finite from the record's states, or its
-            drive is entrained (not supported here yet).
+            drive is entrained (not supported here yet); an unknown prior; ``prior="pca"``
+            without complete frames.
     """
     if phase.entrained(model.topology):
         raise InputError(
@@ -276,6 +448,8 @@ def model_fill(
             "a model with an entrained drive cannot fill gaps yet (its phase would be tracked "
             "along the gaps themselves); fill with a model without [drive] coupling",
         )
+    if prior is not None and prior not in PRIORS:
+        raise InputError("--prior", f"expected {', '.join(PRIORS)}, got '{prior}'")
     positions, mask = plan.positions, plan.mask
     n_frames, n_markers, dim = positions.shape
     dt = plan.traj.dt
@@ -283,6 +457,8 @@ def model_fill(
     values = np.array(positions)
     if not gaps and not denoise:
         return ModelFill(values, [])
+    guide = pca_prior(positions, mask, gaps) if prior == "pca" and gaps else None
+    pure = np.array(positions) if guide is not None else None
     spans = [(0, n_frames)] if denoise else segments_of(gaps, n_frames, context)
     x_all, v_all = frame_states(positions, mask, dt)  # every marker is present somewhere
     genome = jnp.asarray(model.layout.initial())
@@ -303,7 +479,8 @@ def model_fill(
             )
             weight = continuity_weight(ratio)
         inside = [g.stop - g.start for g in gaps if a <= g.start and g.stop <= b]
-        xs, sd, seg = _fit_segment(
+        fit = functools.partial(
+            _fit_segment,
             model,
             genome,
             positions[a:b],
@@ -318,8 +495,28 @@ def model_fill(
             weight / CONTINUITY_WEIGHT,
             longest=max(inside, default=b - a),
         )
-        steps, message, rms, scale, tau = seg
-        seg = Segment(a, b, steps, message, rms, continuity=weight, scale=scale, tau=tau)
+        xs, sd, z, solved = fit()
+        prior_w = float("nan")
+        if guide is not None:
+            pure[a:b] = xs
+            w = prior_weight(solved.level, guide[1][a:b])
+            w_step = prior_weight(solved.level, guide[2][a:b])
+            if np.any(w > 0):
+                steps = solved.steps
+                xs, sd, z, solved = fit(guide=(guide[0][a:b], w, w_step), start=z)
+                solved = dataclasses.replace(solved, steps=steps + solved.steps)
+                prior_w = float(np.median(w[w > 0]))
+        seg = Segment(
+            a,
+            b,
+            solved.steps,
+            solved.message,
+            solved.rms_mm,
+            continuity=weight,
+            scale=solved.scale,
+            tau=solved.tau,
+            prior_weight=prior_w,
+        )
         segments.append(seg)
         values[a:b] = xs
         sigma[a:b] = sd
@@ -327,22 +524,23 @@ def model_fill(
         # only the gaps are the model's: elsewhere the record stays as it was
         keep = mask.copy()
         values[keep] = positions[keep]
-    return ModelFill(values, [sigma[g.start : g.stop, g.column] for g in gaps], segments)
+        if pure is not None:
+            pure[keep] = positions[keep]
+    uncertainty = [sigma[g.start : g.stop, g.column] for g in gaps]
+    return ModelFill(values, uncertainty, segments, pure=pure)
 
 
 class _Programs:
     """A segment's compiled functions, with its data (start frames, targets, weights, as
-    :class:`.shooting.ShootingWindows` holds them) as arguments: compiled once per shape, not
-    once per gap."""
+    :class:`.shooting.ShootingWindows` holds them, and the continuity weight's link) as
+    arguments: compiled once per shape, not once per gap."""
 
-    def __init__(
-        self, model: Model, horizon: int, dt: float, substeps: int, integrator: str, link: float
-    ):
+    def __init__(self, model: Model, horizon: int, dt: float, substeps: int, integrator: str):
         self.model, self.horizon, self.dt = model, horizon, dt
 
-        def windows(starts, target, weight):
+        def windows(starts, target, weight, link):
             k = target.shape[0]
-            link_ = np.full(k - 1, link)
+            link_ = jnp.full(k - 1, link)
             return ShootingWindows(starts, target, weight, dt, link=link_, segments=((0, k, 0),))
 
         def split(z, target):
@@ -350,12 +548,13 @@ class _Programs:
             shape = target.shape[0], target.shape[2], target.shape[3]
             return z[:, :half].reshape(shape), z[:, half:].reshape(shape)
 
-        def residual(z, genome, starts, target, weight):
-            res, _ = make_shooting(model, windows(starts, target, weight), substeps, integrator)
+        def residual(z, genome, starts, target, weight, link):
+            w = windows(starts, target, weight, link)
+            res, _ = make_shooting(model, w, substeps, integrator)
             return jnp.concatenate([r.ravel() for r in res(genome, split(z, target))])
 
-        def normal(z, genome, starts, target, weight):
-            w = windows(starts, target, weight)
+        def normal(z, genome, starts, target, weight, link):
+            w = windows(starts, target, weight, link)
             build = make_normal(model, w, substeps, integrator, lambda u: genome + 0.0 * u[0])
             return build(jnp.zeros(1), z)
 
@@ -381,8 +580,8 @@ class _Programs:
 
 
 @functools.lru_cache(maxsize=4)
-def _programs(model, horizon, dt, substeps, integrator, link=1.0) -> _Programs:
-    return _Programs(model, horizon, dt, substeps, integrator, link)
+def _programs(model, horizon, dt, substeps, integrator) -> _Programs:
+    return _Programs(model, horizon, dt, substeps, integrator)
 
 
 def _fit_segment(
@@ -399,33 +598,64 @@ def _fit_segment(
     max_steps,
     link=1.0,
     longest=1,
+    guide=None,
+    start=None,
 ):
     """(positions [S, M, D], their uncertainties [S, M] (the standard errors scaled by the
-    residuals, :func:`error_scale`; ``longest`` the segment's longest gap in frames), (steps,
-    message, RMS mm, scale, tau))."""
+    residuals, :func:`error_scale`; ``longest`` the segment's longest gap in frames), the
+    solution's window states, a :class:`_Solved`). ``guide``: (targets [S, M, D], weights
+    [S, M]) of a prior on missing samples (weight 0: none), fitted as soft position errors;
+    ``start``: the window states to start from (default: the record's ``states``)."""
     n_frames, n_markers, dim = positions.shape
-    local = shooting_windows(positions, mask, dt, horizon)
-    x0, v0 = start_states(local, [states])
+    frame_weight = mask.astype(np.float64)
+    observed = positions
+    step_prior = None
+    if guide is not None:
+        g_target, g_weight, g_step = guide
+        use = ~mask & (g_weight > 0)
+        frame_weight = np.where(use, g_weight, frame_weight)
+        observed = np.where(use[..., None], g_target, positions)
+        if horizon == 1 and np.any(g_step > 0):  # every frame's state a variable
+            step_prior = (np.diff(g_target, axis=0), g_step[:-1])
+    local = shooting_windows(observed, frame_weight > 0, dt, horizon)
     k, h = len(local.starts), local.horizon
-    programs = _programs(model, h, dt, substeps, integrator, float(link))
+    frames = np.minimum(local.starts[:, None] + np.arange(h + 1)[None, :], n_frames - 1)
+    weight = local.weight * frame_weight[frames]
+    present = (local.weight > 0) & mask[frames]  # [K, H + 1, M]: the recorded samples
+    programs = _programs(model, h, dt, substeps, integrator)
     # frames of the recording: time-dependent forces see its time
     data = (
         jnp.asarray(local.starts + first, jnp.float64),
         jnp.asarray(local.target),
-        jnp.asarray(local.weight),
+        jnp.asarray(weight),
+        jnp.asarray(float(link), jnp.float64),
     )
 
     def flat(z):
-        return programs.residual(z, genome, *data)
+        r = programs.residual(z, genome, *data)
+        if step_prior is None:
+            return r
+        return jnp.concatenate([r, _step_residuals(z, *steps_data)])
 
     def linearize(z, _):
         system = programs.normal(z, genome, *data)
+        if step_prior is not None:
+            system = _with_steps(system, z, *steps_data)
         return system, system.grad_s
 
     def scale(system):
         return jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2)))
 
-    z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
+    steps_data = None
+    if step_prior is not None:
+        # windows k, k + 1 start at frames k, k + 1 (horizon 1); the last frame is no start
+        delta, w_step = step_prior[0][: k - 1], step_prior[1][: k - 1]
+        steps_data = (jnp.asarray(np.nan_to_num(delta)), jnp.asarray(w_step))
+    if start is None:
+        x0, v0 = start_states(local, [states])
+        z0 = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
+    else:
+        z0 = jnp.asarray(start)
     r0 = np.asarray(flat(z0))
     if not np.all(np.isfinite(r0)):
         raise InputError(
@@ -434,30 +664,86 @@ def _fit_segment(
             f"{first}:{first + n_frames}; try a shorter --horizon",
         )
     z, steps, message = levenberg_marquardt(
-        flat, linearize, _states_step_jit, z0, max_steps, RTOL, ATOL, scale=scale
+        flat,
+        linearize,
+        _LapackStep() if LAPACK else _states_step_jit,
+        z0,
+        max_steps,
+        RTOL,
+        ATOL,
+        scale=scale,
+        diagonal=_states_diagonal if MARQUARDT else None,
+        damping=DAMPING,
     )
     pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1]))
-    frames = np.arange(n_frames)
-    kk = np.minimum(frames // h, k - 1)
-    jj = frames - kk * h
+    kk = np.minimum(np.arange(n_frames) // h, k - 1)
+    jj = np.arange(n_frames) - kk * h
     xs = pos[kk, jj].reshape(n_frames, n_markers, dim)
     r = np.asarray(flat(z))
-    terms = int(local.weight.sum())
-    measured = r[: k * (h + 1) * n_markers * dim]
-    rms_mm = float(np.sqrt(np.sum(measured**2) / max(1, terms))) * 1000.0
+    n_measured = k * (h + 1) * n_markers * dim
+    measured = r[:n_measured].reshape(k, h + 1, n_markers, dim)
+    recorded = int(present.sum())
+    rms_mm = float(np.sqrt(np.sum(measured[present] ** 2) / max(1, recorded))) * 1000.0
     # the standard errors of the fitted positions: sigma^2 G T^-1 G^T
+    terms = int((weight > 0).sum()) + (0 if steps_data is None else int((w_step > 0).sum()))
     variance = float(np.sum(r**2)) / max(1, terms * dim - z.shape[1])
-    defects = r[measured.size : measured.size + (k - 1) * n_markers * dim]
+    defects = r[n_measured : n_measured + (k - 1) * n_markers * dim]
     tau = defect_correlation(defects.reshape(k - 1, -1), longest) if k > 2 else 1.0
     noise = noise_estimate(positions, mask)
-    scale = error_scale(np.sqrt(variance), noise, tau)
+    factor = error_scale(np.sqrt(variance), noise, tau)
     if variance == 0.0 and np.isfinite(noise):  # an exact fit: the noise estimate's SD
         variance = noise**2
     system = programs.normal(z, genome, *data)
+    if step_prior is not None:
+        system = _with_steps(system, z, *steps_data)
     diag = np.asarray(system.diag)
     jitter = 1e-12 * float(np.max(np.abs(np.diagonal(diag, axis1=1, axis2=2))))
     cov = inverse_diagonal_blocks(diag + jitter * np.eye(diag.shape[1]), np.asarray(system.off))
     g = jac[kk, jj]  # [S, M D, n]
     var = np.einsum("smn,snp,smp->sm", g, cov[kk], g)  # per coordinate
     sd = np.sqrt(np.maximum(variance * var.reshape(n_frames, n_markers, dim).sum(-1), 0.0))
-    return xs, scale * sd, (steps, message, rms_mm, scale, tau)
+    level = factor * float(np.sqrt(variance))
+    return xs, factor * sd, z, _Solved(steps, message, rms_mm, factor, tau, level)
+
+
+@jax.jit
+def _step_residuals(z, delta, w_step):
+    """The step prior's residuals ``w (X_k+1 - X_k - delta_k)`` [K - 1, M, D] (flattened) of
+    window states z [K, n] (horizon 1: window k starts at frame k)."""
+    n_markers, dim = w_step.shape[1], delta.shape[2]
+    x = z[:, : n_markers * dim].reshape(len(z), n_markers, dim)
+    return (w_step[..., None] * (x[1:] - x[:-1] - delta)).ravel()
+
+
+@jax.jit
+def _with_steps(system, z, delta, w_step):
+    """The normal equations with the step prior's terms added: each residual ``w (X_k+1 -
+    X_k - delta_k)`` adds ``w^2`` to both frames' position diagonals, ``-w^2`` to their
+    coupling, and ``-+ w r`` to their gradients."""
+    n = system.diag.shape[1]
+    dim = delta.shape[2]
+    k = z.shape[0]
+    w2 = jnp.repeat(w_step**2, dim, axis=1)  # [K - 1, M D]
+    w2 = jnp.concatenate([w2, jnp.zeros((k - 1, n - w2.shape[1]))], axis=1)  # no velocity
+    r = _step_residuals(z, delta, w_step).reshape(k - 1, -1)
+    wr = jnp.repeat(w_step, dim, axis=1) * r
+    wr = jnp.concatenate([wr, jnp.zeros((k - 1, n - wr.shape[1]))], axis=1)
+    pad = jnp.zeros((1, n))
+    d = jnp.concatenate([w2, pad]) + jnp.concatenate([pad, w2])
+    g = jnp.concatenate([-wr, pad]) + jnp.concatenate([pad, wr])
+    eye = jnp.eye(n)
+    return system._replace(
+        diag=system.diag + d[:, :, None] * eye,
+        off=system.off - w2[:, :, None] * eye,
+        grad_s=system.grad_s + g,
+    )
+
+
+@dataclass(frozen=True)
+class _Solved:
+    steps: int
+    message: str
+    rms_mm: float
+    scale: float
+    tau: float
+    level: float  # m: what a position error of weight 1 stands for (the scaled residual SD)

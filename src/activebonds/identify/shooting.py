@@ -6,7 +6,8 @@ is integrated H steps from its own state (X_k, V_k) at s_k, which is a variable 
 like the model's parameters, not a recorded state. The residuals are
 
 * the position errors of every window at every frame it covers, its start frame included
-  (a frame shared by two windows counts once, in the later one), 0 where a marker is missing;
+  (a frame shared by two windows counts once, in the later one), 0 where a marker is missing,
+  each times its weight (1 for a recorded sample; a fill's soft prior weighs less);
 * the continuity defects between consecutive windows, ``w (x_end,k - X_k+1)`` and
   ``w dt (v_end,k - V_k+1)``, with ``w = CONTINUITY_WEIGHT``, so that at the optimum the
   windows join into one trajectory of the model.
@@ -40,7 +41,7 @@ class ShootingWindows:
 
     starts: np.ndarray  # [K] start frame of each window (in its recording)
     target: np.ndarray  # [K, H + 1, P, D] recorded positions at s_k .. s_k + H (0 if missing)
-    weight: np.ndarray  # [K, H + 1, P] 1.0 where the term counts
+    weight: np.ndarray  # [K, H + 1, P] 1.0 where the term counts (a position error's factor)
     dt: float
     link: np.ndarray | None = None  # [K - 1] 1.0 where window k + 1 continues window k
     segments: tuple[tuple[int, int, int], ...] = ()  # per recording: (first window, end, frames)
@@ -183,7 +184,7 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
     def residuals(genome, states):
         xs0, vs0 = states
         pos, vel = run(genome, states)
-        measured = jnp.where(weight[..., None] > 0, pos - target, 0.0)
+        measured = jnp.where(weight[..., None] > 0, weight[..., None] * (pos - target), 0.0)
         w = CONTINUITY_WEIGHT
         gap_x = link * w * (pos[:-1, -1] - xs0[1:])
         gap_v = link * w * dt * (vel[:-1, -1] - vs0[1:])

@@ -58,8 +58,9 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
     target = jnp.asarray(windows.target.reshape(n_windows, h + 1, -1))
     weight = jnp.asarray(np.repeat(windows.weight, dim, axis=-1).reshape(n_windows, -1))
     t0 = jnp.asarray(windows.times)
-    link = np.append(np.asarray(windows.link, np.float64), 0.0)  # the last window: no defect
-    c = jnp.asarray(CONTINUITY_WEIGHT * link)
+    # the last window: no defect (a traced link too: the fill passes its weight as an argument)
+    link = jnp.concatenate([jnp.asarray(windows.link), jnp.zeros(1)])
+    c = CONTINUITY_WEIGHT * link
     scale = jnp.concatenate([jnp.ones(half), jnp.full(half, dt)])  # of a state's defect
 
     phases = window_phases(model, windows, substeps)
@@ -70,7 +71,7 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         psi = () if phases is None else (phases(params)[k[0]],)  # tracked along the record
         xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t, *psi)[:2]
         pos = jnp.concatenate([x[None], xs]).reshape(h + 1, -1)
-        measured = jnp.where(wt > 0, (pos - tgt).ravel(), 0.0)
+        measured = jnp.where(wt > 0, wt * (pos - tgt).ravel(), 0.0)
         return measured, jnp.concatenate([xs[-1].ravel(), vs[-1].ravel()])
 
     jac = jax.jacfwd(window, argnums=(0, 1))
