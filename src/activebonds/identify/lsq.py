@@ -185,11 +185,12 @@ def _known_forces(params: Params, topo, x, v, times):
 def _start_phases(model: Model, windows: Windows) -> np.ndarray | None:
     """An entrained drive's phase at each start [S], tracked along the record at the model's
     (fixed) frequency, gain and start phase; None without one."""
-    tracker = start_phases(model, windows, 1)
-    if tracker is None:
-        return None
-    with jax.enable_x64(True):
-        return np.asarray(tracker(model.params)[1], np.float64)
+    with jax.enable_x64(True):  # the signals and the phase in double precision
+        tracker = start_phases(model, windows, 1)
+        if tracker is None:
+            return None
+        params = jax.tree_util.tree_map(lambda a: jnp.asarray(a, jnp.float64), model.params)
+        return np.asarray(tracker(params)[1], np.float64)
 
 
 def linear_problem(model: Model, windows: Windows) -> LinearProblem:
