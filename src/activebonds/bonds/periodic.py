@@ -1,7 +1,7 @@
 """A periodic force on one particle, a Fourier series in the drive's phase (DESIGN.md §2).
 
-F_p += sum_h (C_h cos(h psi) + S_h sin(h psi)), h = 1 .. 4, with C_h and S_h vectors (N, one
-value per axis; file keys ``cos1`` .. ``cos4`` and ``sin1`` .. ``sin4``, genes ``cos1[axis]``;
+F_p += sum_h (C_h cos(h psi) + S_h sin(h psi)), h = 1 .. 8, with C_h and S_h vectors (N, one
+value per axis; file keys ``cos1`` .. ``cos8`` and ``sin1`` .. ``sin8``, genes ``cos1[axis]``;
 a harmonic the bond does not give is 0 and no gene). psi is the model's rhythmic drive
 (``[drive]``): the clock 2 pi f t, or with ``[drive] coupling`` the entrained phase, a state
 of the model pulled by the body (:mod:`activebonds.physics.phase`), written into this kind's
@@ -25,7 +25,7 @@ from .accumulate import accumulate
 from .binary import DRIVE_STATE, drive_parameters
 from .kind import BondKind, LinearPart, MujocoForm, Parameter
 
-HARMONICS = 4  # the highest harmonic a bond may give
+HARMONICS = 8  # the highest harmonic a bond may give
 TERMS = tuple((f"{w}{h}", w, h) for h in range(1, HARMONICS + 1) for w in ("cos", "sin"))
 
 
