@@ -232,7 +232,6 @@ def _population_forces(params, prepared, t0, n_p: int, dim: int):
     return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])
 
 
-
 def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
     """The rhythmic drive's model-level numbers (``[drive]``), shared by every kind that reads
     the drive (one gene each whatever the kinds): its frequency, and an entrained drive's

@@ -78,7 +78,9 @@ KIND = BondKind(
     name="periodic",
     arity=1,
     parameters=tuple(
-        Parameter(key, key, 0.0, lambda v: (v - 1e3, v + 1e3), log=False, form="vector", needs="drive")
+        Parameter(
+            key, key, 0.0, lambda v: (v - 1e3, v + 1e3), log=False, form="vector", needs="drive"
+        )
         for key, _, _ in TERMS
     ),
     shared=drive_parameters(None),

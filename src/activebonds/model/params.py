@@ -26,7 +26,7 @@ class Coupling(NamedTuple):
     axis: int
     offset: float
     holder: int
-    kind: str = "binary"
+    kind: str
 
 
 @dataclass(frozen=True, eq=False)
