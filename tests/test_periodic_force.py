@@ -17,8 +17,9 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.cost import make_windows
+from activebonds.identify.cost import make_cost, make_windows
 from activebonds.identify.lsq import least_squares
+from activebonds.identify.population_cost import make_population_cost
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force
 from activebonds.physics.phase import at_phase
@@ -233,3 +234,21 @@ def test_fit_recovers_frequency_gain_and_coefficients():
     nonzero = TRUE_COEFFICIENTS != 0
     np.testing.assert_allclose(got[nonzero], TRUE_COEFFICIENTS[nonzero], rtol=0.01)
     assert np.abs(got[~nonzero]).max() < 0.01 * np.abs(TRUE_COEFFICIENTS).max()
+
+
+def test_the_population_cost_is_the_cost_with_a_clock():
+    """Without coupling the drive is the clock 2 pi f t: the ES's population one-step cost
+    (the periodic forces vmapped beside the batched kinds) equals the cost, at several
+    individuals."""
+    text = pair(FREQUENCY=FREE["FREQUENCY"], COS1=FREE["COS1"], SINB=FREE["SINB"])
+    clock = loads_model("\n".join(line for line in text.splitlines() if "coupling" not in line))
+    data = simulate(clock, 90, 60.0)
+    windows = make_windows(data.positions, data.mask, data.dt, 1)
+    rng = np.random.default_rng(1)
+    lo, hi = clock.layout.lower, clock.layout.upper  # search space
+    search = lo + (hi - lo) * rng.random((4, clock.layout.n_genes))
+    with jax.enable_x64(True):
+        population, _ = make_population_cost(clock, windows, dtype=jnp.float64)(jnp.asarray(search))
+        one = make_cost(clock, windows)
+        each = [float(one(jnp.asarray(s))[0]) for s in search]
+    np.testing.assert_allclose(np.asarray(population), each, rtol=1e-9)
