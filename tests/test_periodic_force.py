@@ -252,3 +252,10 @@ def test_the_population_cost_is_the_cost_with_a_clock():
         one = make_cost(clock, windows)
         each = [float(one(jnp.asarray(s))[0]) for s in search]
     np.testing.assert_allclose(np.asarray(population), each, rtol=1e-9)
+
+
+def test_mujoco_export_refuses_it_in_one_line():
+    from activebonds.export.mjcf import check_exportable
+
+    with pytest.raises(InputError, match=r"2 periodic bonds \(bond\[3\], bond\[4\]; a force"):
+        check_exportable(loads_model(pair()))

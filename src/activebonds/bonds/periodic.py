@@ -90,5 +90,5 @@ KIND = BondKind(
     what="periodic forces",
     noun="periodic force",
     linear=LinearPart(frozenset(key for key, _, _ in TERMS), _switch_off, _columns),
-    mujoco=MujocoForm(None, why="(a force that follows the drive's phase has no MJCF element)"),
+    mujoco=MujocoForm(None, why="a force that follows the drive's phase has no MJCF element"),
 )
