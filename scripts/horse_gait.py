@@ -285,6 +285,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             result["held_out_cold_start"] = summary(evaluated(model, traj, TEST, True, None))
     # 3. what else was tried, at the chosen harmonics and gain
     tried = {
+        "clock (coupling gain 0)": (h, 0.0, "anchors"),
         "springs at the fit range's mean pose, plus anchors": (h, gain, "fixed"),
         "the scaffold's free springs and anchors": (h, gain, "free"),
     }
