@@ -301,3 +301,12 @@ def test_the_trot_gait_example_free_runs_a_gait_on_the_held_out_frames():
     assert np.all(np.abs(np.asarray(gait.excursion_ratio) - 1.0) < 0.07)
     assert gait.cycle_rms_mm == pytest.approx(37.2, abs=0.1)
     assert gait.body_distance_mm == pytest.approx(120.1, abs=0.1)  # over 100: not met
+
+
+def test_evaluate_refuses_an_origin_after_the_window():
+    from activebonds.report.evaluate import evaluate
+
+    model = loads_model(pair())
+    data = simulate(model, 60, 60.0)
+    with pytest.raises(InputError, match="--origin: must be a frame from 0 to the window's first"):
+        evaluate(model, data, frames=(10, 60), origin=20, horizon=1)
