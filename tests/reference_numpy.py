@@ -22,6 +22,8 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
   height (last coordinate) of the coupling's particle, or the distance between its two
   particles, minus its offset; advanced by explicit
   Euler from each step's start (``entrained_rollout``)
+* periodic force on p: F_p += sum_{h=1..8} C_h cos(h psi) + S_h sin(h psi), psi the drive's
+  phase (2 pi f t, or the entrained psi)
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
 * contact of p with the plane n . x = h (n a unit vector): d = h - n . x_p; while d > 0,
   Fn = max(0, k d - c n . v_p) along n, friction Ft = -mu Fn vt / sqrt(|vt|^2 + eps^2) with
@@ -185,11 +187,26 @@ def contact_force(p, t, x, v) -> np.ndarray:
     return f
 
 
+def periodic_force(p, t, x, v, time=0.0, phase=None) -> np.ndarray:
+    """F_p += sum_h C_h cos(h psi) + S_h sin(h psi), psi the entrained phase ``phase`` or
+    the clock 2 pi f t, coefficients ``cos1`` .. ``sin8`` [N, D]."""
+    x = _arr(x)
+    f = np.zeros_like(x)
+    for b, q in enumerate(_particles(t, 1)[:, 0]):
+        psi = 2 * math.pi * float(p["drive_frequency"][b]) * time if phase is None else phase
+        for h in range(1, 9):
+            f[q] += math.cos(h * psi) * _arr(p[f"cos{h}"][b]) + math.sin(h * psi) * _arr(
+                p[f"sin{h}"][b]
+            )
+    return f
+
+
 KIND_FORCES = {
     "unary": unary_force,
     "binary": binary_force,
     "ternary": ternary_force,
     "contact": contact_force,
+    "periodic": periodic_force,
 }
 
 

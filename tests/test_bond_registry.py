@@ -107,7 +107,7 @@ damping = { value = 2.5, min = 0.01, max = 10.0 }
 
 
 def test_registry_lists_the_kinds_in_order():
-    assert bonds.names()[:4] == ("unary", "binary", "ternary", "contact")
+    assert bonds.names()[:5] == ("unary", "binary", "ternary", "contact", "periodic")
     assert bonds.get("binary").flags == ("neural",)
     with pytest.raises(ValueError, match="already registered"):
         bonds.register(bonds.get("unary"))
@@ -118,13 +118,13 @@ def test_unknown_kind_message_lists_the_registered_kinds(drag):
         'kind = "drag"\nparticles = ["a"]', 'kind = "spring"\nparticles = ["a"]'
     )
     with pytest.raises(InputError, match="bond\\[1\\].kind: Input should be 'unary', 'binary', "
-                       "'ternary', 'contact' or 'drag'"):  # fmt: skip
+                       "'ternary', 'contact', 'periodic' or 'drag'"):  # fmt: skip
         loads_model(text)
 
 
 def test_a_kind_unknown_once_unregistered():
     with pytest.raises(
-        InputError, match="Input should be 'unary', 'binary', 'ternary' or 'contact'"
+        InputError, match="Input should be 'unary', 'binary', 'ternary', 'contact' or 'periodic'"
     ):
         loads_model(DRAG_MODEL)
 

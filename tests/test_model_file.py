@@ -564,7 +564,7 @@ CASES = [
         'kind = "spring"\nparticles = ["A", "B"]',
         "bond[0].kind",
         "bond[0].kind",
-        "'unary', 'binary', 'ternary' or 'contact'",
+        "'unary', 'binary', 'ternary', 'contact' or 'periodic'",
     ),
     Case(
         "invalid TOML syntax",

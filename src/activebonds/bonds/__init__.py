@@ -5,7 +5,7 @@ or in the code that uses it); the model file, genome layout, physics, least squa
 report follow from its declaration.
 """
 
-from . import binary, contact, ternary, unary
+from . import binary, contact, periodic, ternary, unary
 from .kind import (
     ANGLE,
     NON_NEGATIVE,
@@ -18,12 +18,13 @@ from .kind import (
     PopulationForm,
     spread,
 )
-from .registry import drive_kind, get, kinds, names, register, registered, unregister
+from .registry import drive_kind, drive_kinds, get, kinds, names, register, registered, unregister
 
 register(unary.KIND)
 register(binary.KIND)
 register(ternary.KIND)
 register(contact.KIND)
+register(periodic.KIND)
 
 __all__ = [
     "ANGLE",
@@ -36,6 +37,7 @@ __all__ = [
     "Parameter",
     "PopulationForm",
     "drive_kind",
+    "drive_kinds",
     "get",
     "kinds",
     "names",

@@ -232,6 +232,39 @@ def _population_forces(params, prepared, t0, n_p: int, dim: int):
     return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])
 
 
+def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
+    """The rhythmic drive's model-level numbers (``[drive]``), shared by every kind that reads
+    the drive (one gene each whatever the kinds): its frequency, and an entrained drive's
+    coupling gain and start phase; taken by the bonds with flag ``when`` (None: every bond)."""
+    return (
+        Parameter(
+            "drive.frequency",
+            "drive_frequency",
+            0.0,
+            lambda v: (v / 2, v * 2),
+            check=POSITIVE,
+            when=when,
+        ),
+        Parameter(
+            "drive.coupling.gain",
+            "drive_gain",
+            0.0,
+            lambda v: (0.0, max(100.0, 2 * abs(v))),
+            log=False,
+            check=NON_NEGATIVE,
+            when=when,
+        ),
+        Parameter(
+            "drive.coupling.start_phase",
+            "drive_start",
+            0.0,
+            lambda v: (-math.pi, math.pi),
+            log=False,
+            when=when,
+        ),
+    )
+
+
 _NEURAL = "neural"
 
 
@@ -281,33 +314,7 @@ KIND = BondKind(
             needs="drive",
         ),
     ),
-    shared=(
-        Parameter(
-            "drive.frequency",
-            "drive_frequency",
-            0.0,
-            lambda v: (v / 2, v * 2),
-            check=POSITIVE,
-            when=_NEURAL,
-        ),
-        Parameter(
-            "drive.coupling.gain",
-            "drive_gain",
-            0.0,
-            lambda v: (0.0, max(100.0, 2 * abs(v))),
-            log=False,
-            check=NON_NEGATIVE,
-            when=_NEURAL,
-        ),
-        Parameter(
-            "drive.coupling.start_phase",
-            "drive_start",
-            0.0,
-            lambda v: (-math.pi, math.pi),
-            log=False,
-            when=_NEURAL,
-        ),
-    ),
+    shared=drive_parameters(_NEURAL),
     forces=forces,
     timed=True,
     flags=(_NEURAL,),

@@ -53,7 +53,12 @@ def listing(words: list[str] | tuple[str, ...], last: str = "or") -> str:
     return quoted[0] if len(quoted) == 1 else f"{', '.join(quoted[:-1])} {last} {quoted[-1]}"
 
 
+def drive_kinds() -> tuple[str, ...]:
+    """The registered kinds whose bonds read the rhythmic drive (they hold its shared
+    ``drive_frequency``: the neurons' drive, the periodic forces), in order."""
+    return tuple(k.name for k in kinds() if "drive_frequency" in k.fields)
+
+
 def drive_kind() -> str | None:
-    """The registered kind whose bonds hold the rhythmic drive's numbers (its shared
-    ``drive_frequency``: the neurons' drive), or None."""
-    return next((k.name for k in kinds() if "drive_frequency" in k.fields), None)
+    """The first registered kind that reads the rhythmic drive, or None."""
+    return next(iter(drive_kinds()), None)

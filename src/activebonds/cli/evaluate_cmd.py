@@ -82,6 +82,15 @@ def evaluate(
             "swings off counts on."
         ),
     ] = None,
+    origin: Annotated[
+        int | None,
+        typer.Option(
+            help="The recording's frame where the model's time is 0, e.g. 0 for a model fitted "
+            "on 0:300 and judged on 300:600: a rhythmic drive's clock and a moving anchor start "
+            "there, an entrained drive's phase runs on from there as in fit --validate "
+            "(default: the window's first frame)."
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
@@ -111,6 +120,7 @@ def evaluate(
             feet=[f.strip() for f in feet.split(",") if f.strip()] if feet else None,
             up=parse_up(up, loaded.dimension) if up else None,
             body=[b.strip() for b in body.split(",") if b.strip()] if body else None,
+            origin=origin,
         )
     except InputError as e:
         fail(e)

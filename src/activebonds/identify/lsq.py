@@ -35,7 +35,7 @@ from ..errors import InputError
 from ..model import Gene, Model
 from ..model.params import Params
 from ..physics.forces import total_force
-from .cost import Windows
+from .cost import Windows, start_phases
 
 
 @dataclass(frozen=True)
@@ -133,9 +133,12 @@ def _switched_off(model: Model) -> Params:
 class _Unknowns:
     """The columns of the linear unknowns being built, and the known forces."""
 
-    def __init__(self, model: Model, known: np.ndarray, time: np.ndarray):
+    def __init__(self, model: Model, known: np.ndarray, time: np.ndarray, phase=None):
         self.model, self.known = model, known
         self.time = time  # [S] the time of each start (forces that depend on time)
+        # [S] an entrained drive's phase at each start, tracked along the record at the
+        # model's fixed drive numbers (None without one)
+        self.phase = phase
         self.cols: dict[str, np.ndarray] = {}
         self.bounds: dict[str, tuple[float, float]] = {}
         self.pairs: list[tuple[str, str, float, float]] = []
@@ -179,6 +182,17 @@ def _known_forces(params: Params, topo, x, v, times):
     return jax.vmap(lambda a, b, t: total_force(params, topo, a, b, t))(x, v, times)
 
 
+def _start_phases(model: Model, windows: Windows) -> np.ndarray | None:
+    """An entrained drive's phase at each start [S], tracked along the record at the model's
+    (fixed) frequency, gain and start phase; None without one."""
+    with jax.enable_x64(True):  # the signals and the phase in double precision
+        tracker = start_phases(model, windows, 1)
+        if tracker is None:
+            return None
+        params = jax.tree_util.tree_map(lambda a: jnp.asarray(a, jnp.float64), model.params)
+        return np.asarray(tracker(params)[1], np.float64)
+
+
 def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     """The one-step cost of ``windows`` (horizon 1) as ``|columns @ theta + offset - target|^2``
     over the model's linear unknowns."""
@@ -202,7 +216,7 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
             )
             known = np.array(known, np.float64)  # [S, P, D], a writable copy
 
-    unknowns = _Unknowns(model, known, windows.times)
+    unknowns = _Unknowns(model, known, windows.times, _start_phases(model, windows))
     for name in topo.active():
         kind = bonds.get(name)
         if kind.linear is not None:

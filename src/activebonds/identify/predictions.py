@@ -139,13 +139,18 @@ def tracked_phases(
 
 @float64
 def one_step(
-    model: Model, positions: np.ndarray, dt: float, substeps: int = 1, method: str = "euler"
+    model: Model,
+    positions: np.ndarray,
+    dt: float,
+    substeps: int = 1,
+    method: str = "euler",
+    offset: int = 0,
 ) -> np.ndarray:
     """Prediction of every frame t >= 2 from the recorded frames t - 1 and t - 2, [F, P, D].
 
     NaN where an input frame misses a marker, and for frames 0 and 1. Time is 0 at frame 0
-    (the fitted window's first frame); an entrained drive's phase is tracked along the
-    recording (:func:`tracked_phases`)."""
+    (the fitted window's first frame), or ``offset`` frames before it; an entrained drive's
+    phase is tracked along the recording from there (:func:`tracked_phases`)."""
     x = np.asarray(positions, dtype=np.float64)
     out = np.full_like(x, np.nan)
     if x.shape[0] < 3:
@@ -154,13 +159,13 @@ def one_step(
     ok = np.isfinite(prev).all(axis=(1, 2)) & np.isfinite(prev2).all(axis=(1, 2))
     x0 = np.where(ok[:, None, None], prev, 0.0)
     x_prev = np.where(ok[:, None, None], prev2, 0.0)
-    psi = tracked_phases(model, x, dt, substeps)
+    psi = tracked_phases(model, x, dt, substeps, offset)
     psis = None if psi is None else (jnp.asarray(psi[:-2]), jnp.asarray(psi[1:-1]))
     pred = _one_step(
         float64_params(model),
         jnp.asarray(x_prev),
         jnp.asarray(x0),
-        jnp.arange(1, x.shape[0] - 1) * float(dt),
+        (jnp.arange(1, x.shape[0] - 1) + max(int(offset), 0)) * float(dt),
         float(dt),
         topo=StaticTopology(model.topology),
         substeps=int(substeps),
@@ -183,13 +188,15 @@ def free_run(
     method: str = "euler",
     phases: np.ndarray | None = None,
     with_phases: bool = False,
+    offset: int = 0,
 ) -> tuple[np.ndarray, ...]:
     """Free run from the first two complete consecutive recorded frames.
 
     Returns positions and velocities [n_frames, P, D] (velocities are the model's own state;
     frames before the start are the recording and NaN velocities). Once a frame goes
     non-finite, it and every later frame are NaN. An entrained drive starts with its phase
-    tracked along ``positions`` (:func:`tracked_phases`), or at ``phases`` [F] when given
+    tracked along ``positions`` (:func:`tracked_phases`; time 0 ``offset`` frames before
+    the first frame, as :func:`one_step`'s), or at ``phases`` [F] when given
     (e.g. tracked along a recording whose frames before the start are hidden here); with
     ``with_phases``, the run's phases [n_frames] are returned too (NaN where unknown; the
     tracked ones up to the start)."""
@@ -205,7 +212,7 @@ def free_run(
     s = int(starts[0])
     xs[: s + 1] = x[: s + 1]
     if phases is None:
-        phases = tracked_phases(model, x, dt, substeps)
+        phases = tracked_phases(model, x, dt, substeps, offset)
     psis = None
     if phases is not None:
         psis = (jnp.asarray(phases[s - 1]), jnp.asarray(phases[s]))
@@ -214,7 +221,7 @@ def free_run(
         float64_params(model),
         jnp.asarray(x[s - 1]),
         jnp.asarray(x[s]),
-        s * float(dt),
+        (s + max(int(offset), 0)) * float(dt),
         float(dt),
         topo=StaticTopology(model.topology),
         n_steps=max(n - s - 1, 1),

@@ -166,13 +166,24 @@ def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
     """The static part of an entrained drive (None without one, or with the kind that holds
     the drive disabled: no neuron reads it then)."""
     coupling = spec.drive.coupling if spec.drive is not None else None
-    kind = bonds.drive_kind()
-    if coupling is None or kind is None or kind in disable:
+    if coupling is None:
         return None
-    holder = int(np.flatnonzero(arrays[kind]["neural"])[0])
-    axis = spec.dimension - 1  # "height": the last axis
-    which = [coupling.particle] if coupling.signal == "height" else coupling.particles
-    return Coupling(tuple(names[n] for n in which), axis, float(coupling.offset), holder)
+    for kind in bonds.drive_kinds():  # the first kind, in order, with a bond that reads it
+        if kind in disable:
+            continue
+        par = next(p for p in bonds.get(kind).shared if p.field == "drive_frequency")
+        readers = [takes(b, par) for b in spec.bond if b.kind == kind]
+        if any(readers):
+            axis = spec.dimension - 1  # "height": the last axis
+            which = [coupling.particle] if coupling.signal == "height" else coupling.particles
+            return Coupling(
+                tuple(names[n] for n in which),
+                axis,
+                float(coupling.offset),
+                readers.index(True),
+                kind,
+            )
+    return None
 
 
 def _file_params(spec: ModelSpec) -> Params:

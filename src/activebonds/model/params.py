@@ -18,13 +18,15 @@ import numpy as np
 class Coupling(NamedTuple):
     """What pulls an entrained drive's phase (static): minus ``offset`` (m), the coordinate
     ``axis`` of particle ``particles[0]`` (one particle: a height) or the distance between
-    ``particles`` (two: a length); the drive's shared numbers are read from the binary bond
-    at index ``holder`` (the first neural one)."""
+    ``particles`` (two: a length); the drive's shared numbers are read from the bond of kind
+    ``kind`` at index ``holder`` among its kind's (the first that reads the drive: a neural
+    bond, or a periodic force)."""
 
     particles: tuple[int, ...]
     axis: int
     offset: float
     holder: int
+    kind: str
 
 
 @dataclass(frozen=True, eq=False)

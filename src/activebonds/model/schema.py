@@ -83,6 +83,14 @@ class Drive(_Strict):
     coupling: Coupling | None = None
 
 
+def _reads_drive(bond) -> bool:
+    """Whether a bond of the model file reads the rhythmic drive (takes its frequency)."""
+    if bond.kind not in bonds.drive_kinds():
+        return False
+    par = next(p for p in bonds.get(bond.kind).shared if p.field == "drive_frequency")
+    return not par.when or bool(getattr(bond, par.when, False))
+
+
 def entry_at(spec, key: str):
     """The entry of a dotted key of the model file (``drive.coupling.gain``), None where a
     table on its path is absent."""
@@ -327,10 +335,10 @@ class ModelSpec(_Strict):
         for key, name in named:
             if name not in names:
                 raise ValueError(f"drive.coupling.{key}: unknown particle '{name}'")
-        if not any(getattr(b, "neural", False) for b in self.bond):
+        if not any(_reads_drive(b) for b in self.bond):
             raise ValueError(
-                "drive.coupling: an entrained drive needs a neural bond to read it (its "
-                "frequency, gain and start phase are held by the neural bonds)"
+                "drive.coupling: an entrained drive needs a neural bond or a periodic force to "
+                "read it (its frequency, gain and start phase are held by them)"
             )
 
     def _check_shared(self) -> None:

@@ -43,7 +43,7 @@ def entrained(topo: Topology) -> bool:
 
 def numbers(params: Params, topo: Topology):
     """(f in Hz, gain sigma, start phase) of the drive, from the bond that holds them."""
-    held, k = params.bonds[bonds.drive_kind()], topo.drive.holder
+    held, k = params.bonds[topo.drive.kind], topo.drive.holder
     return held["drive_frequency"][k], held["drive_gain"][k], held["drive_start"][k]
 
 
@@ -74,12 +74,17 @@ def rate(params: Params, topo: Topology, x, psi):
 
 
 def at_phase(params: Params, psi) -> Params:
-    """The parameters with the drive's phase set for the forces (every binary bond reads it;
-    only those with a drive weight are moved by it)."""
-    kind = bonds.drive_kind()
-    held = dict(params.bonds[kind])
-    held[DRIVE_STATE] = jnp.broadcast_to(psi, jnp.shape(held["drive_weight"]))
-    return params._replace(bonds={**params.bonds, kind: held})
+    """The parameters with the drive's phase set for the forces of every kind that reads the
+    drive (every binary bond reads it, only those with a drive weight are moved by it; every
+    periodic force)."""
+    out = dict(params.bonds)
+    for kind in bonds.drive_kinds():
+        if kind not in out:
+            continue
+        held = dict(out[kind])
+        held[DRIVE_STATE] = jnp.broadcast_to(psi, jnp.shape(held["drive_frequency"]))
+        out[kind] = held
+    return params._replace(bonds=out)
 
 
 def recorded_signal(

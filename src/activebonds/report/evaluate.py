@@ -159,6 +159,7 @@ def evaluate(
     feet: Sequence[str] | None = None,
     up: Sequence[float] | None = None,
     body: Sequence[str] | None = None,
+    origin: int | None = None,
 ) -> Evaluation:
     """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
     particle, in order; default the model's). ``substeps`` and ``integrator``: the
@@ -166,7 +167,10 @@ def evaluate(
     comparison (1: one step only). ``gait``: score the free runs as a gait too
     (:mod:`activebonds.report.gait_runs`; ``feet``: particle names, ``up``: a vector, each
     found from the model or the recording when not given). ``body``: particle (or marker)
-    names whose errors alone count in a second set of the free-run numbers. Raises
+    names whose errors alone count in a second set of the free-run numbers. ``origin``: the
+    recording's frame where the model's time is 0 (a clock drive and a moving anchor start
+    there, an entrained drive's phase is tracked from there, the frames before the window
+    filled as ``fit --validate`` fills them); default the window's first frame. Raises
     :class:`InputError` (one line) for markers or frames the recording does not have, or a
     ``body`` name the model does not have."""
     from ..identify.problem import select_data
@@ -186,16 +190,19 @@ def evaluate(
     if int(horizon) < 1:
         raise InputError("--horizon", f"must be at least 1, got {horizon}")
     start = settings.frames[0]
+    if origin is not None and not 0 <= int(origin) <= start:
+        raise InputError("--origin", f"must be a frame from 0 to the window's first, {start}")
+    offset = 0 if origin is None else start - int(origin)
     data = select_data(model, recording, settings)
     found = window_metrics(
-        model, data, substeps, integrator, starts=starts, threshold_mm=threshold_mm
+        model, data, substeps, integrator, offset, starts=starts, threshold_mm=threshold_mm
     )
     picked = _body(body, model.particle_names, data.markers)
     body_found = None
     if picked:
         options = {"starts": starts, "threshold_mm": threshold_mm, "markers": picked}
-        body_found = window_metrics(model, data, substeps, integrator, **options)
-    pred = predict(model, data, substeps=substeps, method=integrator)
+        body_found = window_metrics(model, data, substeps, integrator, offset, **options)
+    pred = predict(model, data, substeps=substeps, method=integrator, offset=offset)
     rec = np.asarray(data.positions, np.float64)
     first = start_frames(rec, 1)
     zero_one, zero_run = zero_force_predictions(rec, first[0] if first else rec.shape[0])
@@ -222,7 +229,9 @@ def evaluate(
         model=found["model"],
         zero_force=found["zero_force"],
         particles=particles,
-        comparisons=tuple(comparisons(model, data, horizon, substeps=substeps, method=integrator)),
+        comparisons=tuple(
+            comparisons(model, data, horizon, substeps=substeps, method=integrator, offset=offset)
+        ),
         gait=gait_evaluation(
             model,
             data,
@@ -230,6 +239,7 @@ def evaluate(
             integrator=integrator,
             feet=feet,
             up=up,
+            offset=offset,
             first_frame=start,
         )
         if gait

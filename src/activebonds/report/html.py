@@ -389,25 +389,31 @@ def free_run_table(record: RunRecord) -> Table | None:
 
 def gait_section(record: RunRecord, pred: Prediction, fig_dir: Path) -> Section | None:
     """The gait of the model's free runs (:mod:`activebonds.report.gait_runs`), when the
-    model puts particles in contact with a surface (its feet) and their recorded heights
-    have a period: on the frames after the fitted window when they hold two strides, else
-    on the fitted window; None otherwise."""
+    model puts particles in contact with a surface (its feet) or has a rhythmic drive (its
+    feet the lowest markers, up against its gravity or the recording's guess), and the feet's
+    recorded heights have a period: on the frames after the fitted window when they hold two
+    strides, else on the fitted window; None otherwise."""
     from ..data import Trajectory
     from . import gait as g
-    from .gait_runs import COLUMNS, contact_feet, gait_evaluation
+    from .gait_runs import COLUMNS, choose_feet, choose_up, contact_feet, gait_evaluation
 
     model = record.model
-    if not contact_feet(model):
+    if not contact_feet(model) and model.spec.drive is None:
         return None
     s = record.settings
+    whole = pred.recorded
+    whole_data = Trajectory(whole, np.isfinite(whole).all(axis=-1), pred.markers, 1.0 / pred.dt)
+    try:
+        up = choose_up(model, whole_data, None)[0]
+        feet = choose_feet(model, whole_data, up, None)[0]
+    except InputError:
+        return None
     lo = 0
     if pred.extended:
         later = pred.recorded[pred.fit_frames :]
-        up = -np.asarray(model.params.gravity, np.float64)
-        if np.linalg.norm(up) > 0:
-            t = g.dominant_period(g.vertical(later, up)[:, contact_feet(model)])
-            if np.isfinite(t) and later.shape[0] >= 2 * t:
-                lo = pred.fit_frames
+        t = g.dominant_period(g.vertical(later, up)[:, list(feet)])
+        if np.isfinite(t) and later.shape[0] >= 2 * t:
+            lo = pred.fit_frames
     window = pred.recorded[lo:]
     data = Trajectory(window, np.isfinite(window).all(axis=-1), pred.markers, 1.0 / pred.dt)
     first = int(s.frames[0]) + lo

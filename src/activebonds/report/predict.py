@@ -45,10 +45,10 @@ def _activations(params, xs, vs, ts, topo: StaticTopology, psis=None):
 
 @float64
 def activations(
-    model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0, phases=None
+    model: Model, xs: np.ndarray, vs: np.ndarray, dt: float = 0.0, phases=None, offset: int = 0
 ) -> np.ndarray:
-    """Neuron activations at each state (x, v) of frames 0, 1, ... (time ``frame * dt``, for
-    a rhythmic drive; an entrained drive's phase ``phases`` [F]), [F, B]; 0 for non-neural
+    """Neuron activations at each state (x, v) of frames 0, 1, ... (time ``(offset + frame)
+    dt``, for a rhythmic drive; an entrained drive's phase ``phases`` [F]), [F, B]; 0 for non-neural
     bonds, NaN where the state (or an entrained drive's phase) is unknown."""
     xs = np.asarray(xs, np.float64)
     vs = np.asarray(vs, np.float64)
@@ -64,7 +64,7 @@ def activations(
         psis = jnp.asarray(phases[ok])
     if not ok.any():
         return out
-    ts = jnp.asarray(np.arange(xs.shape[0])[ok] * float(dt))
+    ts = jnp.asarray((np.arange(xs.shape[0])[ok] + max(int(offset), 0)) * float(dt))
     act = _activations(
         float64_params(model),
         jnp.asarray(xs[ok]),
@@ -181,10 +181,12 @@ def predict(
     fit_frames: int | None = None,
     substeps: int = 1,
     method: str = "euler",
+    offset: int = 0,
 ) -> Prediction:
     """One-step and free-run predictions of ``model`` along ``traj`` (markers already in the
     model's particle order). ``fit_frames``: length of the fitted window at the start of
-    ``traj`` (default: all of it)."""
+    ``traj`` (default: all of it); ``offset``: frames from the model's time origin to
+    ``traj``'s first frame (:func:`~activebonds.identify.predictions.one_step`)."""
     if traj.n_markers != model.topology.n_particles:
         raise ValueError(
             f"{traj.n_markers} markers for a model of {model.topology.n_particles} particles"
@@ -193,9 +195,9 @@ def predict(
     n = rec.shape[0]
     fit = n if fit_frames is None else max(1, min(int(fit_frames), n))
     dt = traj.dt
-    one = one_step(model, rec, dt, substeps, method)
-    xs, vs, psis = free_run(model, rec, dt, n, substeps, method, with_phases=True)
-    act = activations(model, xs, vs, dt, psis)
+    one = one_step(model, rec, dt, substeps, method, offset)
+    xs, vs, psis = free_run(model, rec, dt, n, substeps, method, with_phases=True, offset=offset)
+    act = activations(model, xs, vs, dt, psis, offset)
     pairs_of_bonds, neural = neural_bonds(model.topology)
     sat, per = saturation_share(act, neural)
     complete = np.isfinite(rec).all(axis=(1, 2))
