@@ -274,11 +274,17 @@ def contact_energy(p, t, x) -> np.ndarray:
     return energy
 
 
+def no_energy(p, t, x) -> np.ndarray:
+    """A driven force (periodic) stores no potential energy."""
+    return np.zeros(np.shape(_arr(x))[:-2])
+
+
 KIND_ENERGIES = {
     "unary": unary_energy,
     "binary": binary_energy,
     "ternary": ternary_energy,
     "contact": contact_energy,
+    "periodic": no_energy,
 }
 
 

@@ -93,6 +93,11 @@ normal = [0.0, 0.0, 2.0]
 stiffness = { value = 1e4, min = 1e2, max = 1e6 }
 friction = { value = 0.8, min = 0.0, max = 2.0 }
 surface_velocity = { value = [0.1, 0.0, 0.0], min = -1.0, max = 1.0 }
+
+[[bond]]
+kind = "periodic"
+particles = ["A"]
+sin2 = { value = [0.0, 1.0, 0.0], min = -5.0, max = 5.0 }
 """
 
 # name, then the fields: owner, kind, bonds, key, part, axis, source, particle, type
@@ -100,7 +105,8 @@ B = "binary"
 EXPECTED = [
     ("mass:A.mass", "mass", None, (), "mass", None, None, None, "A", None),
     ("gravity.magnitude", "gravity", None, (), "magnitude", None, None, None, None, None),
-    ("drive.frequency", "shared", B, (1,), "drive.frequency", None, None, None, None, None),
+    # shared by the neural bond and the periodic force (bond 7)
+    ("drive.frequency", "shared", B, (1, 7), "drive.frequency", None, None, None, None, None),
     ("bond[0].stiffness", "bond", B, (0,), "stiffness", None, None, None, None, None),
     ("bond[0].damping", "bond", B, (0,), "damping", None, None, None, None, None),
     ("bond[1].gain", "bond", B, (1,), "gain", None, None, None, None, None),
@@ -154,6 +160,9 @@ EXPECTED = [
         None,
         None,
     ),  # fmt: skip
+    ("bond[7].sin2[0]", "bond", "periodic", (7,), "sin2", None, 0, None, None, None),
+    ("bond[7].sin2[1]", "bond", "periodic", (7,), "sin2", None, 1, None, None, None),
+    ("bond[7].sin2[2]", "bond", "periodic", (7,), "sin2", None, 2, None, None, None),
 ]
 FIELDS = ("owner", "kind", "bonds", "key", "part", "axis", "source", "particle", "type")
 
@@ -184,6 +193,7 @@ def test_every_gene_knows_its_owner_bonds_key_and_part_and_its_name_is_derived()
         "bond[4]",
         "bond[5]",
         "bond[6]",
+        "bond[7]",
     )
     assert [model.layout.groups[g.group] for g in genes] == [g.group_name for g in genes]
 
@@ -199,7 +209,8 @@ def test_labels_read_the_fields_and_match_the_names():
     ]
     assert labels[8] == "neural B-C length weight from B-D"
     assert labels[13] == "spring type diagonal stiffness"
-    assert labels[-1] == "contact D surface_velocity z"
+    assert labels[-4] == "contact D surface_velocity z"
+    assert labels[-1] == "periodic force A sin2 z"
     # the same words from the machine key alone (names stored in files)
     assert [parameter_label(model.spec, g.name) for g in model.layout.genes] == labels
     assert parameter_label(model.spec, "bond[1].weights") == "neural B-C weights"
@@ -256,6 +267,7 @@ def test_least_squares_asks_the_kinds_which_genes_are_linear():
     names = [model.layout.genes[g].name for g in nonlinear_genes(model)]
     linear = {"gravity.magnitude", "bond[0].stiffness", "bond[0].damping"}
     linear |= {"type:diagonal.stiffness"} | {f"bond[4].anchor[{a}]" for a in range(3)}
+    linear |= {f"bond[7].sin2[{a}]" for a in range(3)}  # a periodic force's coefficients
     assert set(names) == {g.name for g in model.layout.genes} - linear
 
 
