@@ -415,6 +415,8 @@ def test_filled_file_reads_back_without_the_filled_gaps(tmp_path, ext):
         (["--frames", "10:4"], "--frames: 10:4 is not a window of 120 frames"),
         (["--max-gap", "0"], "--max-gap: expected a positive number of frames, got 0"),
         (["--continuity", "0"], "--continuity: expected a positive weight, got 0.0"),
+        (["--prior", "ica"], "--prior: expected pca, got 'ica'"),
+        (["--method", "spline", "--prior", "pca"], "--prior: needs --method model, not spline"),
     ],
 )
 def test_hard_cases_are_one_line_and_write_nothing(tmp_path, args, line):
