@@ -203,6 +203,12 @@ def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill():
     assert rms(fused.values) < 5e-4
     assert rms(fused.values - fused.pure + truth.positions) < 5e-4  # fused vs pure
     assert "the PCA fill weighed in as a prior on 1 stretch(es)" in fused.note()
+    # without noise the true model's fill stays exact (measured 5e-12 m), and the note does
+    # not blame the model for the prior's steady pull on its defects
+    exact = _traj(truth.positions, missing=[(1, 40, 70)], markers=model.markers)
+    clean = model_fill(model, plan_fill(exact, model.markers), prior="pca")
+    assert np.abs(clean.values[40:70, 1] - truth.positions[40:70, 1]).max() < 1e-6
+    assert "correlated" not in clean.note()
 
 
 def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
@@ -415,6 +421,8 @@ def test_filled_file_reads_back_without_the_filled_gaps(tmp_path, ext):
         (["--frames", "10:4"], "--frames: 10:4 is not a window of 120 frames"),
         (["--max-gap", "0"], "--max-gap: expected a positive number of frames, got 0"),
         (["--continuity", "0"], "--continuity: expected a positive weight, got 0.0"),
+        (["--prior", "ica"], "--prior: expected pca, got 'ica'"),
+        (["--method", "spline", "--prior", "pca"], "--prior: needs --method model, not spline"),
     ],
 )
 def test_hard_cases_are_one_line_and_write_nothing(tmp_path, args, line):

@@ -104,7 +104,7 @@ class Segment:
     rms_mm: float  # of the present samples, at the solution
     continuity: float = CONTINUITY_WEIGHT  # weight of a continuity defect
     scale: float = 1.0  # the posterior SD's scale (:func:`error_scale`)
-    tau: float = 1.0  # the continuity defects' integrated autocorrelation
+    tau: float = 1.0  # the continuity defects' integrated autocorrelation (the model's own fit)
     prior_weight: float = float("nan")  # the median weight of a prior sample; NaN: no prior
 
     def record(self) -> dict:
@@ -496,6 +496,9 @@ def model_fill(
             longest=max(inside, default=b - a),
         )
         xs, sd, z, solved = fit()
+        # the note on the model's continuity defects speaks of the model's own fit: a prior's
+        # steady pull correlates the defects even of a true model
+        model_tau = solved.tau
         prior_w = float("nan")
         if guide is not None:
             pure[a:b] = xs
@@ -514,7 +517,7 @@ def model_fill(
             solved.rms_mm,
             continuity=weight,
             scale=solved.scale,
-            tau=solved.tau,
+            tau=model_tau,
             prior_weight=prior_w,
         )
         segments.append(seg)
