@@ -94,16 +94,22 @@ def test_linear_and_spline_are_exact_on_lines_and_cubics():
     assert sigma[0].shape == (10,) and np.max(sigma[0]) < 1e-12
 
 
-def test_pca_reconstructs_a_marker_from_a_low_dimensional_motion():
-    """Six markers moving as a body that translates (any way) and bends in two modes: the
-    missing marker is the combination of the modes the present ones show (to rounding)."""
+def _low_rank_motion() -> np.ndarray:
+    """Six markers [200, 6, 3] moving as a body that translates (any way) and bends in two
+    modes."""
     rng = np.random.default_rng(3)
     f = np.arange(200.0)
     modes = rng.normal(size=(2, 6, 3)) * 0.05
     base = rng.normal(size=(6, 3)) * 0.3
     weights = np.stack([np.sin(f / 9.0), np.cos(f / 13.0)], -1)
     drift = np.stack([0.01 * f, np.sin(f / 30.0), 0.002 * f**1.5], -1)
-    x = base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+    return base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+
+
+def test_pca_reconstructs_a_marker_from_a_low_dimensional_motion():
+    """Six markers moving as a body that translates (any way) and bends in two modes: the
+    missing marker is the combination of the modes the present ones show (to rounding)."""
+    x = _low_rank_motion()
     t = _traj(x, missing=[(2, 50, 110)])
     plan = plan_fill(t, tuple("ABCDEF"))
     pca = fill_baseline("pca", plan.positions, plan.mask, plan.local())
@@ -220,13 +226,7 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
     from activebonds.identify.fill import model_fill
     from activebonds.model import loads_model
 
-    rng = np.random.default_rng(3)
-    f = np.arange(200.0)
-    modes = rng.normal(size=(2, 6, 3)) * 0.05
-    base = rng.normal(size=(6, 3)) * 0.3
-    weights = np.stack([np.sin(f / 9.0), np.cos(f / 13.0)], -1)
-    drift = np.stack([0.01 * f, np.sin(f / 30.0), 0.002 * f**1.5], -1)
-    x = base + np.einsum("fk,kmd->fmd", weights, modes) + drift[:, None, :]
+    x = _low_rank_motion()
     names = tuple("ABCDEF")
     lines = ['name = "six"', "dimension = 3"]
     lines += [f'[[particle]]\nname = "{m}"\nmass = 1.0' for m in names]
