@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..physics.integrate import stiff
 from .cost import join_windows, make_residuals, make_windows
 from .lm import JITTER
 from .problem import Identification
@@ -121,6 +122,11 @@ def _restart_step(ident, settings, genome, horizon) -> np.ndarray | str:
     """The natural parameters after one Gauss-Newton step of the restart cost at FINER
     substeps (least squares over the parameters, columns scaled)."""
     layout = ident.model.layout
+    if stiff(ident.model.topology):
+        # the start velocities of a stiff kind (contacts) are Newton solves with a Jacobian of
+        # their own; forward mode over the parameters through them left XLA waiting forever
+        # (the tutorial's contact model), as Newton's chord method did on a 41-marker body
+        return "a contact's start velocities are Newton solves, not differentiated twice here"
     windows = join_windows(
         [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in ident.all_data]
     )
