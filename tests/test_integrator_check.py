@@ -90,3 +90,20 @@ def test_a_shooting_fit_at_one_substep_is_checked_by_its_normal_equations(tmp_pa
     ]
     assert abs(checked["after"] - true) < 0.5 * abs(checked["before"] - true)
     assert any(w.startswith("at --substeps 4 the parameters move") for w in record["warnings"])
+
+
+def test_a_contact_model_on_the_restart_cost_is_not_checked_and_says_why():
+    """Forward mode over the parameters through a contact's Newton start velocities left XLA
+    waiting (the tutorial's fit): such a check is not made, and the warning stays in words."""
+    from activebonds.data import read_trajectory
+    from activebonds.data.bundled import dataset
+    from helpers import EXAMPLES
+
+    model = load_model(EXAMPLES / "horse_trot_ground.toml")
+    recording = read_trajectory(dataset("horse-trot").path).window(0, 40)
+    settings = FitSettings()
+    ident = identification(model, recording, settings)
+    genome = np.asarray(ident.model.layout.initial(), np.float64)
+    why = integrator_check.check(ident, settings, genome, 1, [])
+    assert why.startswith("a contact's start velocities are Newton solves")
+    assert "64 % coverage" in uncertainty.warnings("restart", 1, 1, (), why)[1]
