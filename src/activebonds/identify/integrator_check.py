@@ -26,15 +26,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..physics.integrate import stiff
-from .cost import join_windows, make_residuals, make_windows
 from .lm import JITTER
 from .problem import Identification
 from .settings import FitSettings
 from .shooting import join_shooting, shooting_windows, start_states
 from .shooting_normal import damped_step, make_normal
+from .uncertainty import Z95, _residual_function
 
 FINER = 4  # substeps of the check
-Z95 = 1.959963984540054
 MAX_BYTES = 2**28  # the check's dense Jacobian at most (256 MiB)
 MAX_GENES = 200  # a larger model is not checked (the check would compile longer than it fits)
 AT_BOUND = 1e-6  # of its span: a parameter this close to a bound is held there, not judged
@@ -127,17 +126,12 @@ def _restart_step(ident, settings, genome, horizon) -> np.ndarray | str:
         # their own; forward mode over the parameters through them left XLA waiting forever
         # (the tutorial's contact model), as Newton's chord method did on a 41-marker body
         return "a contact's start velocities are Newton solves, not differentiated twice here"
-    windows = join_windows(
-        [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in ident.all_data]
-    )
-    size = 8.0 * windows.target.size * layout.n_genes
+    finer = settings.model_copy(update={"substeps": FINER})
+    # the uncertainty's own residuals (natural units), at FINER substeps
+    flat, _, _, observed, _ = _residual_function(ident, finer, horizon, "restart", None)
+    size = 8.0 * observed * layout.n_genes
     if size > MAX_BYTES:
         return f"its Jacobian would take {size / 2**20:.0f} MiB"
-    residuals = make_residuals(ident.model, windows, FINER, settings.integrator)
-    log = jnp.asarray(layout.log)
-
-    def flat(theta):  # natural units, as the standard errors
-        return residuals(jnp.where(log, jnp.log(theta), theta)).ravel()
 
     def both(theta):  # the residuals beside their Jacobian: one program
         r = flat(theta)
