@@ -26,6 +26,12 @@ steps) as soft observations, weighed by the PCA fill's cross-validated error aga
 first fit's scaled residual SD (``identify.fill.pca_prior``); one call gives both, ``model``
 being its first fit.
 
+``--model gait`` (the horse recordings) replaces the spring body by the gait model of
+``scripts/horse_gait.py`` (an anchor and a periodic force per marker, the drive's phase
+entrained by the left fore hoof; the variant that script chose per gait, :data:`GAIT_VARIANTS`),
+built and solved on the other half alone; its fill tracks the phase along the recording
+(``identify.fill.fill_phases``).
+
 ``--model auto`` replaces the spring body by ``activebonds auto``'s linear model of the half
 (complete graph and an anchor per marker, the variant chosen on the half's validation tail,
 exact least squares: :func:`auto_half`). ``--fitted-on same`` fits each half's model on the
@@ -93,6 +99,31 @@ def auto_half(traj, frames: tuple[int, int]):
     variant = choice.chosen if choice is not None else Variant()
     model = build(decide(base, traj, frames, variant).spec)
     part = traj.select(list(model.markers)).window(*frames)
+    one = one_step(model, np.asarray(part.positions), part.dt)
+    return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
+
+
+# The gait model's variant per horse recording (signal, harmonics, coupling gain rad/s per m):
+# the ones scripts/horse_gait.py chose on frames 150-299 of each gait after a fit on 0-149
+GAIT_VARIANTS = {"horse-trot": ("height", 6, 50.0), "horse-walk": ("length", 6, 50.0)}
+
+
+def gait_half(name: str, traj, frames: tuple[int, int]):
+    """The gait model of ``scripts/horse_gait.py`` (an anchor and a periodic force per marker,
+    the drive's phase entrained by the left fore hoof) built and solved by the exact least
+    squares on ``frames`` alone (anchors, stride frequency and signal offset from them too);
+    (model, its one-step RMS mm on ``frames``)."""
+    if name not in GAIT_VARIANTS:
+        raise SystemExit(f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})")
+    sys.path.insert(0, str(ROOT.parent / "scripts"))
+    from horse_gait import model_text, solved, variant_spec
+
+    from activebonds.identify.predictions import one_step, rms_mm
+
+    signal, harmonics, gain = GAIT_VARIANTS[name]
+    part = traj.window(*frames)
+    text = model_text(part, harmonics, gain, signal)
+    model = solved(variant_spec(text, part, "anchors"), part, (0, part.n_frames))
     one = one_step(model, np.asarray(part.positions), part.dt)
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
@@ -245,6 +276,8 @@ def run(args) -> dict:
             other = halves[1 - h] if args.fitted_on == "other" else frames
             if args.model == "auto":
                 model, rms = auto_half(traj, other)
+            elif args.model == "gait":
+                model, rms = gait_half(name, traj, other)
             else:
                 model, rms = fit_half(base, traj, other)
             models.append(model)
@@ -379,10 +412,11 @@ def main() -> None:
     )
     p.add_argument(
         "--model",
-        choices=("springs", "auto"),
+        choices=("springs", "auto", "gait"),
         default="springs",
-        help="the fitted model: the spring body, or auto's linear model (complete graph and "
-        "anchors, issue 25)",
+        help="the fitted model: the spring body, auto's linear model (complete graph and "
+        "anchors, issue 25), or the horse's gait model (anchors, periodic forces, an entrained "
+        "phase: scripts/horse_gait.py, issue 28; horse recordings only)",
     )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(

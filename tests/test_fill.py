@@ -505,3 +505,35 @@ def test_fill_report_is_one_self_contained_page(tmp_path):
     )
     assert bad.returncode == 2 and "--report: expected an .html page" in bad.stderr
     assert not (tmp_path / "f2.trc").exists()
+
+
+def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
+    """The entrained triangle (its drive's phase pulled by C's height) simulated at one Euler
+    substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
+    tracked along the record from the start phase; a gap in C, the signal itself, runs the
+    phase at the drive's frequency there and still fills far closer than the spline."""
+    from test_entrained_drive import entrained
+
+    from activebonds.identify.fill import fill_phases, model_fill
+    from activebonds.model import loads_model
+    from activebonds.physics import phase
+
+    model = loads_model(entrained())
+    truth = simulate(model, 150, 60.0)
+    t = _traj(truth.positions, missing=[(0, 50, 80)], markers=model.markers)
+    found = model_fill(model, plan_fill(t, model.markers))
+    err = np.linalg.norm(found.values[50:80, 0] - truth.positions[50:80, 0], axis=-1)
+    assert err.max() < 1e-6
+    # the phases the fill starts its windows from: tracked along C's recorded height
+    plan = plan_fill(t, model.markers)
+    psi = fill_phases(model, model.layout.initial(), plan.positions, plan.mask, t.dt)
+    s = phase.signal(model.topology, np.asarray(truth.positions), np)
+    assert np.abs(psi - np.asarray(phase.track(model.params, model.topology, s, t.dt))).max() < 1e-12
+    # a gap in the signal's marker: the phase runs free through it
+    t = _traj(truth.positions, missing=[(2, 50, 80)], markers=model.markers)
+    plan = plan_fill(t, model.markers)
+    found = model_fill(model, plan)
+    err = np.linalg.norm(found.values[50:80, 2] - truth.positions[50:80, 2], axis=-1)
+    spl = fill_baseline("spline", plan.positions, plan.mask, plan.local())
+    spline_err = np.linalg.norm(spl[50:80, 2] - truth.positions[50:80, 2], axis=-1)
+    assert np.sqrt(np.mean(err**2)) < 0.1 * np.sqrt(np.mean(spline_err**2))

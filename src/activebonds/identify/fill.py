@@ -48,6 +48,14 @@ markers present decide; where the model is unsure (long gaps, a hoof in a trot),
 does. The second fit's positions and uncertainties are the fill's; the first fit's positions
 are kept (``ModelFill.pure``).
 
+An entrained drive's phase (``[drive] coupling``) is not a variable of the fill: it is
+tracked along the window's record from the start phase at its first frame
+(:func:`fill_phases`), as a fit tracks it, and each shooting window starts from its frame's
+tracked phase. Through a gap in the signal's own marker the phase is first run at the drive's
+frequency (the coupling off), then tracked along the model's fill of the signal and the
+stretch refitted, until the phase stops moving (:data:`PHASE_ROUNDS`): the phase is the
+model's state, driven by the model's own trajectory where the record says nothing.
+
 The states' Levenberg-Marquardt steps are solved by LAPACK (:class:`_LapackStep`), damped
 from 1e-3 of Marquardt's diagonal: on the 41-marker human walk a 30-frame gap took 23 steps
 from a damping of 1 (velocities, whose defects weigh dt times a position's, moved a third
@@ -90,6 +98,8 @@ MARQUARDT = True
 DAMPING = 1e-3
 LAPACK = True
 SHAPE = True
+PHASE_ROUNDS = 8  # fills of a gap in an entrained drive's signal, each tracking its phase
+PHASE_TOL = 1e-9  # along the last (radians: the rounds stop when it moves less)
 TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
@@ -307,7 +317,7 @@ def continuity_weight(ratio: float) -> float:
 
 
 def one_step_ratio(
-    model: Model, genome, positions, mask, dt, first, substeps=1, integrator="euler"
+    model: Model, genome, positions, mask, dt, first, substeps=1, integrator="euler", phases=None
 ) -> float:
     """How much of the motion's accelerations the model leaves unexplained: on the frames t of
     ``positions`` [S, M, D] where every marker is present at t - n, t and t + n
@@ -315,7 +325,8 @@ def one_step_ratio(
     over the RMS of the second difference alone (zero force's), with v the central difference
     over 2 n frames; NaN without such frames. Over several frames the accelerations outgrow
     the marker noise, which a one-frame ratio would measure instead. (``substeps`` and
-    ``integrator`` are the fill's; the ratio reads the forces alone.)"""
+    ``integrator`` are the fill's; the ratio reads the forces alone. ``phases`` [S]: an
+    entrained drive's phase at each frame.)"""
     from ..physics.forces import total_force
 
     n = RATIO_FRAMES
@@ -329,14 +340,33 @@ def one_step_ratio(
     params = model.layout.decode(genome)
     v = (nxt - prev) / (2 * n * dt)
 
-    def accel(x0, v0, time):
-        return total_force(params, model.topology, x0, v0, time) / params.mass[:, None]
+    def accel(x0, v0, time, *psi):
+        held = phase.at_phase(params, psi[0]) if psi else params
+        return total_force(held, model.topology, x0, v0, time) / params.mass[:, None]
 
-    a = np.asarray(jax.vmap(accel)(jnp.asarray(x), jnp.asarray(v), jnp.asarray((t + first) * dt)))
+    extra = () if phases is None else (jnp.asarray(np.asarray(phases)[t]),)
+    a = jax.vmap(accel)(jnp.asarray(x), jnp.asarray(v), jnp.asarray((t + first) * dt), *extra)
+    a = np.asarray(a)
     second = nxt - 2.0 * x + prev
     e_model = float(np.sqrt(np.mean(np.square(second - (n * dt) ** 2 * a))))
     e_zero = float(np.sqrt(np.mean(np.square(second))))
     return e_model / e_zero if e_zero > 0.0 else float("nan")
+
+
+def fill_phases(model: Model, genome, positions, mask, dt, substeps=1) -> np.ndarray | None:
+    """An entrained drive's phase at every frame [S] of ``positions`` [S, M, D], tracked
+    from the start phase at the first frame (:func:`~activebonds.physics.phase.track`), the
+    coupling off (the signal at its offset) wherever the signal's markers are missing: the
+    phase runs at the drive's frequency there. None for a model without one."""
+    topo = model.topology
+    if not phase.entrained(topo):
+        return None
+    marks = list(topo.drive.particles)
+    missing = ~np.asarray(mask, bool)[:, marks].all(axis=1)
+    s = phase.signal(topo, np.where(missing[:, None, None], 0.0, positions), np)
+    s = np.where(missing, 0.0, s)
+    params = model.layout.decode(genome)
+    return np.asarray(phase.track(params, topo, jnp.asarray(s), dt, substeps))
 
 
 PRIORS = ("pca",)
@@ -438,16 +468,9 @@ def model_fill(
     where the PCA fill is unsure; ``ModelFill.pure`` keeps the first fit's values.
 
     Raises:
-        InputError: the model's trajectory goes non-finite from the record's states, or its
-            drive is entrained (not supported here yet); an unknown prior; ``prior="pca"``
-            without complete frames.
+        InputError: the model's trajectory goes non-finite from the record's states; an
+            unknown prior; ``prior="pca"`` without complete frames.
     """
-    if phase.entrained(model.topology):
-        raise InputError(
-            "--method model",
-            "a model with an entrained drive cannot fill gaps yet (its phase would be tracked "
-            "along the gaps themselves); fill with a model without [drive] coupling",
-        )
     if prior is not None and prior not in PRIORS:
         raise InputError("--prior", f"expected {', '.join(PRIORS)}, got '{prior}'")
     positions, mask = plan.positions, plan.mask
@@ -462,6 +485,9 @@ def model_fill(
     spans = [(0, n_frames)] if denoise else segments_of(gaps, n_frames, context)
     x_all, v_all = frame_states(positions, mask, dt)  # every marker is present somewhere
     genome = jnp.asarray(model.layout.initial())
+    psi = fill_phases(model, genome, positions, mask, dt, substeps)
+    signal_cols = [] if psi is None else list(model.topology.drive.particles)
+    before = np.zeros_like(mask)  # the frames of the segments already filled
     sigma = np.zeros((n_frames, n_markers))
     segments = []
     for a, b in spans:
@@ -476,6 +502,7 @@ def model_fill(
                 plan.window[0] + a,
                 substeps,
                 integrator,
+                phases=None if psi is None else psi[a:b],
             )
             weight = continuity_weight(ratio)
         inside = [g.stop - g.start for g in gaps if a <= g.start and g.stop <= b]
@@ -494,8 +521,24 @@ def model_fill(
             max_steps,
             weight / CONTINUITY_WEIGHT,
             longest=max(inside, default=b - a),
+            phases=None if psi is None else psi[a:b],
         )
         xs, sd, z, solved = fit()
+        if psi is not None and not mask[a:b][:, signal_cols].all():
+            # the signal's own gap: the phase tracked along the model's fill of it, refitted
+            # until the two agree
+            for _ in range(PHASE_ROUNDS):
+                filled = mask.copy()
+                filled[a:b] = True
+                values[a:b][~mask[a:b]] = xs[~mask[a:b]]
+                moved = psi
+                psi = fill_phases(model, genome, values, filled | before, dt, substeps)
+                if np.abs(psi[a:b] - moved[a:b]).max() < PHASE_TOL:
+                    break
+                steps = solved.steps
+                xs, sd, z, solved = fit(phases=psi[a:b], start=z)
+                solved = dataclasses.replace(solved, steps=steps + solved.steps)
+            before[a:b] = True
         # the note on the model's continuity defects speaks of the model's own fit: a prior's
         # steady pull correlates the defects even of a true model
         model_tau = solved.tau
@@ -541,41 +584,46 @@ class _Programs:
     def __init__(self, model: Model, horizon: int, dt: float, substeps: int, integrator: str):
         self.model, self.horizon, self.dt = model, horizon, dt
 
-        def windows(starts, target, weight, link):
+        def windows(starts, target, weight, link, psi):
             k = target.shape[0]
             link_ = jnp.full(k - 1, link)
-            return ShootingWindows(starts, target, weight, dt, link=link_, segments=((0, k, 0),))
+            segments = ((0, k, 0),)
+            return ShootingWindows(
+                starts, target, weight, dt, link=link_, segments=segments, phases=psi
+            )
 
         def split(z, target):
             half = z.shape[1] // 2
             shape = target.shape[0], target.shape[2], target.shape[3]
             return z[:, :half].reshape(shape), z[:, half:].reshape(shape)
 
-        def residual(z, genome, starts, target, weight, link):
-            w = windows(starts, target, weight, link)
+        def residual(z, genome, starts, target, weight, link, psi):
+            w = windows(starts, target, weight, link, psi)
             res, _ = make_shooting(model, w, substeps, integrator)
             return jnp.concatenate([r.ravel() for r in res(genome, split(z, target))])
 
-        def normal(z, genome, starts, target, weight, link):
-            w = windows(starts, target, weight, link)
+        def normal(z, genome, starts, target, weight, link, psi):
+            w = windows(starts, target, weight, link, psi)
             build = make_normal(model, w, substeps, integrator, lambda u: genome + 0.0 * u[0])
             return build(jnp.zeros(1), z)
 
-        def window_positions(z, genome, starts, target):
+        def window_positions(z, genome, starts, target, psi):
             """Positions [K, H + 1, M D] of every window and their Jacobians [.., n]."""
             params = model.layout.decode(genome)
             n_particles, dim = target.shape[2], target.shape[3]
             half = n_particles * dim
 
-            def run(s, t):
+            def run(s, t, *psi0):
                 x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
-                xs, _ = rollout_states(
-                    params, model.topology, x, v, dt, horizon, substeps, integrator, t
-                )
+                xs = rollout_states(
+                    params, model.topology, x, v, dt, horizon, substeps, integrator, t, *psi0
+                )[0]
                 return jnp.concatenate([x[None], xs]).reshape(horizon + 1, -1)
 
             t0 = starts * dt
-            return jax.vmap(run)(z, t0), jax.vmap(jax.jacfwd(run))(z, t0)
+            extra = () if psi is None else (psi,)
+            jac = jax.vmap(jax.jacfwd(run))(z, t0, *extra)
+            return jax.vmap(run)(z, t0, *extra), jac
 
         self.residual = jax.jit(residual)
         self.normal = jax.jit(normal)
@@ -603,12 +651,14 @@ def _fit_segment(
     longest=1,
     guide=None,
     start=None,
+    phases=None,
 ):
     """(positions [S, M, D], their uncertainties [S, M] (the standard errors scaled by the
     residuals, :func:`error_scale`; ``longest`` the segment's longest gap in frames), the
     solution's window states, a :class:`_Solved`). ``guide``: (targets [S, M, D], weights
     [S, M]) of a prior on missing samples (weight 0: none), fitted as soft position errors;
-    ``start``: the window states to start from (default: the record's ``states``)."""
+    ``start``: the window states to start from (default: the record's ``states``);
+    ``phases`` [S]: an entrained drive's phase at every frame (:func:`fill_phases`)."""
     n_frames, n_markers, dim = positions.shape
     frame_weight = mask.astype(np.float64)
     observed = positions
@@ -632,6 +682,7 @@ def _fit_segment(
         jnp.asarray(local.target),
         jnp.asarray(weight),
         jnp.asarray(float(link), jnp.float64),
+        None if phases is None else jnp.asarray(np.asarray(phases)[local.starts]),
     )
 
     def flat(z):
@@ -678,7 +729,7 @@ def _fit_segment(
         diagonal=_states_diagonal if MARQUARDT else None,
         damping=DAMPING,
     )
-    pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1]))
+    pos, jac = (np.asarray(a) for a in programs.positions(z, genome, data[0], data[1], data[4]))
     kk = np.minimum(np.arange(n_frames) // h, k - 1)
     jj = np.arange(n_frames) - kk * h
     xs = pos[kk, jj].reshape(n_frames, n_markers, dim)

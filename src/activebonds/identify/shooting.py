@@ -46,6 +46,7 @@ class ShootingWindows:
     link: np.ndarray | None = None  # [K - 1] 1.0 where window k + 1 continues window k
     segments: tuple[tuple[int, int, int], ...] = ()  # per recording: (first window, end, frames)
     records: tuple[np.ndarray, ...] = ()  # per recording: positions [F, P, D], NaN if missing
+    phases: object = None  # [K] an entrained drive's phase at each start, where given (a fill)
 
     @property
     def horizon(self) -> int:
@@ -118,10 +119,13 @@ def window_phases(model: Model, windows: ShootingWindows, substeps: int):
     recording from the start phase at the recording's first frame
     (:func:`~activebonds.physics.phase.track`): the phase is a window state estimated from
     the record, not a variable of the fit; within a window it moves with the window's state.
-    None for a model without an entrained drive."""
+    None for a model without an entrained drive. Where the windows carry their phases (a
+    fill tracks them along the whole recording), those."""
     topo = model.topology
     if not phase.entrained(topo):
         return None
+    if windows.phases is not None:
+        return lambda params: windows.phases
     if len(windows.records) != len(windows.segments):
         raise ValueError("an entrained drive needs the windows' recordings to track its phase")
     period = phase.period_frames(model.params, topo, windows.dt)  # (a leading gap's fill)
