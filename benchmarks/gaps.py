@@ -114,7 +114,9 @@ def gait_half(name: str, traj, frames: tuple[int, int]):
     squares on ``frames`` alone (anchors, stride frequency and signal offset from them too);
     (model, its one-step RMS mm on ``frames``)."""
     if name not in GAIT_VARIANTS:
-        raise SystemExit(f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})")
+        raise SystemExit(
+            f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})"
+        )
     sys.path.insert(0, str(ROOT.parent / "scripts"))
     from horse_gait import model_text, solved, variant_spec
 

@@ -528,7 +528,9 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     plan = plan_fill(t, model.markers)
     psi = fill_phases(model, model.layout.initial(), plan.positions, plan.mask, t.dt)
     s = phase.signal(model.topology, np.asarray(truth.positions), np)
-    assert np.abs(psi - np.asarray(phase.track(model.params, model.topology, s, t.dt))).max() < 1e-12
+    assert (
+        np.abs(psi - np.asarray(phase.track(model.params, model.topology, s, t.dt))).max() < 1e-12
+    )
     # a gap in the signal's marker: the phase runs free through it
     t = _traj(truth.positions, missing=[(2, 50, 80)], markers=model.markers)
     plan = plan_fill(t, model.markers)
