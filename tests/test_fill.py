@@ -512,11 +512,10 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
     tracked along the record from the start phase; a gap in C, the signal itself, runs the
     phase at the drive's frequency there and still fills far closer than the spline."""
-    from test_entrained_drive import entrained
-
     from activebonds.identify.fill import fill_phases, model_fill
     from activebonds.model import loads_model
     from activebonds.physics import phase
+    from test_entrained_drive import entrained
 
     model = loads_model(entrained())
     truth = simulate(model, 150, 60.0)
