@@ -90,6 +90,7 @@ def test_frames_is_a_start_stop_window_in_every_command():
         assert "--n-frames" in opts and "--frames" not in opts
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_max_steps_bounds_every_refinement_stage(tmp_path):
     assert FitSettings().max_steps == 500
     assert "max_steps" not in FitSettings().job()  # runs from before the option resume

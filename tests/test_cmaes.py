@@ -121,6 +121,7 @@ def test_cmaes_recovers_the_triangle_and_beats_the_es_at_equal_evaluations(trian
     assert not np.any(es.history["best_rms_mm"] < 1e-3)  # the ES is not near it yet
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_fit_stopped_half_way_and_resumed_equals_one_fit(triangle, tmp_path):
     truth, traj = triangle
     opts = {"optimizer": "cmaes", "population": 12, "seed": 3, "chunk": 20, "refine": "none"}

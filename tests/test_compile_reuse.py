@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
@@ -58,6 +60,7 @@ def test_a_second_fit_of_the_same_shapes_compiles_nothing_and_gives_the_same_num
     assert len(list(cache.iterdir())) >= first["compiled"]
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_cache_can_be_switched_off():
     got = _fits(1, ACTIVEBONDS_CACHE="off")
     assert got["cache"] is None

@@ -248,6 +248,7 @@ def test_bad_input_is_one_line_and_exit_2(files, tmp_path, args, words):
     assert words in lines[0]
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_runs_best_model_is_scored_with_the_runs_integration(files, tmp_path):
     """``evaluate RUN/best_model.toml`` without --substeps and --integrator scores the model
     as the fit (and its report) did: with the run's substeps and integrator, named in the

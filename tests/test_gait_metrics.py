@@ -222,6 +222,7 @@ def test_a_model_on_its_own_periodic_simulation(tmp_path):
     assert refused.exit_code == 2 and "--up" in refused.output
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_report_of_a_run_with_feet_has_a_gait_section(tmp_path):
     """The oscillators with gravity and the foot declared by a contact (a plane it never
     reaches): a tiny fit on frames 0-99, the report over 300 frames judges the gait on frames

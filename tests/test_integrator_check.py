@@ -63,6 +63,7 @@ def test_noise_alone_does_not_raise_the_flag(noise):
     assert checked.moved == 0
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_shooting_fit_at_one_substep_is_checked_by_its_normal_equations(tmp_path):
     """`fit` with --cost shooting at one substep of the triangle simulated at 20: the
     uncertainty record carries the check, which flags the fit and moves it toward the truth."""

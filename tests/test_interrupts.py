@@ -225,6 +225,7 @@ def _check(tries, tmp_path, tmp_path_factory, resume: bool):
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process is POSIX")
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_ctrl_c_at_staggered_moments_ends_cleanly_with_a_true_message(tmp_path, tmp_path_factory):
     counts = _check(DEFAULT_TRIES, tmp_path, tmp_path_factory, resume=False)
     assert counts.get("before the run", 0) >= 1 and counts.get("resume", 0) >= 1, counts

@@ -228,6 +228,7 @@ damping = { value = 0.5, min = 0.01, max = 10.0 }
 """
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_fit_summary_and_report_flag_a_value_at_its_bound(tmp_path):
     """The truth's stiffness (40) lies beyond the searched max (20): the fit ends there and
     says so; the rest length, mid-range, is not flagged. The report's table names both."""

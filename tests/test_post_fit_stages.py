@@ -58,6 +58,7 @@ def _invoke(*args):
     return res.stdout
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_stage_from_outside_the_package_runs_through_fit_resume_report_and_sweep(tmp_path):
     run = tmp_path / "run"
     with stages.registered(ToyStage()):

@@ -141,6 +141,7 @@ def _check_output(args: list[str], out: str) -> None:
         raise AssertionError(f"no output check for {command}")
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_cheap_readme_commands_run_as_written(tmp_path, monkeypatch):
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     monkeypatch.chdir(tmp_path)

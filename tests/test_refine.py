@@ -100,6 +100,7 @@ def test_a_horizon_curriculum_starts_each_stage_from_the_last(triangle):
     assert rel_error(model, result.genome, truth) < 1e-8
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
     triangle, tmp_path, monkeypatch
 ):

@@ -317,6 +317,7 @@ def test_torn_or_truncated_checkpoints_are_never_loaded(tmp_path, tmp_path_facto
     assert "no complete checkpoint" in line and newest_name in line and older_name in line, line
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_corrupt_checkpoint_does_not_leak_its_file_handle(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
@@ -331,6 +332,7 @@ def test_a_corrupt_checkpoint_does_not_leak_its_file_handle(tmp_path, tmp_path_f
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)]
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_resume_removes_leftovers_in_the_run_folder(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
+import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
@@ -28,6 +29,7 @@ LINES = (
 )
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_fit_not_on_a_terminal_prints_its_phases_on_stderr(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     args = ["fit", ws["base"] / "triangle.toml", ws["base"] / "triangle.csv"]

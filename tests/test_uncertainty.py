@@ -297,6 +297,7 @@ def test_the_intervals_say_where_they_cannot_be_trusted():
     assert warnings("restart", 10, 4) == []
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_fit_that_rejected_shooting_is_not_told_to_refit_with_shooting(tmp_path):
     """The triangle with a gravity nothing holds, fitted with --cost shooting: its best
     10-frame predictions lose to constant velocity, so the shooting stage is not kept and a
