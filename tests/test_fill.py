@@ -510,8 +510,8 @@ def test_fill_report_is_one_self_contained_page(tmp_path):
 def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     """The entrained triangle (its drive's phase pulled by C's height) simulated at one Euler
     substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
-    tracked along the record from the start phase; a gap in C, the signal itself, runs the
-    phase at the drive's frequency there and still fills far closer than the spline."""
+    tracked along the record from the start phase; a gap in C, the signal itself, too: the
+    phase is tracked along the model's own fill of C, refitted until it stops moving."""
     from activebonds.identify.fill import fill_phases, model_fill
     from activebonds.model import loads_model
     from activebonds.physics import phase
@@ -535,6 +535,4 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     plan = plan_fill(t, model.markers)
     found = model_fill(model, plan)
     err = np.linalg.norm(found.values[50:80, 2] - truth.positions[50:80, 2], axis=-1)
-    spl = fill_baseline("spline", plan.positions, plan.mask, plan.local())
-    spline_err = np.linalg.norm(spl[50:80, 2] - truth.positions[50:80, 2], axis=-1)
-    assert np.sqrt(np.mean(err**2)) < 0.1 * np.sqrt(np.mean(spline_err**2))
+    assert err.max() < 1e-6  # measured 1.2e-12 m: the phase tracked along the fill is the truth's
