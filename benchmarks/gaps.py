@@ -108,11 +108,12 @@ def auto_half(traj, frames: tuple[int, int]):
 GAIT_VARIANTS = {"horse-trot": ("height", 6, 50.0), "horse-walk": ("length", 6, 50.0)}
 
 
-def gait_half(name: str, traj, frames: tuple[int, int]):
+def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"):
     """The gait model of ``scripts/horse_gait.py`` (an anchor and a periodic force per marker,
     the drive's phase entrained by the left fore hoof) built and solved by the exact least
     squares on ``frames`` alone (anchors, stride frequency and signal offset from them too);
-    (model, its one-step RMS mm on ``frames``)."""
+    (model, its one-step RMS mm on ``frames``). ``springs``: the script's "anchors" (no spring
+    between markers), "fixed" or "free" (springs between every pair too)."""
     if name not in GAIT_VARIANTS:
         raise SystemExit(
             f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})"
@@ -125,7 +126,7 @@ def gait_half(name: str, traj, frames: tuple[int, int]):
     signal, harmonics, gain = GAIT_VARIANTS[name]
     part = traj.window(*frames)
     text = model_text(part, harmonics, gain, signal)
-    model = solved(variant_spec(text, part, "anchors"), part, (0, part.n_frames))
+    model = solved(variant_spec(text, part, springs), part, (0, part.n_frames))
     one = one_step(model, np.asarray(part.positions), part.dt)
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
@@ -261,6 +262,7 @@ def run(args) -> dict:
             "horizon": args.horizon,
             "model": args.model,
             "fitted_on": args.fitted_on,
+            "gait_springs": args.gait_springs,
             "command": " ".join(sys.argv),
         },
         "recordings": {},
@@ -279,7 +281,7 @@ def run(args) -> dict:
             if args.model == "auto":
                 model, rms = auto_half(traj, other)
             elif args.model == "gait":
-                model, rms = gait_half(name, traj, other)
+                model, rms = gait_half(name, traj, other, args.gait_springs)
             else:
                 model, rms = fit_half(base, traj, other)
             models.append(model)
@@ -419,6 +421,13 @@ def main() -> None:
         help="the fitted model: the spring body, auto's linear model (complete graph and "
         "anchors, issue 25), or the horse's gait model (anchors, periodic forces, an entrained "
         "phase: scripts/horse_gait.py, issue 28; horse recordings only)",
+    )
+    p.add_argument(
+        "--gait-springs",
+        choices=("anchors", "fixed", "free"),
+        default="anchors",
+        help="--model gait: anchors only (the script's trot model), or springs between every "
+        "pair of markers too, at the fit half's mean distances (fixed) or free",
     )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(
