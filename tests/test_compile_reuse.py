@@ -48,6 +48,7 @@ def _fits(n: int, **env_changes) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_second_fit_of_the_same_shapes_compiles_nothing_and_gives_the_same_numbers(tmp_path):
     cache = tmp_path / "cache"
     got = _fits(2, ACTIVEBONDS_CACHE=str(cache))

@@ -441,7 +441,10 @@ damping = 0.5
     return text
 
 
-@pytest.mark.parametrize("integrator", ["euler", "verlet"])
+@pytest.mark.parametrize(
+    "integrator",
+    ["euler", pytest.param("verlet", marks=pytest.mark.slow)],  # integration scale: slow
+)
 def test_contact_parameters_are_recovered_by_fit(integrator):
     truth = loads_model(hopper(**TRUTH))
     data = simulate(truth, n_frames=200, rate=200.0, integrator=integrator)

@@ -200,6 +200,7 @@ def test_refuses_a_moving_anchor_and_a_missing_position():
         to_mjcf(loads_model(nowhere))
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_cli_writes_the_file_and_nothing_on_refusal(tmp_path):
     out = tmp_path / "triangle.xml"
     proc = cli("export", TRIANGLE, "--format", "mjcf", "--out", out, "--rate", "100")

@@ -155,6 +155,7 @@ def test_init_gives_nan_evaluations_an_infinite_cost():
 HUGE_STIFFNESS = TRIANGLE.read_text().replace("max = 1000.0", "max = 1e30")
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_fit_survives_diverging_candidates(tmp_path):
     """Stiffness bounds up to 1e30 with one substep over a 10-frame horizon: most random
     candidates blow up to inf/NaN. The run completes, counts them, and the final population

@@ -113,6 +113,7 @@ def _without_clock(value):
     return value
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_python_and_the_command_line_write_the_same_run_directory(tmp_path):
     """Same settings, defaults included (refine lm, validation frames; the cost named, the
     command line's default being auto): the same history, best model and stage records,

@@ -289,6 +289,7 @@ def _cli_sample(fuzzed, tmp_path, n: int):
         assert sorted(p.name for p in opts["cwd"].iterdir()) == [src.name], src.name
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_cli_refuses_fuzzed_model_files(fuzzed, tmp_path):
     _cli_sample(fuzzed, tmp_path, 4)
 

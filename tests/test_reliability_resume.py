@@ -345,6 +345,7 @@ def test_resume_removes_leftovers_in_the_run_folder(tmp_path, tmp_path_factory):
     assert leftovers(run) == []
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_resume_of_a_run_killed_before_its_first_checkpoint(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")

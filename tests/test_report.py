@@ -502,6 +502,7 @@ def test_report_shows_the_fit_beside_its_baselines(neural_run):
     assert "zero force (constant velocity)" in text and "momentum floor" in text
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_report_and_evaluate_give_the_same_free_run_and_the_wall_time_is_the_runs(
     tmp_path,
 ):

@@ -186,6 +186,7 @@ def test_an_uncertain_vertical_gets_no_gravity_unless_named(tmp_path):
     assert named.gravity == "+Y" and "gravity = [0.0, 9.81, 0.0]" in named.text
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_best_model_carries_its_start_and_exports_as_is(tmp_path):
     """A fit's best_model.toml holds the positions at the fitted window's first frame and the
     velocity from which the model's step lands on the next one: export and simulate take it
