@@ -536,3 +536,9 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     found = model_fill(model, plan)
     err = np.linalg.norm(found.values[50:80, 2] - truth.positions[50:80, 2], axis=-1)
     assert err.max() < 1e-6  # measured 1.2e-12 m: the phase tracked along the fill is the truth's
+    # a window that starts later (--frames 40:150) runs the phase on from the recording's
+    # first frame, where the model's time starts
+    t = _traj(truth.positions, missing=[(0, 70, 100)], markers=model.markers)
+    found = model_fill(model, plan_fill(t, model.markers, frames=(40, 150)))
+    err = np.linalg.norm(found.values[30:60, 0] - truth.positions[70:100, 0], axis=-1)
+    assert err.max() < 1e-6

@@ -49,8 +49,9 @@ does. The second fit's positions and uncertainties are the fill's; the first fit
 are kept (``ModelFill.pure``).
 
 An entrained drive's phase (``[drive] coupling``) is not a variable of the fill: it is
-tracked along the window's record from the start phase at its first frame
-(:func:`fill_phases`), as a fit tracks it, and each shooting window starts from its frame's
+tracked along the record from the start phase at the recording's first frame (the
+model's time origin, also where ``--frames`` starts later) (:func:`fill_phases`), as a fit
+tracks it, and each shooting window starts from its frame's
 tracked phase. Through a gap in the signal's own marker the phase is first run at the drive's
 frequency (the coupling off), then tracked along the model's fill of the signal and the
 stretch refitted, until the phase stops moving (:data:`PHASE_ROUNDS`): the phase is the
@@ -353,11 +354,14 @@ def one_step_ratio(
     return e_model / e_zero if e_zero > 0.0 else float("nan")
 
 
-def fill_phases(model: Model, genome, positions, mask, dt, substeps=1) -> np.ndarray | None:
+def fill_phases(
+    model: Model, genome, positions, mask, dt, substeps=1, psi0=None
+) -> np.ndarray | None:
     """An entrained drive's phase at every frame [S] of ``positions`` [S, M, D], tracked
-    from the start phase at the first frame (:func:`~activebonds.physics.phase.track`), the
-    coupling off (the signal at its offset) wherever the signal's markers are missing: the
-    phase runs at the drive's frequency there. None for a model without one."""
+    from ``psi0`` (default: the start phase) at the first frame
+    (:func:`~activebonds.physics.phase.track`), the coupling off (the signal at its offset)
+    wherever the signal's markers are missing: the phase runs at the drive's frequency there.
+    None for a model without one."""
     topo = model.topology
     if not phase.entrained(topo):
         return None
@@ -366,7 +370,7 @@ def fill_phases(model: Model, genome, positions, mask, dt, substeps=1) -> np.nda
     s = phase.signal(topo, np.where(missing[:, None, None], 0.0, positions), np)
     s = np.where(missing, 0.0, s)
     params = model.layout.decode(genome)
-    return np.asarray(phase.track(params, topo, jnp.asarray(s), dt, substeps))
+    return np.asarray(phase.track(params, topo, jnp.asarray(s), dt, substeps, psi0))
 
 
 PRIORS = ("pca",)
@@ -485,7 +489,15 @@ def model_fill(
     spans = [(0, n_frames)] if denoise else segments_of(gaps, n_frames, context)
     x_all, v_all = frame_states(positions, mask, dt)  # every marker is present somewhere
     genome = jnp.asarray(model.layout.initial())
-    psi = fill_phases(model, genome, positions, mask, dt, substeps)
+    # the model's time starts at the recording's first frame: a window that starts later
+    # starts from the phase tracked along the frames before it
+    psi0 = None
+    if phase.entrained(model.topology) and plan.window[0] > 0:
+        first, cols = plan.window[0], list(plan.columns)
+        ahead = plan.traj.positions[: first + 1][:, cols]
+        mask_ahead = plan.traj.mask[: first + 1][:, cols]
+        psi0 = fill_phases(model, genome, ahead, mask_ahead, dt, substeps)[-1]
+    psi = fill_phases(model, genome, positions, mask, dt, substeps, psi0)
     signal_cols = [] if psi is None else list(model.topology.drive.particles)
     before = np.zeros_like(mask)  # the frames of the segments already filled
     sigma = np.zeros((n_frames, n_markers))
@@ -532,7 +544,7 @@ def model_fill(
                 filled[a:b] = True
                 values[a:b][~mask[a:b]] = xs[~mask[a:b]]
                 moved = psi
-                psi = fill_phases(model, genome, values, filled | before, dt, substeps)
+                psi = fill_phases(model, genome, values, filled | before, dt, substeps, psi0)
                 if np.abs(psi[a:b] - moved[a:b]).max() < PHASE_TOL:
                     break
                 steps = solved.steps
