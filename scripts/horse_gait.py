@@ -211,10 +211,18 @@ def summary(record: dict) -> dict:
     return out
 
 
+def _float(value):
+    """JSON numbers back to floats ('inf', 'nan' strings included), lists elementwise."""
+    if isinstance(value, list):
+        return [float(v) for v in value]
+    return float(value) if isinstance(value, str | int | float) else value
+
+
 def passes(s: dict, gait: str) -> dict:
     """Each target of issues 28 and 25 met or not (the gait's as written, and (iii)/(iv)
     against the recording's own held-out values)."""
-    g, rec = s["gait"]["model"], s["gait"]["recording"]
+    g = {k: _float(v) for k, v in s["gait"]["model"].items()}
+    rec = {k: _float(v) for k, v in s["gait"]["recording"].items()}
     ratios = np.asarray(g["excursion_ratio"], np.float64)
     out = {
         "period_within_3pct": bool(abs(g["period_error"]) <= 0.03),
@@ -223,24 +231,24 @@ def passes(s: dict, gait: str) -> dict:
         "body_within_recording_own": bool(g["body_distance_mm"] <= rec["body_distance_mm"]),
         "cycle_rms_within_50mm": bool(g["cycle_rms_mm"] <= 50.0),
         "cycle_rms_within_recording_spread": bool(g["cycle_rms_mm"] <= rec["spread_mm"]),
-        "frames_within_50mm_at_least_8": bool(s["frames_within_50mm"] >= 8),
-        "body_frames_at_least_20": bool(s["body_frames_within_50mm"] >= 20),
-        "ahead_10_within_100mm": bool(s["ahead_mm"] <= 100.0),
+        "frames_within_50mm_at_least_8": bool(_float(s["frames_within_50mm"]) >= 8),
+        "body_frames_at_least_20": bool(_float(s["body_frames_within_50mm"]) >= 20),
+        "ahead_10_within_100mm": bool(_float(s["ahead_mm"]) <= 100.0),
     }
     if gait == "trot":
-        out["one_step_within_3_5mm"] = bool(s["one_step_mm"] <= 3.5)
+        out["one_step_within_3_5mm"] = bool(_float(s["one_step_mm"]) <= 3.5)
         out["one_step_within_4_6mm_every_marker_below"] = bool(
-            s["one_step_mm"] <= 4.6 and s["every_marker_below_zero_force"]
+            _float(s["one_step_mm"]) <= 4.6 and s["every_marker_below_zero_force"]
         )
     else:
         worst = max(
-            m / z
+            _float(m) / _float(z)
             for m, z in zip(
                 s["one_step_per_marker_mm"], s["zero_force_one_step_per_marker_mm"], strict=True
             )
         )
         out["one_step_within_3_2mm_no_marker_above_1_15"] = bool(
-            s["one_step_mm"] <= 3.2 and worst <= 1.15
+            _float(s["one_step_mm"]) <= 3.2 and worst <= 1.15
         )
     return out
 
@@ -275,7 +283,55 @@ def tail_targets(s: dict) -> int:
 
 def choice_key(row: dict) -> tuple:
     t = row["tail"]
-    return (-row["tail_targets_met"], t["ahead_mm"], t["one_step_mm"])
+    return (-row["tail_targets_met"], _float(t["ahead_mm"]), _float(t["one_step_mm"]))
+
+
+def anchors_of(model, frequency: float) -> dict:
+    """Each marker's anchor: stiffness k (N/m), damping c (N s/m), natural frequency
+    sqrt(k/m)/2pi (Hz) as a multiple of the stride frequency, damping ratio c/2sqrt(km) and
+    the free transient's e-folds per stride c/2mf (m = 1 kg)."""
+    out = {}
+    for b in model.spec.bond:
+        if b.kind == "unary":
+            k, c = float(b.stiffness.value), float(b.damping.value)
+            out[b.particles[0]] = {
+                "stiffness": k,
+                "damping": c,
+                "natural_over_stride": float(np.sqrt(k) / (2 * np.pi) / frequency),
+                "damping_ratio": float(c / (2 * np.sqrt(k))),
+                "efolds_per_stride": float(c / (2 * frequency)),
+            }
+    return out
+
+
+def phase_slip(model, traj, frames=TEST, horizon: int = 60, every: int = 10) -> dict:
+    """The entrained phase of free runs against the phase tracked along the recording (the
+    model's time from frame 0, as ``--origin 0``): from starts every ``every`` frames of
+    ``frames``, after ``horizon`` frames, psi_run - psi_tracked in frames of a stride
+    (median, median of the absolute value, largest absolute value)."""
+    from activebonds.identify.predictions import free_run, tracked_phases
+
+    x = np.asarray(traj.positions, np.float64)
+    dt = 1.0 / traj.rate
+    psi = tracked_phases(model, x, dt)
+    if psi is None:
+        return {}
+    f = model.spec.drive.frequency
+    period = traj.rate / float(getattr(f, "value", f))
+    slips = []
+    for s in range(frames[0] + 1, frames[1] - horizon, every):
+        hidden = np.full((s + 1, *x.shape[1:]), np.nan)
+        hidden[s - 1 :] = x[s - 1 : s + 1]
+        _, _, run = free_run(model, hidden, dt, s + 1 + horizon, phases=psi, with_phases=True)
+        slips.append((run[s + horizon] - psi[s + horizon]) / (2 * np.pi) * period)
+    d = np.asarray(slips)
+    return {
+        "horizon_frames": horizon,
+        "starts": len(d),
+        "median_frames": float(np.nanmedian(d)),
+        "median_abs_frames": float(np.nanmedian(np.abs(d))),
+        "max_abs_frames": float(np.nanmax(np.abs(d))),
+    }
 
 
 def build_and_solve(traj, harmonics, gain, springs, frames, signal="height", decay=0.0):
@@ -317,7 +373,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     best = min(entrained, key=choice_key)
     earlier = min(
         (r for r in entrained if r["decay"] == 0.0),
-        key=lambda r: (r["tail"]["ahead_mm"], r["tail"]["one_step_mm"]),
+        key=lambda r: (_float(r["tail"]["ahead_mm"]), _float(r["tail"]["one_step_mm"])),
     )
     signal, h, gain, decay = best["signal"], best["harmonics"], best["gain"], best["decay"]
     result["chosen"] = {
@@ -349,6 +405,10 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             result["passes"] = row["passes"]
             # the same without --origin: the phase from its start value at frame 300
             result["held_out_cold_start"] = summary(evaluated(model, traj, TEST, True, None))
+            result["diagnosis"] = {
+                "anchors": anchors_of(model, stride_frequency(traj)),
+                "phase_slip": phase_slip(model, traj),
+            }
     # 3. what else was tried, at the chosen harmonics, gain and damping floor
     tried = {
         "clock (coupling gain 0)": (h, 0.0, "anchors", decay),
@@ -362,6 +422,10 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
         model = build_and_solve(traj, hh, gg, springs, FIT, signal, dd)
         result["tried"][name] = summary(evaluated(model, traj, TEST, True))
         result["tried"][name]["passes"] = passes(result["tried"][name], gait)
+        result["tried"][name]["diagnosis"] = {
+            "anchors": anchors_of(model, stride_frequency(traj)),
+            "phase_slip": phase_slip(model, traj),
+        }
         say(f"{gait}: {name}: held-out one-step {result['tried'][name]['one_step_mm']:.3f} mm")
     result["seconds"] = time.time() - started
     return result
