@@ -18,21 +18,27 @@ frames 0-299 and judged on frames 300-599:
 2. the fit: the exact one-step least squares of every stiffness, damping and coefficient
    (identify/lsq.py through ``structure``'s solver, every bond kept; psi tracked along the
    record at the fixed f, sigma, psi0 = 0);
-3. the choice of the signal (height, length), H in (4, 6) and sigma in (0: a clock, 25, 50,
-   100, 200, 400) rad/s per m: each variant fitted on 0-149 and scored on 150-299 (a
-   validation half long enough, 3.6 strides of the trot, for a clock's drift to show) by the
-   10-frames-ahead RMS of its free runs (``evaluate --origin 0``); the lowest of the entrained
-   ones (sigma > 0; the clocks are scored for the record: on these frames they drift too
-   little to lose, on the held-out ones they drift) is refitted on 0-299 and saved. Nothing held out is looked at by the choice; every
-   variant's held-out scores are recorded beside it;
+3. the choice of the signal (height, length), H in (4, 6), sigma in (0: a clock, 25, 50, 100,
+   200, 400) rad/s per m and the anchors' damping floor (0, 1 or 4 e-folds per stride of an
+   anchor's free oscillation: c >= 2 m f n): each variant fitted on 0-149 (its frequency,
+   signal offset, anchors and floor from 0-149 alone) and its free runs scored on 150-299
+   against 150-299's own recording (``evaluate --origin 0 --gait``): the entrained variant
+   (sigma > 0; the clocks are scored for the record) that meets the most of seven gait
+   targets there (period within 3 %, hoof excursions within 25 %, body within 100 mm,
+   cycle RMS within 50 mm, frames within 50 mm >= 8, body frames >= 20, 10 ahead <= 100 mm),
+   then the lowest 10-frames-ahead RMS, is refitted on 0-299 and saved. Nothing held out is
+   looked at by the choice; every variant's held-out scores are recorded beside it;
 4. the scores on 300-599, each beside the zero-force predictor's, as ``activebonds evaluate
    MODEL DATA --frames 300:600 --origin 0 --horizon 10 --body Head,Withers,Sacrum --gait
    --feet HFL,HFR,HHL,HHR --up +Z`` (one step, 10 ahead, frames within 50 mm, body frames, the
    gait metrics of issue 28 with the recording's own values); for the chosen model also
    without ``--origin`` (the phase started cold at frame 300);
-5. what else was tried at the chosen H and sigma: the clock (sigma = 0); springs between every
-   pair of markers at the fit range's mean distances plus the anchors; the scaffold's free
-   springs and anchors (rest lengths and anchors free).
+5. what else was tried at the chosen H, sigma and floor: the clock (sigma = 0); no damping
+   floor; a weak coupling (sigma = 5); springs between every pair of markers at the fit
+   range's mean distances plus the anchors; the scaffold's free springs and anchors (rest
+   lengths and anchors free); each with its anchors (natural frequency against the stride's,
+   damping ratio) and the slip of its free runs' phase against the phase tracked along the
+   recording, 60 frames after each start (``diagnosis``).
 """
 
 from __future__ import annotations
