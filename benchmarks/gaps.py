@@ -103,15 +103,17 @@ def auto_half(traj, frames: tuple[int, int]):
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
 
-# The gait model's variant per horse recording (signal, harmonics, coupling gain rad/s per m):
-# the ones scripts/horse_gait.py chose on frames 150-299 of each gait after a fit on 0-149
-GAIT_VARIANTS = {"horse-trot": ("height", 6, 50.0), "horse-walk": ("length", 6, 50.0)}
+# The gait model's variant per horse recording (signal, harmonics, coupling gain rad/s per m,
+# anchor damping floor in e-folds a stride): the ones scripts/horse_gait.py chose on frames
+# 150-299 of each gait after a fit on 0-149
+GAIT_VARIANTS = {"horse-trot": ("height", 6, 50.0, 4.0), "horse-walk": ("length", 6, 25.0, 4.0)}
 
 
 def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"):
     """The gait model of ``scripts/horse_gait.py`` (an anchor and a periodic force per marker,
     the drive's phase entrained by the left fore hoof) built and solved by the exact least
-    squares on ``frames`` alone (anchors, stride frequency and signal offset from them too);
+    squares on ``frames`` alone (anchors, stride frequency, signal offset and the anchors'
+    damping floor from them too);
     (model, its one-step RMS mm on ``frames``). ``springs``: the script's "anchors" (no spring
     between markers), "fixed" or "free" (springs between every pair too)."""
     if name not in GAIT_VARIANTS:
@@ -119,14 +121,13 @@ def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"
             f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})"
         )
     sys.path.insert(0, str(ROOT.parent / "scripts"))
-    from horse_gait import model_text, solved, variant_spec
+    from horse_gait import build_and_solve
 
     from activebonds.identify.predictions import one_step, rms_mm
 
-    signal, harmonics, gain = GAIT_VARIANTS[name]
+    signal, harmonics, gain, decay = GAIT_VARIANTS[name]
+    model = build_and_solve(traj, harmonics, gain, springs, frames, signal, decay)
     part = traj.window(*frames)
-    text = model_text(part, harmonics, gain, signal)
-    model = solved(variant_spec(text, part, springs), part, (0, part.n_frames))
     one = one_step(model, np.asarray(part.positions), part.dt)
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
