@@ -58,10 +58,12 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
     target = jnp.asarray(windows.target.reshape(n_windows, h + 1, -1))
     weight = jnp.asarray(np.repeat(windows.weight, dim, axis=-1).reshape(n_windows, -1))
     t0 = jnp.asarray(windows.times)
-    # the last window: no defect (a traced link too: the fill passes its weight as an argument)
-    link = jnp.concatenate([jnp.asarray(windows.link), jnp.zeros(1)])
+    # the last window: no defect (a traced link too: the fill passes its weight as an
+    # argument); NumPy where it is data (no eager program compiled for a constant)
+    xp = jnp if isinstance(windows.link, jax.Array) else np
+    link = xp.concatenate([xp.asarray(windows.link), xp.zeros(1)])
     c = CONTINUITY_WEIGHT * link
-    scale = jnp.concatenate([jnp.ones(half), jnp.full(half, dt)])  # of a state's defect
+    scale = np.concatenate([np.ones(half), np.full(half, dt)])  # of a state's defect
 
     phases = window_phases(model, windows, substeps)
 
