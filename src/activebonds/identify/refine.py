@@ -370,10 +370,10 @@ class Refinement:
         # the shooting's programs compile in the background while the warm start runs
         y0 = (jnp.asarray(self.bounded.from_genome(genome)), jnp.asarray(x0), jnp.asarray(v0))
         residual = ahead(jax.jit(plain), y0)
-        trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # genome: u's shape
         if self.solver != "dense":
             normal, step = self._shooting_programs(windows, y0)
         self._check_ahead(1, y0[0])
+        trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # last needed, last
         warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
         if warm.accepted:
             genome = np.asarray(warm.genome)
