@@ -9,7 +9,8 @@ its own, with JAX's persistent compilation cache off (every program compiled in 
 time); ``--warm`` also runs it twice more with a cache of its own and records the second
 (``warm_seconds``: a repeated fit of the same shapes, the command line's default cache). One shooting stage from the same start (the one-step optimum, solved exactly) on
 the same data; per path: the stage's seconds (the warm start on the restart cost, then the
-shooting solve, compilation included), its Levenberg-Marquardt steps, peak RSS, the final
+shooting solve, compilation included) and its process's CPU seconds (every thread: on a
+machine shared with other work, the figure that load does not inflate), its Levenberg-Marquardt steps, peak RSS, the final
 objective and RMS; per case: the largest difference of a parameter between paths, relative
 and in the structured fit's standard errors (its Gauss-Newton uncertainty, the states eliminated).
 A dense path whose Jacobian alone would need more than ``--max-gb`` is not run: the record
@@ -117,10 +118,10 @@ def child(name: str, path: str) -> dict:
     )
     ident = identification(model, traj, settings)
     start = least_squares(ident.model, make_windows(traj.positions, traj.mask, traj.dt, 1))
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     refinement = Refinement(ident, settings, solver=path)
     stage = refinement.stage(horizon, start.genome)
-    seconds = time.perf_counter() - t
+    seconds, cpu = time.perf_counter() - t, time.process_time() - cpu
     natural = ident.model.layout.natural(np.asarray(stage.genome))
     errors = None
     if path == "structured" and stage.cost == "shooting" and stage.accepted:
@@ -133,6 +134,7 @@ def child(name: str, path: str) -> dict:
         "std_errors": errors,
         "cost": stage.cost,
         "seconds": round(seconds, 2),
+        "cpu_seconds": round(cpu, 2),
         "steps": stage.steps,
         "accepted": stage.accepted,
         "message": stage.message,
@@ -196,6 +198,7 @@ def main() -> None:
                     _run_child(name, path, cache)
                     warm = _run_child(name, path, cache)
                 row[path]["warm_seconds"] = warm.get("seconds")
+                row[path]["warm_cpu_seconds"] = warm.get("cpu_seconds")
                 row[path]["warm_steps"] = warm.get("steps")
             hidden = ("genome", "natural", "std_errors")
             shown = {k: v for k, v in row[path].items() if k not in hidden}
@@ -209,11 +212,16 @@ def main() -> None:
                 na, nb = np.asarray(a["natural"]), np.asarray(b["natural"])
                 row["max_param_diff_sd"] = float(np.max(np.abs(na - nb) / np.asarray(se)))
             row["speedup"] = round(a["seconds"] / b["seconds"], 2)
+            row["cpu_speedup"] = round(a["cpu_seconds"] / b["cpu_seconds"], 2)
             if a.get("warm_seconds") and b.get("warm_seconds"):
                 row["warm_speedup"] = round(a["warm_seconds"] / b["warm_seconds"], 2)
-                print(f"{name}: compilation cache warm, {row['warm_speedup']}x")
+                row["warm_cpu_speedup"] = round(a["warm_cpu_seconds"] / b["warm_cpu_seconds"], 2)
+                print(
+                    f"{name}: compilation cache warm, {row['warm_speedup']}x "
+                    f"({row['warm_cpu_speedup']}x in CPU seconds)"
+                )
             print(
-                f"{name}: {row['speedup']}x, max rel diff {row['max_rel_param_diff']:.2e}, "
+                f"{name}: {row['speedup']}x ({row['cpu_speedup']}x in CPU seconds), max rel diff {row['max_rel_param_diff']:.2e}, "
                 f"{row.get('max_param_diff_sd', float('nan')):.3g} standard deviations"
             )
         record["cases"][name] = row

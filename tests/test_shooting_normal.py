@@ -71,7 +71,15 @@ def problem():
     jac = np.asarray(jax.jacfwd(flat)(z))
     r = np.asarray(flat(z))
     normal = make_normal(model, windows, 2, "verlet", bounded.to_genome)(u, s)
-    return {"jac": jac, "r": r, "normal": normal, "p": u.size, "k": k, "n": s.shape[1]}
+    return {
+        "jac": jac,
+        "r": r,
+        "normal": normal,
+        "p": u.size,
+        "k": k,
+        "n": s.shape[1],
+        "build": lambda: make_normal(model, windows, 2, "verlet", bounded.to_genome)(u, s),
+    }
 
 
 def _dense_normal(normal, p, k, n):
@@ -98,6 +106,19 @@ def test_the_blocks_are_the_dense_normal_equations(problem):
     scale = np.abs(jac.T @ jac).max()
     np.testing.assert_allclose(a, jac.T @ jac, rtol=0, atol=1e-10 * scale)
     np.testing.assert_allclose(g, jac.T @ r, rtol=0, atol=1e-10 * np.abs(jac.T @ r).max())
+
+
+def test_windows_mapped_in_padded_equal_batches_give_the_same_blocks(problem, monkeypatch):
+    """5 windows, at most 2 at a time: 3 batches of 2, the last padded with a copy of the last
+    window (dropped), rather than a remainder batch traced and compiled as a second program."""
+    from activebonds.identify import shooting_normal
+
+    assert shooting_normal._batches(5, 2) == (2, 6)
+    assert shooting_normal._batches(40, 24) == (20, 40)  # the tetrahedron's: no padding
+    monkeypatch.setattr(shooting_normal, "LANES", 2 * (problem["n"] + problem["p"]))
+    padded = problem["build"]()
+    for a, b in zip(padded, problem["normal"], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
 
 
 def test_the_damped_step_is_the_dense_solve(problem):

@@ -115,7 +115,12 @@ def _interrupted(steps: int) -> str:
 
 
 def _sum_squares(tree) -> float:
-    return float(sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(tree)))
+    return float(_sum_squares_program(tree))
+
+
+@jax.jit
+def _sum_squares_program(tree):  # one program, not three eager ones per leaf
+    return sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(tree))
 
 
 def _solve_dense(residual, y0, max_steps: int):
@@ -146,10 +151,12 @@ def _dense_step(system, damping):
     return jnp.linalg.solve(jtj + jnp.diag(damp), -grad)
 
 
-def _solve(residual, y0, max_steps: int, interior=None):
+def _solve(residual, y0, max_steps: int, interior=None, jacobian=None):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
-    accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`."""
-    jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
+    accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`.
+    ``jacobian``: ``y -> J`` (default: forward mode through ``residual``)."""
+    if jacobian is None:
+        jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
 
     def flat(y):
         return ravel_pytree(residual(y))[0]
@@ -186,19 +193,25 @@ def _normal_scale(normal):
     )
 
 
+@jax.jit
+def _ravel(tree):
+    return ravel_pytree(tree)[0]
+
+
 def _solve_shooting(residual, normal, y0, max_steps: int, interior=None, step=damped_step):
     """Levenberg-Marquardt on a shooting stage's structured normal equations
     (:mod:`.shooting_normal`): as :func:`_solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
     u0, x0, v0 = y0
     k, shape = x0.shape[0], x0.shape
 
+    @jax.jit  # data movement, as one program each rather than eager ops
     def split(z):
         u, states = z
         half = states.shape[1] // 2
         return u, states[:, :half].reshape(shape), states[:, half:].reshape(shape)
 
     def flat(z):
-        return ravel_pytree(residual(split(z)))[0]
+        return _ravel(residual(split(z)))
 
     def linearize(z, _):
         system = normal(*z)
@@ -237,6 +250,11 @@ class Refinement:
         self.recordings = ident.all_data
         self.states = None  # per recording, per-frame states of the last shooting stage
         self._residuals: dict[int, tuple] = {}  # by horizon: (windows, jitted residuals)
+        self._raw: dict[int, object] = {}  # by horizon: the same residuals, not jitted
+        self._jacobians: dict[int, object] = {}  # by horizon: the warm start's Jacobian
+        # the bounds' transform as one program: the restart residuals of u are those of
+        # its genome, by the shared program (bit for bit those of both compiled together)
+        self._to_genome = jax.jit(self.bounded.to_genome)
 
     def stage(self, horizon: int, genome: np.ndarray, max_steps: int | None = None) -> Stage:
         """One stage; ``max_steps`` Levenberg-Marquardt steps at most (default: the
@@ -270,6 +288,7 @@ class Refinement:
                 ]
             )
             residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+            self._raw[horizon] = residuals
             self._residuals[horizon] = (windows, jax.jit(residuals))
         return self._residuals[horizon]
 
@@ -292,10 +311,15 @@ class Refinement:
                 if self.solver == "dense":  # optimistix compiles the function it is given
                     u, steps, message = _solve_dense(plain, u0, max_steps)
                 else:
-                    # compiled with the bounds' transform: an eager transform rounds
-                    # otherwise, and near a bound the steps follow the rounding
-                    residual = jax.jit(plain)
-                    u, steps, message = _solve(residual, u0, max_steps, self.bounded.interior)
+                    # the bounds' transform compiled (an eager transform rounds otherwise,
+                    # and near a bound the steps follow the rounding), then the shared
+                    # residuals: no second program of the same residuals
+                    def residual(u):
+                        return residuals(self._to_genome(u))
+
+                    u, steps, message = _solve(
+                        residual, u0, max_steps, self.bounded.interior, self._jacobian(horizon)
+                    )
             except Interrupted as stop:
                 stopped = stop
                 u, steps, message = stop.value, stop.steps, _interrupted(stop.steps)
@@ -311,6 +335,18 @@ class Refinement:
         if stopped is not None:
             raise StageInterrupted(stage) from None
         return stage
+
+    def _jacobian(self, horizon: int):
+        """The restart residuals' Jacobian at ``horizon`` in the search space (forward mode
+        through the residuals themselves, not through their jitted program: the same numbers,
+        traced at half the cost), built once per refinement."""
+        if horizon not in self._jacobians:
+            self._restart_residuals(horizon)
+            raw, to_genome = self._raw[horizon], self.bounded.to_genome
+            self._jacobians[horizon] = jax.jit(
+                jax.jacfwd(lambda y: ravel_pytree(raw(to_genome(y)))[0])
+            )
+        return self._jacobians[horizon]
 
     def _shooting(self, horizon, genome, max_steps) -> Stage:
         s = self.settings
@@ -337,6 +373,7 @@ class Refinement:
         if self.solver != "dense":
             normal, step = self._shooting_programs(windows, y0)
         self._check_ahead(1, y0[0])
+        trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # last needed, last
         warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
         if warm.accepted:
             genome = np.asarray(warm.genome)
@@ -394,7 +431,7 @@ class Refinement:
             self.ident.model, windows, s.substeps, s.integrator, self.bounded.to_genome
         )
         u, x = y0[0], y0[1]
-        k, p, n = x.shape[0], u.shape[0], 2 * x[0].size
+        k, p, n = x.shape[0], u.shape[0], 2 * int(np.prod(x.shape[1:]))
         f = u.dtype
 
         def shape(*dims):

@@ -165,7 +165,9 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
     """``(genome, states) -> residuals`` (a pytree of arrays, metres) and
     ``(genome, states) -> frame states`` of the windows' trajectories.
 
-    ``states = (X [K, P, D], V [K, P, D])``: each window's start state."""
+    ``states = (X [K, P, D], V [K, P, D])``: each window's start state. The trajectory's
+    ``run`` attribute is its jitted ``(genome, states) -> (positions, velocities)``
+    [K, H + 1, P, D] of every window."""
     topo, layout = model.topology, model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
     t0 = jnp.asarray(windows.times)
@@ -196,7 +198,7 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
 
     def trajectory(genome, states):
         """Per recording, per-frame (positions, velocities) [F, P, D] along the windows."""
-        pos, vel = run(genome, states)
+        pos, vel = trajectory.run(genome, states)
         out = []
         for k0, k1, n_frames in windows.segments:
             p, v = pos[k0:k1], vel[k0:k1]
@@ -205,6 +207,9 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
             out.append((np.asarray(xs[:n_frames]), np.asarray(vs[:n_frames])))
         return out
 
+    # one compiled program (run eagerly, its ops compiled one by one); a caller may replace
+    # it by the same program compiled ahead (:mod:`.compile_ahead`)
+    trajectory.run = jax.jit(run)
     return residuals, trajectory
 
 

@@ -58,10 +58,12 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
     target = jnp.asarray(windows.target.reshape(n_windows, h + 1, -1))
     weight = jnp.asarray(np.repeat(windows.weight, dim, axis=-1).reshape(n_windows, -1))
     t0 = jnp.asarray(windows.times)
-    # the last window: no defect (a traced link too: the fill passes its weight as an argument)
-    link = jnp.concatenate([jnp.asarray(windows.link), jnp.zeros(1)])
+    # the last window: no defect (a traced link too: the fill passes its weight as an
+    # argument); NumPy where it is data (no eager program compiled for a constant)
+    xp = jnp if isinstance(windows.link, jax.Array) else np
+    link = xp.concatenate([xp.asarray(windows.link), xp.zeros(1)])
     c = CONTINUITY_WEIGHT * link
-    scale = jnp.concatenate([jnp.ones(half), jnp.full(half, dt)])  # of a state's defect
+    scale = np.concatenate([np.ones(half), np.full(half, dt)])  # of a state's defect
 
     phases = window_phases(model, windows, substeps)
 
@@ -101,12 +103,15 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         # windows mapped at once: few where each carries many tangents (a 41-marker body's
         # 660 run 2-3 times faster one window at a time than vmapped by 3 or 7)
         by_lanes = max(1, LANES // (n + p))
-        batch = max(1, min(n_windows, by_lanes, BATCH_BYTES // (8 * rows * (n + p) * 2)))
+        batch, padded = _batches(n_windows, min(by_lanes, BATCH_BYTES // (8 * rows * (n + p) * 2)))
         nxt = jnp.concatenate([states[1:], jnp.zeros((1, n))])
         us = jnp.broadcast_to(u, (n_windows, p))
         ks = () if phases is None else (jnp.arange(n_windows),)
-        out = jax.lax.map(blocks, (us, states, nxt, t0, target, weight, c, *ks), batch_size=batch)
-        tkk, tk1, ykk, yk1, pkk, gkk, gk1, guk, dk1 = out
+        inputs = (us, states, nxt, t0, target, weight, c, *ks)
+        if padded > n_windows:  # copies of the last window, dropped below
+            inputs = jax.tree.map(lambda a: _pad_rows(a, padded - n_windows), inputs)
+        out = jax.lax.map(blocks, inputs, batch_size=batch)
+        tkk, tk1, ykk, yk1, pkk, gkk, gk1, guk, dk1 = (a[:n_windows] for a in out)
 
         def shift(a):  # window k's contribution to window k + 1
             return jnp.concatenate([jnp.zeros_like(a[:1]), a[:-1]])
@@ -122,6 +127,21 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         )
 
     return normal
+
+
+def _batches(n_windows: int, most: int) -> tuple[int, int]:
+    """(batch, padded): windows mapped at once, at most ``most``, and the number of windows
+    padded to a multiple of it. Batches of equal size: ``lax.map`` traces and compiles a
+    remainder that is not a whole batch as a second program (the normal equations' trace and
+    compilation twice over)."""
+    n_batches = -(-n_windows // max(1, min(n_windows, most)))
+    batch = -(-n_windows // n_batches)
+    return batch, batch * n_batches
+
+
+def _pad_rows(a, extra: int):
+    """``a`` with its last row repeated ``extra`` times."""
+    return jnp.concatenate([a, jnp.repeat(a[-1:], extra, axis=0)])
 
 
 def block_tridiagonal_solve(diag, off, rhs):
