@@ -458,6 +458,7 @@ def test_resume_forced_after_every_kind_of_change(tmp_path, tmp_path_factory):
     _check_forced(cases, list(cases), reference(tmp_path_factory), cache)
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_refusal_names_the_changed_setting(tmp_path, tmp_path_factory):
     run = copy_run(reference(tmp_path_factory), tmp_path / "run")
     edit_meta(run, lambda m: m["settings"].update(seed=4))

@@ -215,6 +215,7 @@ def test_too_little_free_space_is_refused_up_front(tmp_path, inputs, monkeypatch
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_space_estimate_covers_what_a_run_writes(tmp_path, inputs):
     """The estimate is an upper bound of what a finished run holds (so a refusal is never of a
     run that would fit), within a factor that keeps it meaningful."""
