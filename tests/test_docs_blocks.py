@@ -362,9 +362,8 @@ def test_the_export_page_runs(folder):
     assert run_page("howto/export-mujoco.md", folder) == ["export: 3 bodies"]
 
 
-@pytest.mark.parametrize(
-    "refine", [False, pytest.param(True, marks=pytest.mark.slow)], ids=["es", "refined"]
-)
+@pytest.mark.parametrize("refine", [False, True], ids=["es", "refined"])
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_several_recordings_page_runs(folder, refine):
     checked = run_page("howto/several-recordings.md", folder, refine=refine)
     assert checked[:2] == ["simulate: 120 frames"] * 2 and checked[2].startswith("fit: ")

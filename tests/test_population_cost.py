@@ -139,6 +139,7 @@ def test_unrolled_and_gathered_force_sums_agree():
         np.testing.assert_allclose(np.asarray(accumulate(n, terms, form)), expected, atol=1e-12)
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_mixed_precision_fit_recovers_the_triangle():
     """--precision mixed (the ES's one-step cost in float32) against a known truth: the ES
     alone gets within 5 % of every parameter, and its float64 refinement within 0.1 %; the
