@@ -99,8 +99,8 @@ MARQUARDT = True
 DAMPING = 1e-3
 LAPACK = True
 SHAPE = True
-PHASE_ROUNDS = 8  # fills of a gap in an entrained drive's signal, each tracking its phase
-PHASE_TOL = 1e-9  # along the last (radians: the rounds stop when it moves less)
+PHASE_ROUNDS = 8  # refits of a stretch whose entrained drive's signal has a gap, at most
+PHASE_TOL = 1e-9  # radians: the rounds stop when the tracked phase moves less
 TAU_NOTE = 4.0  # the note names correlated continuity defects from this tau up (scale 2)
 
 
@@ -367,8 +367,7 @@ def fill_phases(
         return None
     marks = list(topo.drive.particles)
     missing = ~np.asarray(mask, bool)[:, marks].all(axis=1)
-    s = phase.signal(topo, np.where(missing[:, None, None], 0.0, positions), np)
-    s = np.where(missing, 0.0, s)
+    s = np.where(missing, 0.0, phase.signal(topo, positions, np))
     params = model.layout.decode(genome)
     return np.asarray(phase.track(params, topo, jnp.asarray(s), dt, substeps, psi0))
 
@@ -539,12 +538,12 @@ def model_fill(
         if psi is not None and not mask[a:b][:, signal_cols].all():
             # the signal's own gap: the phase tracked along the model's fill of it, refitted
             # until the two agree
+            seen = mask | before
+            seen[a:b] = True
             for _ in range(PHASE_ROUNDS):
-                filled = mask.copy()
-                filled[a:b] = True
                 values[a:b][~mask[a:b]] = xs[~mask[a:b]]
                 moved = psi
-                psi = fill_phases(model, genome, values, filled | before, dt, substeps, psi0)
+                psi = fill_phases(model, genome, values, seen, dt, substeps, psi0)
                 if np.abs(psi[a:b] - moved[a:b]).max() < PHASE_TOL:
                     break
                 steps = solved.steps
