@@ -10,6 +10,7 @@ force by about 2 and N Euler substeps by about 2N/(N+1), while the fit error sta
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -156,3 +157,69 @@ def test_a_body_at_60_hz_has_its_start_velocity_solved(truth, method, substeps):
     np.testing.assert_allclose(v, v1, rtol=1e-6, atol=1e-6 * float(np.abs(v1).max()))
     few = np.asarray(start_velocity(p, truth.topology, x0, x1, dt, substeps, method, 3))
     assert np.isnan(few).all()  # the old 3 rounds: not converged
+
+
+def test_newton_solves_the_start_the_fixed_point_cannot_and_differentiates_it(truth):
+    """Damped springs whose integrator is stable at 2 Euler substeps of 10 ms but whose
+    start's fixed point diverges (it contracts by about dt c / m: 0.02 x 60 / 0.8 here, three
+    bonds of 20 N s/m on the lightest particle): Newton's method on the exact
+    Jacobian (``newton=True``, what a single parameter vector's least squares, checks and
+    predictions use) returns the velocity the integrator carried, to 1e-9 relative, and its
+    implicit derivative in the damping equals a central difference of the solve itself."""
+    p = _stiff_damped(truth, damping=20.0)
+    x0, v0 = (np.asarray(a) for a in truth.initial_state())
+    x1, v1 = (np.asarray(a) for a in advance(p, truth.topology, x0, v0, 0.02, 2, "euler"))
+    fixed_point = start_velocity(p, truth.topology, x0, x1, 0.02, 2, "euler")
+    assert np.isnan(np.asarray(fixed_point)).all()
+
+    def solved(damping):
+        q = _stiff_damped(truth, damping)
+        return start_velocity(q, truth.topology, x0, x1, 0.02, 2, "euler", newton=True)
+
+    v = np.asarray(solved(20.0))
+    np.testing.assert_allclose(v, v1, rtol=0, atol=1e-9 * np.abs(v1).max())
+    _, dv = jax.jvp(solved, (20.0,), (1.0,))
+    eps = 1e-3
+    central = (np.asarray(solved(20.0 + eps)) - np.asarray(solved(20.0 - eps))) / (2 * eps)
+    assert np.abs(np.asarray(dv)).max() > 1e-4  # the start's velocity does depend on it
+    np.testing.assert_allclose(np.asarray(dv), central, rtol=0, atol=1e-6 * np.abs(central).max())
+
+
+def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(truth):
+    """Data the damped tetrahedron above generated (2 Euler substeps at 50 Hz): the
+    population's cost (fixed-point starts) is +inf at the truth, the least squares'
+    residuals (Newton's starts) vanish there, so a refinement can start from it."""
+    from activebonds.identify.cost import make_residuals
+
+    p = _stiff_damped(truth, damping=20.0)
+    model, layout = truth, truth.layout
+    genome = np.asarray(layout.initial())
+    names = [(g.kind, g.field) for g in layout.genes]
+    for i, (kind, field) in enumerate(names):
+        if kind == "binary" and field == "stiffness":
+            genome[i] = np.log(1000.0) if layout.log[i] else 1000.0
+        elif kind == "binary" and field == "damping":
+            genome[i] = np.log(20.0) if layout.log[i] else 20.0
+    params = layout.decode(genome)
+    np.testing.assert_allclose(
+        np.asarray(params.bonds["binary"]["damping"]), np.asarray(p.bonds["binary"]["damping"])
+    )
+    x, v = (np.asarray(a) for a in truth.initial_state())
+    frames = [x]
+    for _ in range(20):
+        x, v = (np.asarray(a) for a in advance(params, truth.topology, x, v, 0.02, 2, "euler"))
+        frames.append(x)
+    windows = make_windows(np.stack(frames), np.ones((21, x.shape[0]), bool), 0.02, 1)
+    total, _ = make_cost(model, windows, 2, "euler")(genome)
+    assert not np.isfinite(float(total))
+    residuals = np.asarray(make_residuals(model, windows, 2, "euler")(genome))
+    assert np.abs(residuals).max() < 1e-9
+
+
+def _stiff_damped(truth, damping, stiffness=1000.0):
+    binary = {
+        **truth.params.bonds["binary"],
+        "stiffness": np.full(6, stiffness),
+        "damping": jnp.full(6, damping),
+    }
+    return truth.params._replace(bonds={**truth.params.bonds, "binary": binary})

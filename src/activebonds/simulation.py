@@ -81,6 +81,7 @@ def simulate(
             integrator,
             t=t0,
             psi=psi_first,
+            newton=True,
         )
     n_run = n_frames if first is None else n_frames - 1
     run = rollout(

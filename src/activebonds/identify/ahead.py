@@ -38,7 +38,9 @@ def _runs(params, x_prev, x0, t0, dt, topo: StaticTopology, n_steps, substeps, m
 
     def one(a, b, t, *psi):
         p_prev, p0 = psi if psi else (None, None)
-        v = start_velocity(params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev)
+        v = start_velocity(
+            params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=True
+        )
         xs = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)[0]
         return xs[-1]
 

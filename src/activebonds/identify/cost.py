@@ -191,8 +191,10 @@ def start_phases(model: Model, windows: Windows, substeps: int):
     return phases
 
 
-def _predictor(model: Model, windows: Windows, substeps: int, method: str):
-    """``params -> predicted positions [S, H, P, D]`` from every restart state."""
+def _predictor(model: Model, windows: Windows, substeps: int, method: str, newton: bool = False):
+    """``params -> predicted positions [S, H, P, D]`` from every restart state; ``newton``:
+    the start velocities by Newton's method (one parameter vector), else by the fixed point
+    (a population's: see :func:`~activebonds.physics.integrate.start_velocity`)."""
     topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     x_prev = jnp.asarray(windows.x_prev)
@@ -201,14 +203,14 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str):
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
     phases = start_phases(model, windows, substeps)
     if phases is not None:
-        return _phased_predictor(model, windows, substeps, method, phases)
+        return _phased_predictor(model, windows, substeps, method, phases, newton)
 
     def velocities(params):
         if exact_backward:
             return v0
         start = jax.vmap(
             lambda a, b, t: start_velocity(
-                params, topo, a, b, dt, substeps, method, START_ITERATIONS, t
+                params, topo, a, b, dt, substeps, method, START_ITERATIONS, t, newton=newton
             )
         )
         return start(x_prev, x0, t0)
@@ -226,7 +228,9 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str):
     return predict
 
 
-def _phased_predictor(model: Model, windows: Windows, substeps: int, method: str, phases):
+def _phased_predictor(
+    model: Model, windows: Windows, substeps: int, method: str, phases, newton: bool = False
+):
     """:func:`_predictor` for an entrained drive: each restart starts from its recorded
     state with the phase tracked along the record there (:func:`start_phases`); the phase
     then moves with the predicted state."""
@@ -242,7 +246,17 @@ def _phased_predictor(model: Model, windows: Windows, substeps: int, method: str
         if not (substeps == 1 and method == "euler"):
             v = jax.vmap(
                 lambda a, b, t, p: start_velocity(
-                    params, topo, a, b, dt, substeps, method, START_ITERATIONS, t, psi=p
+                    params,
+                    topo,
+                    a,
+                    b,
+                    dt,
+                    substeps,
+                    method,
+                    START_ITERATIONS,
+                    t,
+                    psi=p,
+                    newton=newton,
                 )
             )(x_prev, x0, t0, psi_prev)
 
@@ -275,10 +289,13 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
 
 def make_residuals(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
     """``genome -> residuals [S, H, P, D]`` (m): predicted minus recorded positions, 0 where
-    the term does not count. Their sum of squares is :func:`make_cost`'s global cost."""
+    the term does not count. Their sum of squares is :func:`make_cost`'s global cost where
+    its start velocities converge: these (one parameter vector, for a least squares or a
+    check) are solved by Newton's method, which also converges where a population's fixed
+    point does not."""
     layout = model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
-    predict = _predictor(model, windows, substeps, method)
+    predict = _predictor(model, windows, substeps, method, newton=True)
 
     def residuals(genome):
         err = predict(layout.decode(genome)) - target
@@ -315,7 +332,18 @@ def unsolved_starts(
     def residuals(x_prev, x0, t0, psi):
         def one(a, b, t, p):
             v, r = start_velocity(
-                params, topo, a, b, windows.dt, substeps, method, START_ITERATIONS, t, True, p
+                params,
+                topo,
+                a,
+                b,
+                windows.dt,
+                substeps,
+                method,
+                START_ITERATIONS,
+                t,
+                True,
+                p,
+                newton=True,
             )
             return jnp.where(jnp.all(jnp.isfinite(v)), r, jnp.inf)
 

@@ -78,7 +78,16 @@ def _one_step(
 
     def step(a, b, t, *psi):
         v = start_velocity(
-            params, topo.topo, a, b, dt, substeps, method, t=t, psi=psi[0] if psi else None
+            params,
+            topo.topo,
+            a,
+            b,
+            dt,
+            substeps,
+            method,
+            t=t,
+            psi=psi[0] if psi else None,
+            newton=True,
         )
         return advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
 
@@ -101,7 +110,9 @@ def _free_run(
     """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``; then the
     run's phases are returned too."""
     psi_prev, psi0 = psis if psis is not None else (None, None)
-    v0 = start_velocity(params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev)
+    v0 = start_velocity(
+        params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev, newton=True
+    )
     run = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0, psi0)
     return (v0, *run)
 
