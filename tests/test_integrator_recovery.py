@@ -187,8 +187,8 @@ def test_newton_solves_the_start_the_fixed_point_cannot_and_differentiates_it(tr
 
 def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(truth):
     """Data the damped tetrahedron above generated (2 Euler substeps at 50 Hz): the
-    population's cost (fixed-point starts) is +inf at the truth, the least squares'
-    residuals (Newton's starts) vanish there, so a refinement can start from it."""
+    population's cost (fixed-point starts) is +inf at the truth, and so are the residuals
+    by default; with Newton's starts (``newton=True``) they vanish there."""
     from activebonds.identify.cost import make_residuals
 
     p = _stiff_damped(truth, damping=20.0)
@@ -212,7 +212,8 @@ def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(tru
     windows = make_windows(np.stack(frames), np.ones((21, x.shape[0]), bool), 0.02, 1)
     total, _ = make_cost(model, windows, 2, "euler")(genome)
     assert not np.isfinite(float(total))
-    residuals = np.asarray(make_residuals(model, windows, 2, "euler")(genome))
+    assert np.isnan(np.asarray(make_residuals(model, windows, 2, "euler")(genome))).any()
+    residuals = np.asarray(make_residuals(model, windows, 2, "euler", newton=True)(genome))
     assert np.abs(residuals).max() < 1e-9
 
 
@@ -223,3 +224,50 @@ def _stiff_damped(truth, damping, stiffness=1000.0):
         "damping": jnp.full(6, damping),
     }
     return truth.params._replace(bonds={**truth.params.bonds, "binary": binary})
+
+
+def test_a_refinement_whose_start_the_fixed_point_cannot_solve_takes_newtons_starts():
+    """The damped tetrahedron above (20 N s/m on every bond, stiffnesses the file's), its
+    recording made at 2 Euler substeps: from 2 % off the truth, the one-step refinement's
+    start cannot be computed with the fixed point's start velocities (every one diverges),
+    so its residuals are rebuilt with Newton's, and it recovers every parameter to 1e-6."""
+    from activebonds.identify.problem import identification
+    from activebonds.identify.refine import Refinement
+    from activebonds.identify.settings import FitSettings
+    from activebonds.model import loads_model
+
+    model = loads_model(TETRA.read_text().replace("max = 10.0", "max = 100.0"), "tetra")
+    layout = model.layout
+    truth = np.asarray(layout.initial(), np.float64)
+    damping = [i for i, g in enumerate(layout.genes) if g.field == "damping"]
+    truth[damping] = np.log(20.0) if layout.log[damping[0]] else 20.0
+    traj = simulate(model.with_genome(truth), 40, 50.0, substeps=2, integrator="euler")
+    settings = FitSettings(horizon=(1,), cost="restart", substeps=2, integrator="euler")
+    refinement = Refinement(identification(model, traj, settings), settings)
+    start = layout.natural(truth) * 1.02
+    start[layout.log] = np.log(start[layout.log])
+    stage = refinement.stage(1, start)
+    assert stage.accepted and refinement._newton, stage.message
+    found = layout.natural(np.asarray(stage.genome))
+    np.testing.assert_allclose(found, layout.natural(truth), rtol=1e-6)
+
+
+def test_predictions_from_a_recording_take_newtons_starts_where_the_fixed_point_fails():
+    """The damped tetrahedron's own recording (2 Euler substeps): its one-step predictions
+    and a free run from its first frames reproduce it (the fixed point's starts are NaN
+    there: the predictions are run again with Newton's)."""
+    from activebonds.identify.predictions import free_run, one_step
+    from activebonds.model import loads_model
+
+    model = loads_model(TETRA.read_text().replace("max = 10.0", "max = 100.0"), "tetra")
+    layout = model.layout
+    genome = np.asarray(layout.initial(), np.float64)
+    damping = [i for i, g in enumerate(layout.genes) if g.field == "damping"]
+    genome[damping] = np.log(20.0) if layout.log[damping[0]] else 20.0
+    truth = model.with_genome(genome)
+    traj = simulate(truth, 30, 50.0, substeps=2, integrator="euler")
+    x = np.asarray(traj.positions)
+    predicted = one_step(truth, x, traj.dt, substeps=2, method="euler")
+    np.testing.assert_allclose(predicted[2:], x[2:], rtol=0, atol=1e-9)
+    run = free_run(truth, x, traj.dt, substeps=2, method="euler")[0]
+    np.testing.assert_allclose(run, x, rtol=0, atol=1e-8)

@@ -25,21 +25,34 @@ import numpy as np
 from ..data import Trajectory
 from ..model import Model
 from ..runtime import float64
-from .predictions import StaticTopology, float64_params, tracked_phases
+from .predictions import StaticTopology, float64_params, solved, tracked_phases
 from .verdict import Comparison
 
 DEFAULT_AHEAD = 10  # frames ahead in fit's summary and evaluate's default
 
 
-@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
-def _runs(params, x_prev, x0, t0, dt, topo: StaticTopology, n_steps, substeps, method, psis=None):
-    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``."""
+@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method", "newton"))
+def _runs(
+    params,
+    x_prev,
+    x0,
+    t0,
+    dt,
+    topo: StaticTopology,
+    n_steps,
+    substeps,
+    method,
+    psis=None,
+    newton: bool = False,
+):
+    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``;
+    ``newton``: the start velocities by Newton's method (:func:`.predictions.solved`)."""
     from ..physics.integrate import rollout_states, start_velocity
 
     def one(a, b, t, *psi):
         p_prev, p0 = psi if psi else (None, None)
         v = start_velocity(
-            params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=True
+            params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=newton
         )
         xs = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)[0]
         return xs[-1]
@@ -74,7 +87,8 @@ def model_ahead(
         return out
     psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
     psis = None if psi is None else (jnp.asarray(psi[starts - 1]), jnp.asarray(psi[starts]))
-    pred = _runs(
+    pred = solved(
+        _runs,
         float64_params(model),
         jnp.asarray(rec[starts - 1]),
         jnp.asarray(rec[starts]),

@@ -287,15 +287,17 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     return cost
 
 
-def make_residuals(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
+def make_residuals(
+    model: Model, windows: Windows, substeps: int = 1, method: str = "euler", newton: bool = False
+):
     """``genome -> residuals [S, H, P, D]`` (m): predicted minus recorded positions, 0 where
-    the term does not count. Their sum of squares is :func:`make_cost`'s global cost where
-    its start velocities converge: these (one parameter vector, for a least squares or a
-    check) are solved by Newton's method, which also converges where a population's fixed
-    point does not."""
+    the term does not count. Their sum of squares is :func:`make_cost`'s global cost.
+    ``newton``: the start velocities by Newton's method, which converges where the fixed
+    point does not (the population's cost then +inf), at a compilation and a Jacobian of the
+    landing per start (:func:`~activebonds.physics.integrate.start_velocity`)."""
     layout = model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
-    predict = _predictor(model, windows, substeps, method, newton=True)
+    predict = _predictor(model, windows, substeps, method, newton=newton)
 
     def residuals(genome):
         err = predict(layout.decode(genome)) - target
@@ -343,7 +345,6 @@ def unsolved_starts(
                 t,
                 True,
                 p,
-                newton=True,
             )
             return jnp.where(jnp.all(jnp.isfinite(v)), r, jnp.inf)
 

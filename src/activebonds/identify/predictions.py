@@ -70,11 +70,34 @@ def neural_bonds(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(rows), np.concatenate(flags)
 
 
-@partial(jax.jit, static_argnames=("topo", "substeps", "method"))
+def solved(program, *args, **kwargs):
+    """``program(*args, **kwargs)`` with the start velocities by the fixed point (cheap), run
+    again with Newton's method where a result is not finite and the start needed a solve:
+    the fixed point fails where the damping is strong for the frame interval
+    (:func:`~activebonds.physics.integrate.start_velocity`)."""
+    out = program(*args, **kwargs)
+    if kwargs["substeps"] == 1 and kwargs["method"] == "euler":
+        return out
+    if all(np.isfinite(np.asarray(a)).all() for a in jax.tree.leaves(out)):
+        return out
+    return program(*args, newton=True, **kwargs)
+
+
+@partial(jax.jit, static_argnames=("topo", "substeps", "method", "newton"))
 def _one_step(
-    params, x_prev, x0, times, dt, topo: StaticTopology, substeps: int, method: str, psis=None
+    params,
+    x_prev,
+    x0,
+    times,
+    dt,
+    topo: StaticTopology,
+    substeps: int,
+    method: str,
+    psis=None,
+    newton: bool = False,
 ):
-    """``psis``: an entrained drive's phases (at the frames of ``x_prev``, of ``x0``)."""
+    """``psis``: an entrained drive's phases (at the frames of ``x_prev``, of ``x0``);
+    ``newton``: the start velocities by Newton's method (see :func:`solved`)."""
 
     def step(a, b, t, *psi):
         v = start_velocity(
@@ -87,14 +110,14 @@ def _one_step(
             method,
             t=t,
             psi=psi[0] if psi else None,
-            newton=True,
+            newton=newton,
         )
         return advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
 
     return jax.vmap(step)(x_prev, x0, times, *(psis or ()))
 
 
-@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method"))
+@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method", "newton"))
 def _free_run(
     params,
     x_prev,
@@ -106,12 +129,13 @@ def _free_run(
     substeps: int,
     method: str,
     psis=None,
+    newton: bool = False,
 ):
     """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``; then the
-    run's phases are returned too."""
+    run's phases are returned too. ``newton``: as :func:`_one_step`'s."""
     psi_prev, psi0 = psis if psis is not None else (None, None)
     v0 = start_velocity(
-        params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev, newton=True
+        params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev, newton=newton
     )
     run = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0, psi0)
     return (v0, *run)
@@ -172,7 +196,8 @@ def one_step(
     x_prev = np.where(ok[:, None, None], prev2, 0.0)
     psi = tracked_phases(model, x, dt, substeps, offset)
     psis = None if psi is None else (jnp.asarray(psi[:-2]), jnp.asarray(psi[1:-1]))
-    pred = _one_step(
+    pred = solved(
+        _one_step,
         float64_params(model),
         jnp.asarray(x_prev),
         jnp.asarray(x0),
@@ -228,7 +253,8 @@ def free_run(
     if phases is not None:
         psis = (jnp.asarray(phases[s - 1]), jnp.asarray(phases[s]))
         psi_out[: s + 1] = phases[: s + 1]
-    run = _free_run(
+    run = solved(
+        _free_run,
         float64_params(model),
         jnp.asarray(x[s - 1]),
         jnp.asarray(x[s]),

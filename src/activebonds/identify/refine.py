@@ -50,6 +50,11 @@ from .shooting import (
 from .shooting_normal import Normal, damped_step, floored, make_normal, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
+# ... and of a shooting stage's warm start on the restart cost: a start for the shooting, not
+# its answer. On a model that cannot follow the recording its restart cost crawls (the spring
+# body on the bundled human walk at H = 10: 0.6 % of its loss in steps 60-100, 2.4 s a step),
+# and the shooting refines from wherever it got
+WARM_STEPS = 50
 # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
 INITIAL_DAMPING = 1e-3
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
@@ -252,6 +257,9 @@ class Refinement:
         self._residuals: dict[int, tuple] = {}  # by horizon: (windows, jitted residuals)
         self._raw: dict[int, object] = {}  # by horizon: the same residuals, not jitted
         self._jacobians: dict[int, object] = {}  # by horizon: the warm start's Jacobian
+        # the restart residuals' start velocities by Newton's method, once the fixed point
+        # failed at a point that had to be judged (:meth:`_to_newton`)
+        self._newton = False
         # the bounds' transform as one program: the restart residuals of u are those of
         # its genome, by the shared program (bit for bit those of both compiled together)
         self._to_genome = jax.jit(self.bounded.to_genome)
@@ -287,10 +295,28 @@ class Refinement:
                     for d in self.recordings
                 ]
             )
-            residuals = make_residuals(self.ident.model, windows, s.substeps, s.integrator)
+            residuals = make_residuals(
+                self.ident.model, windows, s.substeps, s.integrator, self._newton
+            )
             self._raw[horizon] = residuals
             self._residuals[horizon] = (windows, jax.jit(residuals))
         return self._residuals[horizon]
+
+    def _to_newton(self) -> bool:
+        """Switch the restart residuals' start velocities from the fixed point to Newton's
+        method, their programs rebuilt at their next use; False where that changes nothing
+        (already switched, or no start needs a solve). The fixed point is the cheaper program
+        (a tetrahedron's stage compiles in half the time) and converges for most models; it
+        fails where the damping is strong for the frame interval (the spring body fitted to
+        the bundled human walk: every start, at the one-step optimum)."""
+        s = self.settings
+        if self._newton or (s.substeps == 1 and s.integrator == "euler"):
+            return False
+        self._newton = True
+        self._residuals.clear()
+        self._raw.clear()
+        self._jacobians.clear()
+        return True
 
     def _restart(self, horizon, genome, max_steps) -> Stage:
         windows, residuals = self._restart_residuals(horizon)
@@ -303,6 +329,9 @@ class Refinement:
         # the start's and the end's costs by the shared program (the checks against constant
         # velocity reuse it; a start that diverges compiles nothing more)
         start = _sum_squares(residuals(to_genome(u0)))
+        if not np.isfinite(start) and self._to_newton():  # the start velocities, by Newton
+            windows, residuals = self._restart_residuals(horizon)
+            start = _sum_squares(residuals(to_genome(u0)))
         stopped = None
         if not np.isfinite(start):  # no step can be judged from a non-finite cost
             u, steps, message = u0, 1, "not started"
@@ -374,7 +403,8 @@ class Refinement:
             normal, step = self._shooting_programs(windows, y0)
         self._check_ahead(1, y0[0])
         trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # last needed, last
-        warm = self._restart(horizon, genome, max_steps)  # interrupted: the stage's start
+        # interrupted: the stage's start
+        warm = self._restart(horizon, genome, min(max_steps, WARM_STEPS))
         if warm.accepted:
             genome = np.asarray(warm.genome)
             # the restart cost's optimum at this horizon (its RMS already measured by the
@@ -463,6 +493,9 @@ class Refinement:
                 model = float(known_mm)
             else:
                 cost = _sum_squares(residuals(jnp.asarray(genome)))
+                if not np.isfinite(cost) and self._to_newton():  # the starts, by Newton
+                    windows, residuals = self._restart_residuals(h)
+                    cost = _sum_squares(residuals(jnp.asarray(genome)))
                 model = float(rms_mm(cost, windows.n_terms))
             baseline = float(rms_mm(constant_velocity_cost(windows), windows.n_terms))
             if not np.isfinite(model):  # not a loss to constant velocity: no number at all
