@@ -2,7 +2,8 @@
 path (normal equations by window, states eliminated), side by side in one run.
 
     python benchmarks/shooting.py [--cases tetra,horse7,walk,body300,body600]
-                                  [--paths dense,structured] [--warm] [--json out.json]
+                                  [--paths dense,structured] [--warm] [--trace]
+                                  [--json out.json]
 
 Each (case, path) runs in its own process, one after another, so its peak memory (RSS) is
 its own, with JAX's persistent compilation cache off (every program compiled in the stage's
@@ -95,6 +96,48 @@ def dense_bytes(model, traj, horizon: int) -> float:
     return 8.0 * unknowns * residuals
 
 
+def _traced(timeline: list) -> None:
+    """Record the stage's parts (warm start, checks, the one-step stage instead) and every
+    Levenberg-Marquardt solve (steps, message, seconds) in ``timeline``, each also printed to
+    stderr as it ends, every 10th step's loss too (``--trace``: where a long stage goes)."""
+    from activebonds.identify import refine
+
+    t0 = time.perf_counter()
+
+    def note(entry):
+        entry["at"] = round(time.perf_counter() - t0, 1)
+        timeline.append(entry)
+        print(f"[{entry['at']:8.1f} s] {entry}", file=sys.stderr, flush=True)
+
+    solve = refine.levenberg_marquardt
+
+    def traced_solve(*args, **kwargs):
+        t, user = time.perf_counter(), kwargs.get("on_step")
+
+        def on_step(steps, loss):
+            if steps % 10 == 0:
+                print(f"    step {steps}: loss {loss:.6g}", file=sys.stderr, flush=True)
+            if user:
+                user(steps, loss)
+
+        out = solve(*args, **{**kwargs, "on_step": on_step})
+        note({"solve": out[1], "message": out[2], "seconds": round(time.perf_counter() - t, 1)})
+        return out
+
+    refine.levenberg_marquardt = traced_solve
+    for part in ("_restart", "_versus_constant_velocity", "_one_step_instead"):
+        method = getattr(refine.Refinement, part)
+
+        def traced(self, *args, _method=method, _part=part, **kwargs):
+            t = time.perf_counter()
+            out = _method(self, *args, **kwargs)
+            said = getattr(out, "message", out)
+            note({"part": _part, "seconds": round(time.perf_counter() - t, 1), "result": said})
+            return out
+
+        setattr(refine.Refinement, part, traced)
+
+
 def child(name: str, path: str) -> dict:
     from activebonds.runtime import fast_cpu_flags
 
@@ -112,6 +155,9 @@ def child(name: str, path: str) -> dict:
     from activebonds.identify.settings import FitSettings
 
     jax.config.update("jax_enable_x64", True)
+    timeline: list = []
+    if os.environ.get("SHOOTING_TRACE"):
+        _traced(timeline)
     model, traj, horizon, substeps, integrator = case(name)
     settings = FitSettings(
         horizon=(horizon,), cost="shooting", refine="lm", substeps=substeps, integrator=integrator
@@ -142,19 +188,24 @@ def child(name: str, path: str) -> dict:
         "continuity_mm": stage.continuity_mm,
         "genome": stage.genome,
         "peak_rss_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 3),
+        **({"timeline": timeline} if timeline else {}),
     }
 
 
-def _run_child(name: str, path: str, cache: str) -> dict:
+def _run_child(name: str, path: str, cache: str, trace: bool = False) -> dict:
     """One (case, path) in its own process, JAX's persistent cache ``cache`` (a folder, or
-    "off")."""
-    env = {**os.environ, "ACTIVEBONDS_CACHE": cache}
+    "off"); ``trace``: its timeline printed as it goes and kept in the result."""
+    env = {**os.environ, "ACTIVEBONDS_CACHE": cache, **({"SHOOTING_TRACE": "1"} if trace else {})}
     out = subprocess.run(
-        [sys.executable, __file__, "--child", name, path], capture_output=True, text=True, env=env
+        [sys.executable, __file__, "--child", name, path],
+        stdout=subprocess.PIPE,
+        stderr=None if trace else subprocess.PIPE,
+        text=True,
+        env=env,
     )
     line = [ln for ln in out.stdout.splitlines() if ln.startswith("RESULT ")]
     if not line:
-        return {"failed": out.stderr.strip().splitlines()[-1:]}
+        return {"failed": (out.stderr or "see above").strip().splitlines()[-1:]}
     return json.loads(line[0][7:])
 
 
@@ -168,6 +219,11 @@ def main() -> None:
         "--warm",
         action="store_true",
         help="also time each path with JAX's persistent cache warm (a repeated fit)",
+    )
+    parser.add_argument(
+        "--trace",
+        action="store_true",
+        help="print where each stage's time goes (its parts and solves) and keep it in the JSON",
     )
     parser.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -192,7 +248,7 @@ def main() -> None:
                 row[path] = {"skipped": f"its Jacobian alone needs {need:.1f} GB"}
                 print(f"{name} {path}: skipped ({need:.1f} GB Jacobian)", flush=True)
                 continue
-            row[path] = _run_child(name, path, "off")
+            row[path] = _run_child(name, path, "off", args.trace)
             if args.warm and "seconds" in row[path]:  # a second run loads the first's programs
                 with tempfile.TemporaryDirectory() as cache:
                     _run_child(name, path, cache)
@@ -200,7 +256,7 @@ def main() -> None:
                 row[path]["warm_seconds"] = warm.get("seconds")
                 row[path]["warm_cpu_seconds"] = warm.get("cpu_seconds")
                 row[path]["warm_steps"] = warm.get("steps")
-            hidden = ("genome", "natural", "std_errors")
+            hidden = ("genome", "natural", "std_errors", "timeline")
             shown = {k: v for k, v in row[path].items() if k not in hidden}
             print(f"{name} {path}: {shown}", flush=True)
         a, b = row.get("dense", {}), row.get("structured", {})
