@@ -2,7 +2,7 @@
 marker, the drive's phase entrained by a hoof; its free run scored as a gait.
 
     python scripts/horse_gait.py [--json docs/results/horse_gait.json] [--gait trot|walk|both]
-                                 [--out runs/gait]
+                                 [--out runs/gait] [--variant PARTICLES:H:GAIN:DECAY ...]
 
 For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, all 7 markers), fitted on
 frames 0-299 and judged on frames 300-599:
@@ -37,8 +37,19 @@ frames 0-299 and judged on frames 300-599:
    floor; a weak coupling (sigma = 5); springs between every pair of markers at the fit
    range's mean distances plus the anchors; the scaffold's free springs and anchors (rest
    lengths and anchors free); each with its anchors (natural frequency against the stride's,
-   damping ratio) and the slip of its free runs' phase against the phase tracked along the
-   recording, 60 frames after each start (``diagnosis``).
+   damping ratio), its coupling strength kappa = sigma A / 2 / (2 pi f) (A the signal's
+   fundamental amplitude: the lock range and the phase's ripple within the stride, as shares
+   of the drive's rate), the tracked phase's rate over 0-299 and the slip of its free runs'
+   phase against the phase tracked along the recording, 60 frames after each start
+   (``diagnosis``); and two other signals at the chosen kappa: the most sinusoidal distance
+   but the chosen signal, and the left hind hoof's height;
+6. for the record, over 0-299: every signal the coupling can read (each marker's height,
+   each pair's distance) with its share of variance in the stride's fundamental
+   (``signals``), and the recorded gait's time against a clock at the fit range's stride
+   frequency, per 150 frames of the recording (``clock_drift``, model-free).
+
+``--variant`` scores variants outside the grid (fitted on 0-149 and free-run on 150-299,
+refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores.
 """
 
 from __future__ import annotations
