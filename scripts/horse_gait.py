@@ -3,6 +3,7 @@ marker, the drive's phase entrained by a hoof; its free run scored as a gait.
 
     python scripts/horse_gait.py [--json docs/results/horse_gait.json] [--gait trot|walk|both]
                                  [--out runs/gait] [--variant PARTICLES:H:GAIN:DECAY ...]
+                                 [--survey]
 
 For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, all 7 markers), fitted on
 frames 0-299 and judged on frames 300-599:
@@ -49,7 +50,8 @@ frames 0-299 and judged on frames 300-599:
    frequency, per 150 frames of the recording (``clock_drift``, model-free).
 
 ``--variant`` scores variants outside the grid (fitted on 0-149 and free-run on 150-299,
-refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores.
+refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores;
+``--survey`` writes item 6 and the example models' kappa and phase rates (no fit).
 """
 
 from __future__ import annotations
@@ -276,21 +278,26 @@ def damping_floor(traj, decay: float, frames=FIT) -> float:
     return 2.0 * 1.0 * stride_frequency(traj, frames) * decay
 
 
-def fundamental(s: np.ndarray, frequency: float, rate: float) -> tuple[float, float]:
-    """(share, amplitude): the share of a signal's variance (mean removed) in the stride's
-    fundamental (the least squares of a cosine and a sine at ``frequency``), and that
-    fundamental's amplitude (the signal's units)."""
+def fundamental(
+    s: np.ndarray, frequency: float, rate: float, phase: bool = False
+) -> tuple[float, ...]:
+    """(share, amplitude[, phase]): the share of a signal's variance (mean removed) in the
+    stride's fundamental (the least squares of a cosine and a sine at ``frequency``), that
+    fundamental's amplitude (the signal's units) and with ``phase`` its phase theta0 (deg;
+    the fundamental is A cos(2 pi f t - theta0), t from the first frame)."""
     s = np.asarray(s, np.float64) - np.mean(s)
     t = np.arange(len(s)) / rate
     basis = np.stack([np.cos(2 * np.pi * frequency * t), np.sin(2 * np.pi * frequency * t)], 1)
     c, *_ = np.linalg.lstsq(basis, s, rcond=None)
-    return float(np.sum((basis @ c) ** 2) / np.sum(s * s)), float(np.hypot(*c))
+    out = (float(np.sum((basis @ c) ** 2) / np.sum(s * s)), float(np.hypot(*c)))
+    return out + (float(np.degrees(np.arctan2(c[1], c[0]))),) if phase else out
 
 
 def signal_survey(traj, frames=FIT) -> list[dict]:
     """Every signal the coupling can read (each particle's height, each pair's distance) over
     ``frames``: its share of variance in the stride's fundamental (how sinusoidal it is at the
-    stride frequency) and that fundamental's amplitude (mm), most sinusoidal first."""
+    stride frequency), that fundamental's amplitude (mm) and its phase (deg, from the first
+    frame: two signals a quarter stride apart differ by 90), most sinusoidal first."""
     x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
     names, f = list(traj.markers), stride_frequency(traj, frames)
     pairs = [(n,) for n in names] + [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
@@ -298,8 +305,15 @@ def signal_survey(traj, frames=FIT) -> list[dict]:
     for pair in pairs:
         i = [names.index(n) for n in pair]
         s = x[:, i[0], 2] if len(i) == 1 else np.linalg.norm(x[:, i[1]] - x[:, i[0]], axis=-1)
-        share, amplitude = fundamental(s, f, traj.rate)
-        out.append({"particles": list(pair), "share": share, "amplitude_mm": 1e3 * amplitude})
+        share, amplitude, theta = fundamental(s, f, traj.rate, phase=True)
+        out.append(
+            {
+                "particles": list(pair),
+                "share": share,
+                "amplitude_mm": 1e3 * amplitude,
+                "phase_deg": theta,
+            }
+        )
     return sorted(out, key=lambda r: -r["share"])
 
 
@@ -618,6 +632,34 @@ def explore(gait: str, variants, say=print) -> dict:
     return {"gait": gait, "explored": rows}
 
 
+def survey(gait: str, model_file: Path) -> dict:
+    """Over 0-299 of a gait: every signal's share in the stride's fundamental, the gait's time
+    against the fit range's clock (per 150 frames, 0-599), and for a fitted model (its file)
+    its coupling strength kappa and the phase's rate tracked along 0-299 and 300-599. No fit."""
+    from activebonds.data import read_trajectory
+    from activebonds.data.bundled import dataset
+    from activebonds.model import load_model
+
+    traj = read_trajectory(dataset(GAITS[gait]).path)
+    model = load_model(model_file)
+    c = model.spec.drive.coupling
+    signal = signal_name([c.particle] if c.particle else c.particles)
+    gain = float(getattr(c.gain, "value", c.gain))
+    return {
+        "gait": gait,
+        "signals": signal_survey(traj),
+        "clock_drift": clock_drift(traj),
+        "model": {
+            "file": str(model_file),
+            "signal": list(SIGNALS[signal]),
+            "gain": gain,
+            "coupling_strength": coupling_strength(traj, gain, signal),
+            "phase_rate_fit": phase_rate(model, traj),
+            "phase_rate_held_out": phase_rate(model, traj, TEST),
+        },
+    }
+
+
 def line(s: dict) -> str:
     """One line of a summary's figures."""
     m = s["gait"]["model"]
@@ -663,12 +705,38 @@ def main(argv=None) -> int:
         default=[],
         help="PARTICLES:H:GAIN:DECAY (repeatable): score these variants only (no choice)",
     )
+    parser.add_argument(
+        "--survey",
+        action="store_true",
+        help="the signals, the gait's drift against a clock and the example models' coupling "
+        "strength and phase rate (no fit)",
+    )
     args = parser.parse_args(argv)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     gaits = ("trot", "walk") if args.gait == "both" else (args.gait,)
     from activebonds.report.gait import plain
 
+    if args.survey:
+        results = [survey(g, ROOT / "examples" / f"horse_{g}_gait.toml") for g in gaits]
+        for r in results:
+            m, top = r["model"], r["signals"][:4]
+            print(
+                f"{r['gait']}: kappa {m['coupling_strength']:.3f}, phase rate {m['phase_rate_fit']}"
+            )
+            print(
+                "  most sinusoidal: "
+                + ", ".join(f"{'-'.join(t['particles'])} {t['share']:.3f}" for t in top)
+            )
+            print(
+                "  drift: "
+                + ", ".join(
+                    f"{d['frames']} {d['max_abs']:.1f}" for d in r["clock_drift"]["segments"]
+                )
+            )
+        Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
+        print(f"\nwritten: {args.json}")
+        return 0
     if args.variant:
         results = [explore(g, args.variant) for g in gaits]
         Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
