@@ -2,7 +2,8 @@
 marker, the drive's phase entrained by a hoof; its free run scored as a gait.
 
     python scripts/horse_gait.py [--json docs/results/horse_gait.json] [--gait trot|walk|both]
-                                 [--out runs/gait]
+                                 [--out runs/gait] [--variant PARTICLES:H:GAIN:DECAY ...]
+                                 [--survey]
 
 For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, all 7 markers), fitted on
 frames 0-299 and judged on frames 300-599:
@@ -37,8 +38,20 @@ frames 0-299 and judged on frames 300-599:
    floor; a weak coupling (sigma = 5); springs between every pair of markers at the fit
    range's mean distances plus the anchors; the scaffold's free springs and anchors (rest
    lengths and anchors free); each with its anchors (natural frequency against the stride's,
-   damping ratio) and the slip of its free runs' phase against the phase tracked along the
-   recording, 60 frames after each start (``diagnosis``).
+   damping ratio), its coupling strength kappa = sigma A / 2 / (2 pi f) (A the signal's
+   fundamental amplitude: the lock range and the phase's ripple within the stride, as shares
+   of the drive's rate), the tracked phase's rate over 0-299 and the slip of its free runs'
+   phase against the phase tracked along the recording, 60 frames after each start
+   (``diagnosis``); and two other signals at the chosen kappa: the most sinusoidal distance
+   but the chosen signal, and the left hind hoof's height;
+6. for the record, over 0-299: every signal the coupling can read (each marker's height,
+   each pair's distance) with its share of variance in the stride's fundamental
+   (``signals``), and the recorded gait's time against a clock at the fit range's stride
+   frequency, per 150 frames of the recording (``clock_drift``, model-free).
+
+``--variant`` scores variants outside the grid (fitted on 0-149 and free-run on 150-299,
+refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores;
+``--survey`` writes item 6 and the example models' kappa and phase rates (no fit).
 """
 
 from __future__ import annotations
@@ -56,8 +69,9 @@ GAITS = {"trot": "horse-trot", "walk": "horse-walk"}
 FIT, TEST, TRAIN, TAIL = (0, 300), (300, 600), (0, 150), (150, 300)
 BODY = ("Head", "Withers", "Sacrum")
 FEET = ("HFL", "HFR", "HHL", "HHR")
-# The signals that may entrain the drive: the left fore hoof's height, or its distance from
-# the sacrum (the hoof's fore-aft swing seen from the body, one period a stride at a walk too)
+# The signals that may entrain the drive, each a particle's height (one name) or the distance
+# between two particles (two names): the left fore hoof's height, or its distance from the
+# sacrum (the hoof's fore-aft swing seen from the body, one period a stride at a walk too)
 SIGNALS = {"height": ("HFL",), "length": ("Sacrum", "HFL")}
 HARMONICS = (4, 6)  # the variants' numbers of harmonics
 GAINS = (0.0, 25.0, 50.0, 100.0, 200.0, 400.0)  # and coupling gains, rad/s per m (0: a clock)
@@ -70,13 +84,13 @@ DECAYS = (0.0, 1.0, 4.0)
 def signal_of(x: np.ndarray, names, signal: str) -> np.ndarray:
     """The coupling's signal along positions x [F, P, D] (before its offset)."""
     which = [names.index(n) for n in SIGNALS[signal]]
-    if signal == "height":
+    if len(which) == 1:
         return x[:, which[0], 2]
     return np.linalg.norm(x[:, which[1]] - x[:, which[0]], axis=-1)
 
 
 def drive_text(frequency: float, gain: float, offset: float, signal: str) -> str:
-    if signal == "height":
+    if len(SIGNALS[signal]) == 1:
         what = f'particle = "{SIGNALS[signal][0]}"'
     else:
         a, b = SIGNALS[signal]
@@ -264,6 +278,117 @@ def damping_floor(traj, decay: float, frames=FIT) -> float:
     return 2.0 * 1.0 * stride_frequency(traj, frames) * decay
 
 
+def fundamental(
+    s: np.ndarray, frequency: float, rate: float, phase: bool = False
+) -> tuple[float, ...]:
+    """(share, amplitude[, phase]): the share of a signal's variance (mean removed) in the
+    stride's fundamental (the least squares of a cosine and a sine at ``frequency``), that
+    fundamental's amplitude (the signal's units) and with ``phase`` its phase theta0 (deg;
+    the fundamental is A cos(2 pi f t - theta0), t from the first frame)."""
+    s = np.asarray(s, np.float64) - np.mean(s)
+    t = np.arange(len(s)) / rate
+    basis = np.stack([np.cos(2 * np.pi * frequency * t), np.sin(2 * np.pi * frequency * t)], 1)
+    c, *_ = np.linalg.lstsq(basis, s, rcond=None)
+    out = (float(np.sum((basis @ c) ** 2) / np.sum(s * s)), float(np.hypot(*c)))
+    return out + (float(np.degrees(np.arctan2(c[1], c[0]))),) if phase else out
+
+
+def signal_survey(traj, frames=FIT) -> list[dict]:
+    """Every signal the coupling can read (each particle's height, each pair's distance) over
+    ``frames``: its share of variance in the stride's fundamental (how sinusoidal it is at the
+    stride frequency), that fundamental's amplitude (mm) and its phase (deg, from the first
+    frame: two signals a quarter stride apart differ by 90), most sinusoidal first."""
+    x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
+    names, f = list(traj.markers), stride_frequency(traj, frames)
+    pairs = [(n,) for n in names] + [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
+    out = []
+    for pair in pairs:
+        i = [names.index(n) for n in pair]
+        s = x[:, i[0], 2] if len(i) == 1 else np.linalg.norm(x[:, i[1]] - x[:, i[0]], axis=-1)
+        share, amplitude, theta = fundamental(s, f, traj.rate, phase=True)
+        out.append(
+            {
+                "particles": list(pair),
+                "share": share,
+                "amplitude_mm": 1e3 * amplitude,
+                "phase_deg": theta,
+            }
+        )
+    return sorted(out, key=lambda r: -r["share"])
+
+
+def coupling_strength(traj, gain: float, signal: str, frames=FIT) -> float:
+    """kappa = sigma A / 2 / (2 pi f): the coupling's locking range as a share of the drive's
+    rate, A the signal's fundamental amplitude over ``frames``. For a signal at the stride
+    frequency, d psi/dt = 2 pi f - sigma s cos psi locks while the tempo differs by less than
+    kappa and, locked, ripples by the same +-kappa twice a stride (s cos psi = A/2 [cos(theta -
+    psi) + cos(theta + psi)] for s = A cos theta): with one signal, a lock that holds against
+    a tempo change of 1 % makes the phase run unevenly by 1 % or more within the stride."""
+    x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
+    f = stride_frequency(traj, frames)
+    _, amplitude = fundamental(signal_of(x, list(traj.markers), signal), f, traj.rate)
+    return float(gain * amplitude / 2.0 / (2.0 * np.pi * f))
+
+
+def phase_rate(model, traj, frames=FIT) -> dict:
+    """The entrained phase tracked along the recording over ``frames``: its rate's 5th and
+    95th percentiles and mean as shares of 2 pi f (1 for a clock)."""
+    from activebonds.identify.predictions import tracked_phases
+
+    x = np.asarray(traj.positions, np.float64)
+    psi = tracked_phases(model, x, 1.0 / traj.rate)
+    if psi is None:
+        return {}
+    f = model.spec.drive.frequency
+    rate = (
+        np.diff(psi[frames[0] : frames[1]])
+        * traj.rate
+        / (2 * np.pi * float(getattr(f, "value", f)))
+    )
+    return {
+        "p5": float(np.percentile(rate, 5)),
+        "mean": float(np.mean(rate)),
+        "p95": float(np.percentile(rate, 95)),
+    }
+
+
+def clock_drift(traj, frames=FIT, signal=("Sacrum", "HFL"), every: int = 150) -> dict:
+    """Does the recorded gait keep time with a clock at the fit range's stride frequency? The
+    gait's phase, the Hilbert phase of the hoof-sacrum distance (its mean over ``frames``
+    removed), averaged over a stride, minus the clock's 2 pi f t and the mean difference over
+    ``frames``, in frames of a stride: per ``every`` frames of the recording, its range
+    (first, last value) and largest absolute value. Model-free: what a clock fitted on
+    ``frames`` would slip against the recorded gait."""
+    from scipy.signal import hilbert
+
+    x = np.asarray(traj.positions, np.float64)
+    names = list(traj.markers)
+    f = stride_frequency(traj, frames)
+    period = traj.rate / f
+    s = np.linalg.norm(x[:, names.index(signal[1])] - x[:, names.index(signal[0])], axis=-1)
+    s = s - s[frames[0] : frames[1]].mean()
+    theta = np.unwrap(np.angle(hilbert(s)))
+    slip = (theta - 2 * np.pi * f * np.arange(len(s)) / traj.rate) / (2 * np.pi) * period
+    n = int(round(period))
+    smooth = np.convolve(slip, np.ones(n) / n, mode="same")
+    ok = np.arange(len(s))
+    ok = (ok >= n // 2) & (ok < len(s) - n // 2)  # a whole stride either side of the average
+    smooth = smooth - np.mean(smooth[frames[0] : frames[1]][ok[frames[0] : frames[1]]])
+    out = {"signal": list(signal), "period_frames": float(period), "segments": []}
+    for a in range(0, len(s), every):
+        part = smooth[a : a + every][ok[a : a + every]]
+        if part.size:
+            out["segments"].append(
+                {
+                    "frames": [a, min(a + every, len(s))],
+                    "first": float(part[0]),
+                    "last": float(part[-1]),
+                    "max_abs": float(np.max(np.abs(part))),
+                }
+            )
+    return out
+
+
 # The targets counted by the choice on 150-299 (issue 28's (i)-(iv) and issue 25's free-run
 # numbers, against 150-299's own recording): keys of passes()
 TAIL_TARGETS = (
@@ -340,6 +465,33 @@ def phase_slip(model, traj, frames=TEST, horizon: int = 60, every: int = 10) -> 
     }
 
 
+def signal_name(particles) -> str:
+    """The key of :data:`SIGNALS` for a particle's height (one name) or a distance (two),
+    added when new: "height HHL", "length Withers-HHL"."""
+    for key, value in SIGNALS.items():
+        if tuple(value) == tuple(particles):
+            return key
+    key = ("height " if len(particles) == 1 else "length ") + "-".join(particles)
+    SIGNALS[key] = tuple(particles)
+    return key
+
+
+def gain_for(traj, kappa: float, signal: str, frames=FIT) -> float:
+    """The gain giving ``signal`` the coupling strength ``kappa`` over ``frames``."""
+    return kappa / coupling_strength(traj, 1.0, signal, frames)
+
+
+def diagnosis(model, traj, gain: float, signal: str) -> dict:
+    """A fitted model's anchors, its coupling's strength and the tracked phase's rate over the
+    fit range, and the slip of its free runs' phase on the held-out frames."""
+    return {
+        "anchors": anchors_of(model, stride_frequency(traj)),
+        "coupling_strength": coupling_strength(traj, gain, signal),
+        "phase_rate": phase_rate(model, traj),
+        "phase_slip": phase_slip(model, traj),
+    }
+
+
 def build_and_solve(traj, harmonics, gain, springs, frames, signal="height", decay=0.0):
     """The variant fitted on ``frames``: its frequency, signal offset, anchors and damping
     floor from those frames alone."""
@@ -356,6 +508,10 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     traj = read_trajectory(dataset(GAITS[gait]).path)
     started = time.time()
     result = {"gait": gait, "markers": list(traj.markers), "variants": []}
+    # the signals' shapes and the gait's time against a clock, over the fit range (0-299) and
+    # on (for the record)
+    result["signals"] = signal_survey(traj)
+    result["clock_drift"] = clock_drift(traj)
     # 1. the choice: fitted on 0-149 (its frequency, signal offset, anchors and damping floor
     # from 0-149 alone), its free runs scored on 150-299 against 150-299's own recording
     for signal in SIGNALS:
@@ -411,30 +567,110 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             result["passes"] = row["passes"]
             # the same without --origin: the phase from its start value at frame 300
             result["held_out_cold_start"] = summary(evaluated(model, traj, TEST, True, None))
-            result["diagnosis"] = {
-                "anchors": anchors_of(model, stride_frequency(traj)),
-                "phase_slip": phase_slip(model, traj),
-            }
-    # 3. what else was tried, at the chosen harmonics, gain and damping floor
+            result["diagnosis"] = diagnosis(model, traj, gain, signal)
+    # 3. what else was tried, at the chosen harmonics, gain and damping floor; other signals
+    # at the chosen coupling strength kappa (their gains scaled by the amplitudes' ratio): the
+    # most sinusoidal distance other than the chosen signal, and a hind hoof's height
+    kappa = coupling_strength(traj, gain, signal)
+    other = next(
+        r["particles"]
+        for r in result["signals"]
+        if len(r["particles"]) == 2 and tuple(r["particles"]) != SIGNALS[signal]
+    )
     tried = {
-        "clock (coupling gain 0)": (h, 0.0, "anchors", decay),
-        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0),
-        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay),
-        "springs at the fit range's mean pose, plus anchors": (h, gain, "fixed", decay),
-        "the scaffold's free springs and anchors": (h, gain, "free", decay),
+        "clock (coupling gain 0)": (h, 0.0, "anchors", decay, signal),
+        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0, signal),
+        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay, signal),
+        "springs at the fit range's mean pose, plus anchors": (h, gain, "fixed", decay, signal),
+        "the scaffold's free springs and anchors": (h, gain, "free", decay, signal),
     }
+    for what, parts in (("the most sinusoidal other distance", other), ("a hind hoof", ["HHL"])):
+        name = signal_name(parts)
+        g = gain_for(traj, kappa, name)
+        tried[f"{what} ({name}) at the chosen kappa (gain {g:.3g})"] = (
+            h,
+            g,
+            "anchors",
+            decay,
+            name,
+        )
     result["tried"] = {}
-    for name, (hh, gg, springs, dd) in tried.items():
-        model = build_and_solve(traj, hh, gg, springs, FIT, signal, dd)
+    for name, (hh, gg, springs, dd, sig) in tried.items():
+        model = build_and_solve(traj, hh, gg, springs, FIT, sig, dd)
         result["tried"][name] = summary(evaluated(model, traj, TEST, True))
         result["tried"][name]["passes"] = passes(result["tried"][name], gait)
-        result["tried"][name]["diagnosis"] = {
-            "anchors": anchors_of(model, stride_frequency(traj)),
-            "phase_slip": phase_slip(model, traj),
-        }
+        result["tried"][name]["diagnosis"] = diagnosis(model, traj, gg, sig)
         say(f"{gait}: {name}: held-out one-step {result['tried'][name]['one_step_mm']:.3f} mm")
     result["seconds"] = time.time() - started
     return result
+
+
+def explore(gait: str, variants, say=print) -> dict:
+    """Variants outside the grid (``PARTICLES:H:GAIN:DECAY``, PARTICLES one name for a height
+    or two joined by '-' for a distance: "Withers-HHL:6:17.9:4"), each scored as the grid's are:
+    fitted on 0-149 and free-run on 150-299, refitted on 0-299 and judged on 300-599. Nothing
+    is chosen or written but the scores."""
+    from activebonds.data import read_trajectory
+    from activebonds.data.bundled import dataset
+
+    traj = read_trajectory(dataset(GAITS[gait]).path)
+    rows = []
+    for text in variants:
+        parts, h, gain, decay = text.split(":")
+        signal, h, gain, decay = signal_name(parts.split("-")), int(h), float(gain), float(decay)
+        row = {"signal": signal, "harmonics": h, "gain": gain, "decay": decay}
+        row["coupling_strength"] = coupling_strength(traj, gain, signal)
+        model = build_and_solve(traj, h, gain, "anchors", TRAIN, signal, decay)
+        row["tail"] = summary(evaluated(model, traj, TAIL, True))
+        row["tail_targets_met"] = tail_targets(row["tail"])
+        model = build_and_solve(traj, h, gain, "anchors", FIT, signal, decay)
+        row["held_out"] = summary(evaluated(model, traj, TEST, True))
+        row["passes"] = passes(row["held_out"], gait)
+        rows.append(row)
+        say(f"{gait} {text} (kappa {row['coupling_strength']:.3f}): 150-299 {line(row['tail'])}")
+        say(f"    300-599 {line(row['held_out'])}, targets met {sum(row['passes'].values())}")
+    return {"gait": gait, "explored": rows}
+
+
+def survey(gait: str, model_file: Path) -> dict:
+    """Over 0-299 of a gait: every signal's share in the stride's fundamental, the gait's time
+    against the fit range's clock (per 150 frames, 0-599), and for a fitted model (its file)
+    its coupling strength kappa and the phase's rate tracked along 0-299 and 300-599. No fit."""
+    from activebonds.data import read_trajectory
+    from activebonds.data.bundled import dataset
+    from activebonds.model import load_model
+
+    traj = read_trajectory(dataset(GAITS[gait]).path)
+    model = load_model(model_file)
+    c = model.spec.drive.coupling
+    signal = signal_name([c.particle] if c.particle else c.particles)
+    gain = float(getattr(c.gain, "value", c.gain))
+    return {
+        "gait": gait,
+        "signals": signal_survey(traj),
+        "clock_drift": clock_drift(traj),
+        "model": {
+            "file": str(model_file),
+            "signal": list(SIGNALS[signal]),
+            "gain": gain,
+            "coupling_strength": coupling_strength(traj, gain, signal),
+            "phase_rate_fit": phase_rate(model, traj),
+            "phase_rate_held_out": phase_rate(model, traj, TEST),
+        },
+    }
+
+
+def line(s: dict) -> str:
+    """One line of a summary's figures."""
+    m = s["gait"]["model"]
+    ratios = " ".join(f"{_float(r):.2f}" for r in m["excursion_ratio"])
+    return (
+        f"one step {_float(s['one_step_mm']):.3f} mm, 10 ahead {_float(s['ahead_mm']):.1f}, "
+        f"frames {s['frames_within_50mm']}, body frames {s['body_frames_within_50mm']}, period "
+        f"{_float(m['period_frames']):.2f}, excursions {ratios}, body "
+        f"{_float(m['body_distance_mm']):.1f}, cycle RMS {_float(m['cycle_rms_mm']):.1f} "
+        f"(shape {_float(m['cycle_shape_rms_mm']):.1f})"
+    )
 
 
 def show(result: dict) -> None:
@@ -463,14 +699,52 @@ def main(argv=None) -> int:
     parser.add_argument("--json", default=str(ROOT / "docs" / "results" / "horse_gait.json"))
     parser.add_argument("--gait", choices=("trot", "walk", "both"), default="both")
     parser.add_argument("--out", default=str(ROOT / "runs" / "gait"), help="the fitted models")
+    parser.add_argument(
+        "--variant",
+        action="append",
+        default=[],
+        help="PARTICLES:H:GAIN:DECAY (repeatable): score these variants only (no choice)",
+    )
+    parser.add_argument(
+        "--survey",
+        action="store_true",
+        help="the signals, the gait's drift against a clock and the example models' coupling "
+        "strength and phase rate (no fit)",
+    )
     args = parser.parse_args(argv)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     gaits = ("trot", "walk") if args.gait == "both" else (args.gait,)
+    from activebonds.report.gait import plain
+
+    if args.survey:
+        results = [survey(g, ROOT / "examples" / f"horse_{g}_gait.toml") for g in gaits]
+        for r in results:
+            m, top = r["model"], r["signals"][:4]
+            print(
+                f"{r['gait']}: kappa {m['coupling_strength']:.3f}, phase rate {m['phase_rate_fit']}"
+            )
+            print(
+                "  most sinusoidal: "
+                + ", ".join(f"{'-'.join(t['particles'])} {t['share']:.3f}" for t in top)
+            )
+            print(
+                "  drift: "
+                + ", ".join(
+                    f"{d['frames']} {d['max_abs']:.1f}" for d in r["clock_drift"]["segments"]
+                )
+            )
+        Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
+        print(f"\nwritten: {args.json}")
+        return 0
+    if args.variant:
+        results = [explore(g, args.variant) for g in gaits]
+        Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
+        print(f"\nwritten: {args.json}")
+        return 0
     results = [run_gait(g, out_dir) for g in gaits]
     for r in results:
         show(r)
-    from activebonds.report.gait import plain
 
     Path(args.json).write_text(json.dumps(plain(results), indent=1) + "\n")
     print(f"\nwritten: {args.json}")
