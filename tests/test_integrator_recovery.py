@@ -172,6 +172,7 @@ def test_newton_solves_the_start_the_fixed_point_cannot_and_differentiates_it(tr
     fixed_point = start_velocity(p, truth.topology, x0, x1, 0.02, 2, "euler")
     assert np.isnan(np.asarray(fixed_point)).all()
 
+    @jax.jit
     def solved(damping):
         q = _stiff_damped(truth, damping)
         return start_velocity(q, truth.topology, x0, x1, 0.02, 2, "euler", newton=True)
@@ -226,6 +227,7 @@ def _stiff_damped(truth, damping, stiffness=1000.0):
     return truth.params._replace(bonds={**truth.params.bonds, "binary": binary})
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_a_refinement_whose_start_the_fixed_point_cannot_solve_takes_newtons_starts():
     """The damped tetrahedron above (20 N s/m on every bond, stiffnesses the file's), its
     recording made at 2 Euler substeps: from 2 % off the truth, the one-step refinement's
