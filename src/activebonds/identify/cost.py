@@ -193,8 +193,8 @@ def start_phases(model: Model, windows: Windows, substeps: int):
 
 def _predictor(model: Model, windows: Windows, substeps: int, method: str, newton: bool = False):
     """``params -> predicted positions [S, H, P, D]`` from every restart state; ``newton``:
-    the start velocities by Newton's method (one parameter vector), else by the fixed point
-    (a population's: see :func:`~activebonds.physics.integrate.start_velocity`)."""
+    the start velocities by Newton's method, else by the fixed point (see
+    :func:`~activebonds.physics.integrate.start_velocity`)."""
     topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     x_prev = jnp.asarray(windows.x_prev)
@@ -334,17 +334,7 @@ def unsolved_starts(
     def residuals(x_prev, x0, t0, psi):
         def one(a, b, t, p):
             v, r = start_velocity(
-                params,
-                topo,
-                a,
-                b,
-                windows.dt,
-                substeps,
-                method,
-                START_ITERATIONS,
-                t,
-                True,
-                p,
+                params, topo, a, b, windows.dt, substeps, method, START_ITERATIONS, t, True, p
             )
             return jnp.where(jnp.all(jnp.isfinite(v)), r, jnp.inf)
 

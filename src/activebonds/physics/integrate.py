@@ -265,8 +265,10 @@ def start_velocity(
     times a step's cost per round), differentiated implicitly (:func:`_landing_velocity`).
     The fixed point, cheap enough for a population, slows as its contraction nears 1 and
     diverges beyond: on a 41-marker spring body fitted to a real walk (2 Verlet substeps at
-    60 Hz) it contracts by 0.67 a round, and its 12 rounds leave every start unsolved. A
-    single parameter vector (a least squares, a check, a prediction) takes Newton's method.
+    60 Hz) it contracts by 0.67 a round, and its 12 rounds leave every start unsolved. The
+    callers with one parameter vector try the fixed point first and take Newton's method
+    where it failed (:meth:`activebonds.identify.refine.Refinement._to_newton`,
+    :func:`activebonds.identify.predictions.solved`); a population keeps the fixed point.
 
     ``with_residual``: also return the last residual where the solve has not converged (m;
     0 where it has or none is needed), for counting the starts that could not be solved.
