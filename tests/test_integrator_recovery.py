@@ -186,6 +186,7 @@ def test_newton_solves_the_start_the_fixed_point_cannot_and_differentiates_it(tr
     np.testing.assert_allclose(np.asarray(dv), central, rtol=0, atol=1e-6 * np.abs(central).max())
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(truth):
     """Data the damped tetrahedron above generated (2 Euler substeps at 50 Hz): the
     population's cost (fixed-point starts) is +inf at the truth, and so are the residuals
@@ -254,6 +255,7 @@ def test_a_refinement_whose_start_the_fixed_point_cannot_solve_takes_newtons_sta
     np.testing.assert_allclose(found, layout.natural(truth), rtol=1e-6)
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_predictions_from_a_recording_take_newtons_starts_where_the_fixed_point_fails():
     """The damped tetrahedron's own recording (2 Euler substeps): its one-step predictions
     and a free run from its first frames reproduce it (the fixed point's starts are NaN
