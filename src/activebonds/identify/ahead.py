@@ -45,8 +45,9 @@ def _runs(
     psis=None,
     newton: bool = False,
 ):
-    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``;
-    ``newton``: the start velocities by Newton's method (:func:`.predictions.solved`)."""
+    """(start velocities, the runs' last positions): ``psis``, an entrained drive's phases at
+    the frames of ``x_prev`` and ``x0``; ``newton``, the start velocities by Newton's method
+    (:func:`.predictions.solved`)."""
     from ..physics.integrate import rollout_states, start_velocity
 
     def one(a, b, t, *psi):
@@ -55,7 +56,7 @@ def _runs(
             params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=newton
         )
         xs = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)[0]
-        return xs[-1]
+        return v, xs[-1]
 
     return jax.vmap(one)(x_prev, x0, t0, *(psis or ()))
 
@@ -99,7 +100,7 @@ def model_ahead(
         substeps=int(substeps),
         method=method,
         psis=psis,
-    )
+    )[1]
     pred = np.array(pred, np.float64)
     pred[~np.isfinite(pred)] = np.inf  # a failed prediction: an infinite error, not a gap
     out[starts + k] = pred

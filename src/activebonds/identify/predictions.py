@@ -71,14 +71,15 @@ def neural_bonds(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
 
 
 def solved(program, *args, **kwargs):
-    """``program(*args, **kwargs)`` with the start velocities by the fixed point (cheap), run
-    again with Newton's method where a result is not finite and the start needed a solve:
-    the fixed point fails where the damping is strong for the frame interval
-    (:func:`~activebonds.physics.integrate.start_velocity`)."""
+    """``program(*args, **kwargs)`` (its first output the start velocities) with the start
+    velocities by the fixed point (cheap), run again with Newton's method where one is not
+    finite: the fixed point fails where the damping is strong for the frame interval
+    (:func:`~activebonds.physics.integrate.start_velocity`). A run that diverges after its
+    start is not run again."""
     out = program(*args, **kwargs)
     if kwargs["substeps"] == 1 and kwargs["method"] == "euler":
         return out
-    if all(np.isfinite(np.asarray(a)).all() for a in jax.tree.leaves(out)):
+    if np.isfinite(np.asarray(out[0])).all():
         return out
     return program(*args, newton=True, **kwargs)
 
@@ -96,8 +97,9 @@ def _one_step(
     psis=None,
     newton: bool = False,
 ):
-    """``psis``: an entrained drive's phases (at the frames of ``x_prev``, of ``x0``);
-    ``newton``: the start velocities by Newton's method (see :func:`solved`)."""
+    """(start velocities, predictions): ``psis``, an entrained drive's phases (at the frames of
+    ``x_prev``, of ``x0``); ``newton``, the start velocities by Newton's method (see
+    :func:`solved`)."""
 
     def step(a, b, t, *psi):
         v = start_velocity(
@@ -112,7 +114,7 @@ def _one_step(
             psi=psi[0] if psi else None,
             newton=newton,
         )
-        return advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
+        return v, advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
 
     return jax.vmap(step)(x_prev, x0, times, *(psis or ()))
 
@@ -207,7 +209,7 @@ def one_step(
         substeps=int(substeps),
         method=method,
         psis=psis,
-    )
+    )[1]
     pred = np.array(pred, dtype=np.float64)
     pred[~ok] = np.nan
     out[2:] = pred
