@@ -289,6 +289,7 @@ class _Flag:
         return self.polls >= self.after
 
 
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_ctrl_c_during_the_refinement_stops_within_one_step_and_resumes(tmp_path):
     """The refinement's Levenberg-Marquardt loop polls for a Ctrl-C between two steps (the
     command line registers its guard's flag, here a simulated one): the first poll that says
