@@ -191,10 +191,18 @@ def start_phases(model: Model, windows: Windows, substeps: int):
     return phases
 
 
-def _predictor(model: Model, windows: Windows, substeps: int, method: str, newton: bool = False):
+def _predictor(
+    model: Model,
+    windows: Windows,
+    substeps: int,
+    method: str,
+    newton: bool = False,
+    unroll: bool = False,
+):
     """``params -> predicted positions [S, H, P, D]`` from every restart state; ``newton``:
     the start velocities by Newton's method, else by the fixed point (see
-    :func:`~activebonds.physics.integrate.start_velocity`)."""
+    :func:`~activebonds.physics.integrate.start_velocity`); ``unroll``: the substeps written
+    out (a population's cost runs faster so: :func:`~activebonds.physics.integrate.advance`)."""
     topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     x_prev = jnp.asarray(windows.x_prev)
@@ -203,14 +211,24 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str, newto
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
     phases = start_phases(model, windows, substeps)
     if phases is not None:
-        return _phased_predictor(model, windows, substeps, method, phases, newton)
+        return _phased_predictor(model, windows, substeps, method, phases, newton, unroll)
 
     def velocities(params):
         if exact_backward:
             return v0
         start = jax.vmap(
             lambda a, b, t: start_velocity(
-                params, topo, a, b, dt, substeps, method, START_ITERATIONS, t, newton=newton
+                params,
+                topo,
+                a,
+                b,
+                dt,
+                substeps,
+                method,
+                START_ITERATIONS,
+                t,
+                newton=newton,
+                unroll=unroll,
             )
         )
         return start(x_prev, x0, t0)
@@ -218,10 +236,15 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str, newto
     def predict(params):
         v = velocities(params)
         if horizon == 1:
-            step = jax.vmap(lambda x, v, t: advance(params, topo, x, v, dt, substeps, method, t)[0])
-            return step(x0, v, t0)[:, None]
+
+            def step(x, v, t):
+                return advance(params, topo, x, v, dt, substeps, method, t, unroll=unroll)[0]
+
+            return jax.vmap(step)(x0, v, t0)[:, None]
         run = jax.vmap(
-            lambda x, v, t: rollout_states(params, topo, x, v, dt, horizon, substeps, method, t)[0]
+            lambda x, v, t: rollout_states(
+                params, topo, x, v, dt, horizon, substeps, method, t, unroll=unroll
+            )[0]
         )
         return run(x0, v, t0)
 
@@ -229,7 +252,13 @@ def _predictor(model: Model, windows: Windows, substeps: int, method: str, newto
 
 
 def _phased_predictor(
-    model: Model, windows: Windows, substeps: int, method: str, phases, newton: bool = False
+    model: Model,
+    windows: Windows,
+    substeps: int,
+    method: str,
+    phases,
+    newton: bool = False,
+    unroll: bool = False,
 ):
     """:func:`_predictor` for an entrained drive: each restart starts from its recorded
     state with the phase tracked along the record there (:func:`start_phases`); the phase
@@ -257,11 +286,13 @@ def _phased_predictor(
                     t,
                     psi=p,
                     newton=newton,
+                    unroll=unroll,
                 )
             )(x_prev, x0, t0, psi_prev)
 
         def run(x, v, t, p):
-            return rollout_states(params, topo, x, v, dt, horizon, substeps, method, t, p)[0]
+            xs = rollout_states(params, topo, x, v, dt, horizon, substeps, method, t, p, unroll)
+            return xs[0]
 
         return jax.vmap(run)(x0, v, t0, psi0)
 
@@ -272,10 +303,11 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
     """A pure function ``genome -> (global cost, local costs [P])`` for one individual.
 
     Costs are sums of squared position errors (m^2); a non-finite prediction gives +inf.
+    The substeps are written out (the population's cost, vmapped, runs faster so).
     """
     layout = model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
-    predict = _predictor(model, windows, substeps, method)
+    predict = _predictor(model, windows, substeps, method, unroll=True)
 
     def cost(genome):
         params = layout.decode(genome)

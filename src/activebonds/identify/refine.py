@@ -386,7 +386,10 @@ class Refinement:
         windows = join_shooting(
             [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
         )
-        residuals, trajectory = make_shooting(self.ident.model, windows, s.substeps, s.integrator)
+        # the dense path's forward mode over every unknown runs its substeps written out
+        residuals, trajectory = make_shooting(
+            self.ident.model, windows, s.substeps, s.integrator, unroll=self.solver == "dense"
+        )
         if self.states is None:
             self.states = [frame_states(d.positions, d.mask, d.dt) for d in self.recordings]
         x0, v0 = start_states(windows, self.states)

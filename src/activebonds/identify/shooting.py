@@ -161,9 +161,16 @@ def frame_states(positions: np.ndarray, mask: np.ndarray, dt: float):
     return x, np.gradient(x, dt, axis=0)
 
 
-def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, method: str = "euler"):
+def make_shooting(
+    model: Model,
+    windows: ShootingWindows,
+    substeps: int = 1,
+    method: str = "euler",
+    unroll: bool = False,
+):
     """``(genome, states) -> residuals`` (a pytree of arrays, metres) and
-    ``(genome, states) -> frame states`` of the windows' trajectories.
+    ``(genome, states) -> frame states`` of the windows' trajectories. ``unroll``: the
+    substeps written out (the dense path's forward mode over every unknown runs faster so).
 
     ``states = (X [K, P, D], V [K, P, D])``: each window's start state. The trajectory's
     ``run`` attribute is its jitted ``(genome, states) -> (positions, velocities)``
@@ -181,7 +188,9 @@ def make_shooting(model: Model, windows: ShootingWindows, substeps: int = 1, met
         xs0, vs0 = states
 
         def window(x, v, t, *psi):
-            xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t, *psi)[:2]
+            xs, vs = rollout_states(
+                params, topo, x, v, dt, h, substeps, method, t, *psi, unroll=unroll
+            )[:2]
             return jnp.concatenate([x[None], xs]), jnp.concatenate([v[None], vs])
 
         extra = () if phases is None else (phases(params),)

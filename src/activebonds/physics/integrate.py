@@ -126,9 +126,17 @@ def advance(
     method: Integrator = "euler",
     t=0.0,
     psi=None,
+    unroll: bool = False,
 ):
     """Integrate over one sample interval dt in ``substeps`` steps, from time ``t``;
     returns (x, v), or (x, v, psi) with an entrained drive's phase ``psi`` (required then).
+
+    ``unroll``: the substeps written out in the program (up to :data:`UNROLLED`) rather than
+    run as a loop. Written out, a population's cost (vmapped over a few hundred genomes)
+    runs 25-45 % faster, and a forward-mode Jacobian over a thousand unknowns (the dense
+    shooting path) much faster; a loop traces and compiles in about half the time and runs
+    as fast for everything else (one trajectory, a Jacobian over the parameters, the
+    shooting's normal equations by window: ``benchmarks/README.md``), so it is the default.
 
     With substeps (> 1) and a stiff kind (:func:`stiff_kinds`), every substep's kick is
     linearly implicit in that kind's velocity dependence (:func:`kick`): substeps exist to
@@ -151,7 +159,7 @@ def advance(
             return one(state, t + k * h, True)
 
         return jax.lax.fori_loop(0, substeps, implicit, (x, v, *extra))
-    if substeps <= UNROLLED:
+    if substeps == 1 or (unroll and substeps <= UNROLLED):
         state = (x, v, *extra)
         for k in range(substeps):
             state = one(state, t if k == 0 else t + k * h)
@@ -164,7 +172,7 @@ def advance(
     return state
 
 
-UNROLLED = 8  # substeps written out in the program (fastest to run); more run as a loop
+UNROLLED = 8  # substeps written out in the program where asked (``unroll``); more: a loop
 # fixed-point rounds of start_velocity (substeps > 1): the fixed point contracts by
 # about dt (c/m + dt k/m) a round, 0.2-0.3 for a body's springs at 60 Hz (500 N/m, 5 N s/m per
 # kg), so 3 rounds left every such start 1e-3 off (NaN: +inf cost, a shot model rejected) and
@@ -224,6 +232,7 @@ def start_velocity(
     with_residual: bool = False,
     psi=None,
     newton: bool = False,
+    unroll: bool = False,
 ):
     """The velocity at a recorded frame that the integrator itself would carry there, given
     the two recorded positions ``x_prev`` (frame t - 1) and ``x`` (frame t); ``t`` is the
@@ -272,6 +281,7 @@ def start_velocity(
 
     ``with_residual``: also return the last residual where the solve has not converged (m;
     0 where it has or none is needed), for counting the starts that could not be solved.
+    ``unroll``: the substeps written out (:func:`advance`).
     """
     _needs_phase(topo, psi)
     v_b = (x - x_prev) / dt
@@ -292,7 +302,7 @@ def start_velocity(
     v = v_b - lag * dt * total_force(at_prev, topo, x_prev, v_b, t_prev) * inv_m
 
     def land(v):
-        return advance(params, topo, x_prev, v, dt, substeps, method, t_prev, psi)[:2]
+        return advance(params, topo, x_prev, v, dt, substeps, method, t_prev, psi, unroll)[:2]
 
     if newton and not stiff(topo):
         v = _landing_velocity(topo, substeps, method, params, x_prev, x, dt, t_prev, psi, v)
@@ -361,24 +371,35 @@ def rollout(
 
 
 def rollout_states(
-    params, topo, x0, v0, dt, n_steps: int, substeps: int = 1, method="euler", t0=0.0, psi0=None
+    params,
+    topo,
+    x0,
+    v0,
+    dt,
+    n_steps: int,
+    substeps: int = 1,
+    method="euler",
+    t0=0.0,
+    psi0=None,
+    unroll: bool = False,
 ):
     """Free run returning (positions, velocities) of the ``n_steps`` states after (x0, v0),
     (x0, v0) being at time ``t0``; with an entrained drive's phase ``psi0`` at x0 (required
-    then), (positions, velocities, phases)."""
+    then), (positions, velocities, phases). ``unroll``: the substeps written out
+    (:func:`advance`)."""
     _needs_phase(topo, psi0)
     if psi0 is not None:
 
         def phased(state, i):
             x, v, psi = state
-            state = advance(params, topo, x, v, dt, substeps, method, t0 + i * dt, psi)
+            state = advance(params, topo, x, v, dt, substeps, method, t0 + i * dt, psi, unroll)
             return state, state
 
         _, states = jax.lax.scan(phased, (x0, v0, psi0), jnp.arange(n_steps))
         return states
 
     def body(state, i):
-        state = advance(params, topo, *state, dt, substeps, method, t0 + i * dt)
+        state = advance(params, topo, *state, dt, substeps, method, t0 + i * dt, unroll=unroll)
         return state, state
 
     _, (xs, vs) = jax.lax.scan(body, (x0, v0), jnp.arange(n_steps))
