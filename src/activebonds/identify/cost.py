@@ -299,15 +299,18 @@ def _phased_predictor(
     return predict
 
 
-def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "euler"):
+def make_cost(
+    model: Model, windows: Windows, substeps: int = 1, method: str = "euler", unroll: bool = True
+):
     """A pure function ``genome -> (global cost, local costs [P])`` for one individual.
 
     Costs are sums of squared position errors (m^2); a non-finite prediction gives +inf.
-    The substeps are written out (the population's cost, vmapped, runs faster so).
+    ``unroll``: the substeps written out (the population's cost, vmapped, runs faster so:
+    :func:`~activebonds.physics.integrate.advance`).
     """
     layout = model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
-    predict = _predictor(model, windows, substeps, method, unroll=True)
+    predict = _predictor(model, windows, substeps, method, unroll=unroll)
 
     def cost(genome):
         params = layout.decode(genome)
@@ -320,16 +323,22 @@ def make_cost(model: Model, windows: Windows, substeps: int = 1, method: str = "
 
 
 def make_residuals(
-    model: Model, windows: Windows, substeps: int = 1, method: str = "euler", newton: bool = False
+    model: Model,
+    windows: Windows,
+    substeps: int = 1,
+    method: str = "euler",
+    newton: bool = False,
+    unroll: bool = False,
 ):
     """``genome -> residuals [S, H, P, D]`` (m): predicted minus recorded positions, 0 where
     the term does not count. Their sum of squares is :func:`make_cost`'s global cost.
     ``newton``: the start velocities by Newton's method, which converges where the fixed
     point does not (the population's cost then +inf), at a compilation and a Jacobian of the
-    landing per start (:func:`~activebonds.physics.integrate.start_velocity`)."""
+    landing per start (:func:`~activebonds.physics.integrate.start_velocity`). ``unroll``:
+    the substeps written out (:func:`~activebonds.physics.integrate.advance`)."""
     layout = model.layout
     target, weight = jnp.asarray(windows.target), jnp.asarray(windows.weight)
-    predict = _predictor(model, windows, substeps, method, newton=newton)
+    predict = _predictor(model, windows, substeps, method, newton=newton, unroll=unroll)
 
     def residuals(genome):
         err = predict(layout.decode(genome)) - target

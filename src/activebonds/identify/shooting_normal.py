@@ -47,9 +47,17 @@ class Normal(NamedTuple):
     grad_u: jax.Array  # [p]
 
 
-def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: str, to_genome):
+def make_normal(
+    model: Model,
+    windows: ShootingWindows,
+    substeps: int,
+    method: str,
+    to_genome,
+    unroll: bool = False,
+):
     """``(u, S) -> Normal`` at parameters u (search space of ``to_genome``) and window
-    states S [K, n] (each row: the window's start positions then velocities, flattened)."""
+    states S [K, n] (each row: the window's start positions then velocities, flattened).
+    ``unroll``: the substeps written out (:func:`~activebonds.physics.integrate.advance`)."""
     topo, layout = model.topology, model.layout
     dt, h = windows.dt, windows.horizon
     n_windows = len(windows.starts)
@@ -71,7 +79,9 @@ def make_normal(model: Model, windows: ShootingWindows, substeps: int, method: s
         params = layout.decode(to_genome(u))
         x, v = s[:half].reshape(n_particles, dim), s[half:].reshape(n_particles, dim)
         psi = () if phases is None else (phases(params)[k[0]],)  # tracked along the record
-        xs, vs = rollout_states(params, topo, x, v, dt, h, substeps, method, t, *psi)[:2]
+        xs, vs = rollout_states(
+            params, topo, x, v, dt, h, substeps, method, t, *psi, unroll=unroll
+        )[:2]
         pos = jnp.concatenate([x[None], xs]).reshape(h + 1, -1)
         measured = jnp.where(wt > 0, wt * (pos - tgt).ravel(), 0.0)
         return measured, jnp.concatenate([xs[-1].ravel(), vs[-1].ravel()])
