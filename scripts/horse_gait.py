@@ -89,17 +89,29 @@ def signal_of(x: np.ndarray, names, signal: str) -> np.ndarray:
     return np.linalg.norm(x[:, which[1]] - x[:, which[0]], axis=-1)
 
 
-def drive_text(frequency: float, gain: float, offset: float, signal: str) -> str:
+def _signal_keys(signal: str) -> str:
+    """A signal's keys in the model file: ``particle = ..`` or ``signal = "length", ..``."""
     if len(SIGNALS[signal]) == 1:
-        what = f'particle = "{SIGNALS[signal][0]}"'
-    else:
-        a, b = SIGNALS[signal]
-        what = f'signal = "length", particles = ["{a}", "{b}"]'
+        return f'particle = "{SIGNALS[signal][0]}"'
+    a, b = SIGNALS[signal]
+    return f'signal = "length", particles = ["{a}", "{b}"]'
+
+
+def drive_text(frequency: float, gain: float, offset: float, signal: str, quadrature=None) -> str:
+    """The ``[drive]`` table; ``quadrature`` (signal, gain, offset): a second signal read
+    against sin psi."""
+    second = ""
+    if quadrature is not None:
+        q, q_gain, q_offset = quadrature
+        second = (
+            f", quadrature = {{ {_signal_keys(q)}, gain = {q_gain:.6g}, offset = {q_offset:.6g} }}"
+        )
     return (
         "\n[drive]\n"
         f"frequency = {frequency:.6g}  # Hz: the fit range's stride (the hoof height's period)\n"
-        f"coupling = {{ {what}, gain = {gain:.6g}, offset = {offset:.6g}, start_phase = 0.0 }}"
-        "  # offset: the signal's mean over the fit range\n"
+        f"coupling = {{ {_signal_keys(signal)}, gain = {gain:.6g}, offset = {offset:.6g}, "
+        f"start_phase = 0.0{second} }}"
+        "  # offset: the signals' means over the fit range\n"
     )
 
 
@@ -133,9 +145,25 @@ def stride_frequency(traj, frames=FIT) -> float:
     return traj.rate / g.dominant_period(x[:, list(traj.markers).index("HFL"), 2])
 
 
-def model_text(traj, harmonics: int, gain: float, signal: str = "height", frames=FIT) -> str:
+def balanced_gain(traj, gain: float, signal: str, second: str, frames=FIT) -> float:
+    """The second signal's gain sigma_b pairing it with the first as a quarter-stride pair:
+    for fundamentals s = A cos(phi - theta) and s_b = A_b cos(phi - theta_b), the sigma_b
+    whose sigma_b s_b sin psi is nearest (least squares over the stride) to sigma A sin(phi -
+    theta) sin psi, the term that turns sigma s cos psi into sigma A cos(phi - theta - psi):
+    sigma_b = sigma A sin(theta_b - theta) / A_b (negative where s_b leads s)."""
+    x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
+    names, f = list(traj.markers), stride_frequency(traj, frames)
+    _, a, theta = fundamental(signal_of(x, names, signal), f, traj.rate, phase=True)
+    _, b, theta_b = fundamental(signal_of(x, names, second), f, traj.rate, phase=True)
+    return float(gain * a * np.sin(np.radians(theta_b - theta)) / b)
+
+
+def model_text(
+    traj, harmonics: int, gain: float, signal: str = "height", frames=FIT, quadrature=None
+) -> str:
     """The scaffold's complete graph and anchors, no gravity, a periodic force per marker and
-    the entrained drive; every number from ``frames`` (the fit range)."""
+    the entrained drive; every number from ``frames`` (the fit range). ``quadrature``
+    (signal, gain): a second signal, its gain None for :func:`balanced_gain`'s."""
     from activebonds.identify.scaffold import scaffold
 
     base = scaffold(traj, frames=frames, gravity=False).text
@@ -146,7 +174,13 @@ def model_text(traj, harmonics: int, gain: float, signal: str = "height", frames
     acc = np.linalg.norm(np.diff(x, 2, axis=0), axis=-1).max(axis=0) * traj.rate**2
     masses = [1.0] * len(names)  # the scaffold's (1 kg a marker)
     header, _, bodies = base.partition("\n[[particle]]")
-    drive = drive_text(frequency, gain, float(s.mean()), signal)
+    second = None
+    if quadrature is not None:
+        q, q_gain = quadrature
+        if q_gain is None:
+            q_gain = balanced_gain(traj, gain, signal, q, frames)
+        second = (q, q_gain, float(signal_of(x, names, q).mean()))
+    drive = drive_text(frequency, gain, float(s.mean()), signal, second)
     text = header + drive + "\n[[particle]]" + bodies
     return text + periodic_text(names, masses, acc, harmonics)
 
@@ -492,10 +526,12 @@ def diagnosis(model, traj, gain: float, signal: str) -> dict:
     }
 
 
-def build_and_solve(traj, harmonics, gain, springs, frames, signal="height", decay=0.0):
-    """The variant fitted on ``frames``: its frequency, signal offset, anchors and damping
-    floor from those frames alone."""
-    text = model_text(traj, harmonics, gain, signal, frames)
+def build_and_solve(
+    traj, harmonics, gain, springs, frames, signal="height", decay=0.0, quadrature=None
+):
+    """The variant fitted on ``frames``: its frequency, signal offsets, anchors, damping
+    floor (and a balanced second gain) from those frames alone."""
+    text = model_text(traj, harmonics, gain, signal, frames, quadrature)
     floor = damping_floor(traj, decay, frames)
     return solved(variant_spec(text, traj, springs, frames, floor), traj, frames)
 
@@ -605,29 +641,73 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     return result
 
 
+def parse_variant(text: str) -> dict:
+    """``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]`` as a variant row: PARTICLES one name for
+    a height or two joined by '-' for a distance; QPARTICLES a second signal (read against
+    sin psi), QGAIN its gain or ``balanced`` (:func:`balanced_gain`, from each fit's frames)."""
+    parts = text.split(":")
+    if len(parts) not in (4, 6):
+        raise SystemExit(f"--variant {text}: expected PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]")
+    row = {
+        "signal": signal_name(parts[0].split("-")),
+        "harmonics": int(parts[1]),
+        "gain": float(parts[2]),
+        "decay": float(parts[3]),
+    }
+    if len(parts) == 6:
+        q_gain = None if parts[5] == "balanced" else float(parts[5])
+        row["quadrature"] = {"signal": signal_name(parts[4].split("-")), "gain": q_gain}
+    return row
+
+
+def quadrature_of(row: dict):
+    """A variant row's second signal as ``build_and_solve`` takes it (None: one signal)."""
+    q = row.get("quadrature")
+    return None if q is None else (q["signal"], q["gain"])
+
+
+def strengths(traj, row: dict, frames=FIT) -> dict:
+    """kappa of the row's first signal and, with a second, kappa_b = |sigma_b| A_b / 2 /
+    (2 pi f) and the second's gain (the balanced one from ``frames``)."""
+    out = {"coupling_strength": coupling_strength(traj, row["gain"], row["signal"], frames)}
+    q = row.get("quadrature")
+    if q is not None:
+        g = q["gain"]
+        if g is None:
+            g = balanced_gain(traj, row["gain"], row["signal"], q["signal"], frames)
+        out["quadrature_gain"] = g
+        out["quadrature_strength"] = abs(coupling_strength(traj, g, q["signal"], frames))
+    return out
+
+
 def explore(gait: str, variants, say=print) -> dict:
-    """Variants outside the grid (``PARTICLES:H:GAIN:DECAY``, PARTICLES one name for a height
-    or two joined by '-' for a distance: "Withers-HHL:6:17.9:4"), each scored as the grid's are:
-    fitted on 0-149 and free-run on 150-299, refitted on 0-299 and judged on 300-599. Nothing
-    is chosen or written but the scores."""
+    """Variants outside the grid (``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]``,
+    :func:`parse_variant`: "Withers-HHL:6:17.9:4", "Sacrum-HFL:6:12.5:4:Withers-HHL:balanced"),
+    each scored as the grid's are: fitted on 0-149 and free-run on 150-299, refitted on 0-299
+    and judged on 300-599. Nothing is chosen or written but the scores."""
     from activebonds.data import read_trajectory
     from activebonds.data.bundled import dataset
 
     traj = read_trajectory(dataset(GAITS[gait]).path)
     rows = []
     for text in variants:
-        parts, h, gain, decay = text.split(":")
-        signal, h, gain, decay = signal_name(parts.split("-")), int(h), float(gain), float(decay)
-        row = {"signal": signal, "harmonics": h, "gain": gain, "decay": decay}
-        row["coupling_strength"] = coupling_strength(traj, gain, signal)
-        model = build_and_solve(traj, h, gain, "anchors", TRAIN, signal, decay)
+        row = parse_variant(text)
+        signal, h, gain, decay = (row[k] for k in ("signal", "harmonics", "gain", "decay"))
+        quad = quadrature_of(row)
+        row |= strengths(traj, row)
+        model = build_and_solve(traj, h, gain, "anchors", TRAIN, signal, decay, quad)
         row["tail"] = summary(evaluated(model, traj, TAIL, True))
         row["tail_targets_met"] = tail_targets(row["tail"])
-        model = build_and_solve(traj, h, gain, "anchors", FIT, signal, decay)
+        model = build_and_solve(traj, h, gain, "anchors", FIT, signal, decay, quad)
         row["held_out"] = summary(evaluated(model, traj, TEST, True))
         row["passes"] = passes(row["held_out"], gait)
         rows.append(row)
-        say(f"{gait} {text} (kappa {row['coupling_strength']:.3f}): 150-299 {line(row['tail'])}")
+        kappa = f"kappa {row['coupling_strength']:.3f}"
+        if "quadrature_strength" in row:
+            kappa += (
+                f", sigma_b {row['quadrature_gain']:.3g}, kappa_b {row['quadrature_strength']:.3f}"
+            )
+        say(f"{gait} {text} ({kappa}): 150-299 {line(row['tail'])}")
         say(f"    300-599 {line(row['held_out'])}, targets met {sum(row['passes'].values())}")
     return {"gait": gait, "explored": rows}
 
@@ -703,7 +783,8 @@ def main(argv=None) -> int:
         "--variant",
         action="append",
         default=[],
-        help="PARTICLES:H:GAIN:DECAY (repeatable): score these variants only (no choice)",
+        help="PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN] (repeatable; QGAIN a number or "
+        "'balanced'): score these variants only (no choice)",
     )
     parser.add_argument(
         "--survey",
