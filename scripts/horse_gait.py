@@ -79,6 +79,14 @@ GAINS = (0.0, 25.0, 50.0, 100.0, 200.0, 400.0)  # and coupling gains, rad/s per 
 # damping c >= 2 m f n (a free transient decays as exp(-c t / 2m), by n e-folds in a stride
 # 1/f); 0: the scaffold's own lower bound (1 % of its start value)
 DECAYS = (0.0, 1.0, 4.0)
+# Quarter-stride pairs ([drive.coupling] quadrature: d psi/dt = 2 pi f - sigma s cos psi -
+# sigma_b s_b sin psi): each signal of SIGNALS with its partner (the most sinusoidal signal
+# whose fundamental lies 90 +- QUARTER_TOLERANCE degrees from it over 0-149, quadrature_partner),
+# in either order; the first's gain at the coupling strength kappa of QUADRATURE_KAPPAS (from
+# its amplitude over 0-149), the second's balanced (balanced_gain); H = 6, n = 4 only (the
+# run's time)
+QUADRATURE_KAPPAS = (0.08, 0.16, 0.32)
+QUARTER_TOLERANCE = 30.0
 
 
 def signal_of(x: np.ndarray, names, signal: str) -> np.ndarray:
@@ -156,6 +164,39 @@ def balanced_gain(traj, gain: float, signal: str, second: str, frames=FIT) -> fl
     _, a, theta = fundamental(signal_of(x, names, signal), f, traj.rate, phase=True)
     _, b, theta_b = fundamental(signal_of(x, names, second), f, traj.rate, phase=True)
     return float(gain * a * np.sin(np.radians(theta_b - theta)) / b)
+
+
+def quadrature_partner(traj, signal: str, frames=TRAIN) -> str:
+    """The most sinusoidal signal (:func:`signal_survey` over ``frames``) whose fundamental
+    lies a quarter stride (90 +- :data:`QUARTER_TOLERANCE` degrees) from ``signal``'s."""
+    found = signal_survey(traj, frames)
+    own = next(r for r in found if tuple(r["particles"]) == tuple(SIGNALS[signal]))
+    for r in found:  # most sinusoidal first
+        apart = abs((r["phase_deg"] - own["phase_deg"] + 180.0) % 360.0 - 180.0)
+        if abs(apart - 90.0) <= QUARTER_TOLERANCE:
+            return signal_name(r["particles"])
+    raise ValueError(f"no signal a quarter stride from {signal}")
+
+
+def quadrature_rows(traj) -> list[dict]:
+    """The grid's quarter-stride pairs (:data:`QUADRATURE_KAPPAS`): variant rows, their
+    signals and gains from 0-149."""
+    rows = []
+    for signal in list(SIGNALS)[:2]:  # height, length (not the signals added later)
+        partner = quadrature_partner(traj, signal)
+        for first, second in ((signal, partner), (partner, signal)):
+            for kappa in QUADRATURE_KAPPAS:
+                gain = round(gain_for(traj, kappa, first, TRAIN), 3)
+                rows.append(
+                    {
+                        "signal": first,
+                        "harmonics": 6,
+                        "gain": gain,
+                        "decay": 4.0,
+                        "quadrature": {"signal": second, "gain": None},
+                    }
+                )
+    return rows
 
 
 def model_text(
@@ -567,6 +608,21 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
                         f"gait targets met {row['tail_targets_met']} of {len(TAIL_TARGETS)}"
                     )
                     result["variants"].append(row)
+    for row in quadrature_rows(traj):  # the quarter-stride pairs
+        q = row["quadrature"]
+        model = build_and_solve(
+            traj, 6, row["gain"], "anchors", TRAIN, row["signal"], 4.0, quadrature_of(row)
+        )
+        row |= strengths(traj, row, TRAIN)
+        row["tail"] = summary(evaluated(model, traj, TAIL, True))
+        row["tail_targets_met"] = tail_targets(row["tail"])
+        say(
+            f"{gait} {row['signal']} + {q['signal']} H=6 sigma={row['gain']:g} "
+            f"(kappa {row['coupling_strength']:.2f}) decay=4: tail one-step "
+            f"{row['tail']['one_step_mm']:.3f} mm, 10 ahead {row['tail']['ahead_mm']:.1f} mm, "
+            f"gait targets met {row['tail_targets_met']} of {len(TAIL_TARGETS)}"
+        )
+        result["variants"].append(row)
     entrained = [r for r in result["variants"] if r["gain"] > 0]  # (the clocks: for the record)
     best = min(entrained, key=choice_key)
     earlier = min(
@@ -574,6 +630,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
         key=lambda r: (_float(r["tail"]["ahead_mm"]), _float(r["tail"]["one_step_mm"])),
     )
     signal, h, gain, decay = best["signal"], best["harmonics"], best["gain"], best["decay"]
+    quad = quadrature_of(best)
     result["chosen"] = {
         "signal": signal,
         "harmonics": h,
@@ -582,16 +639,26 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
         "damping_floor": damping_floor(traj, decay),
         "rule": RULE,
     }
+    if quad is not None:
+        result["chosen"]["quadrature"] = best["quadrature"]
     result["chosen_by_earlier_rule"] = {
         k: earlier[k] for k in ("signal", "harmonics", "gain", "decay")
     } | {"rule": "entrained, no damping floor, lowest 10-ahead RMS on 150-299"}
-    say(f"{gait}: chosen {signal} H={h} sigma={gain:g} decay={decay:g}")
+    second = "" if quad is None else f" + {quad[0]} (balanced)"
+    say(f"{gait}: chosen {signal}{second} H={h} sigma={gain:g} decay={decay:g}")
     # 2. every variant refitted on 0-299 and judged on 300-599 with the gait metrics (for the
     # record: not seen by the choice)
     for row in result["variants"]:
         chosen = row is best
         model = build_and_solve(
-            traj, row["harmonics"], row["gain"], "anchors", FIT, row["signal"], row["decay"]
+            traj,
+            row["harmonics"],
+            row["gain"],
+            "anchors",
+            FIT,
+            row["signal"],
+            row["decay"],
+            quadrature_of(row),
         )
         row["held_out"] = summary(evaluated(model, traj, TEST, True))
         row["passes"] = passes(row["held_out"], gait)
@@ -603,7 +670,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             result["passes"] = row["passes"]
             # the same without --origin: the phase from its start value at frame 300
             result["held_out_cold_start"] = summary(evaluated(model, traj, TEST, True, None))
-            result["diagnosis"] = diagnosis(model, traj, gain, signal)
+            result["diagnosis"] = diagnosis(model, traj, gain, signal) | strengths(traj, row)
     # 3. what else was tried, at the chosen harmonics, gain and damping floor; other signals
     # at the chosen coupling strength kappa (their gains scaled by the amplitudes' ratio): the
     # most sinusoidal distance other than the chosen signal, and a hind hoof's height
@@ -615,11 +682,20 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     )
     tried = {
         "clock (coupling gain 0)": (h, 0.0, "anchors", decay, signal),
-        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0, signal),
-        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay, signal),
-        "springs at the fit range's mean pose, plus anchors": (h, gain, "fixed", decay, signal),
-        "the scaffold's free springs and anchors": (h, gain, "free", decay, signal),
+        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0, signal, quad),
+        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay, signal, quad),
+        "springs at the fit range's mean pose, plus anchors": (
+            h,
+            gain,
+            "fixed",
+            decay,
+            signal,
+            quad,
+        ),
+        "the scaffold's free springs and anchors": (h, gain, "free", decay, signal, quad),
     }
+    if quad is not None:
+        tried["the first signal alone (no quadrature)"] = (h, gain, "anchors", decay, signal)
     for what, parts in (("the most sinusoidal other distance", other), ("a hind hoof", ["HHL"])):
         name = signal_name(parts)
         g = gain_for(traj, kappa, name)
@@ -631,8 +707,8 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             name,
         )
     result["tried"] = {}
-    for name, (hh, gg, springs, dd, sig) in tried.items():
-        model = build_and_solve(traj, hh, gg, springs, FIT, sig, dd)
+    for name, (hh, gg, springs, dd, sig, *qq) in tried.items():
+        model = build_and_solve(traj, hh, gg, springs, FIT, sig, dd, *qq)
         result["tried"][name] = summary(evaluated(model, traj, TEST, True))
         result["tried"][name]["passes"] = passes(result["tried"][name], gait)
         result["tried"][name]["diagnosis"] = diagnosis(model, traj, gg, sig)
