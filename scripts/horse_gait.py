@@ -2,7 +2,8 @@
 marker, the drive's phase entrained by a hoof; its free run scored as a gait.
 
     python scripts/horse_gait.py [--json docs/results/horse_gait.json] [--gait trot|walk|both]
-                                 [--out runs/gait] [--variant PARTICLES:H:GAIN:DECAY ...]
+                                 [--out runs/gait]
+                                 [--variant PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN] ...]
                                  [--survey]
 
 For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, all 7 markers), fitted on
@@ -28,7 +29,12 @@ frames 0-299 and judged on frames 300-599:
    targets there (period within 3 %, hoof excursions within 25 %, body within 100 mm,
    cycle RMS within 50 mm, frames within 50 mm >= 8, body frames >= 20, 10 ahead <= 100 mm),
    then the lowest 10-frames-ahead RMS, is refitted on 0-299 and saved. Nothing held out is
-   looked at by the choice; every variant's held-out scores are recorded beside it;
+   looked at by the choice; every variant's held-out scores are recorded beside it. The grid
+   also holds quarter-stride pairs (``[drive.coupling] quadrature``: d psi/dt = 2 pi f -
+   sigma s cos psi - sigma_b s_b sin psi): each of the two signals with its partner, the most
+   sinusoidal signal whose fundamental is 90 +- 30 degrees from it over 0-149, in either
+   order, the first at kappa 0.08, 0.16 or 0.32 (its gain from 0-149's amplitude), the second
+   balanced (``balanced_gain``: sigma_b A_b = sigma A sin(theta_b - theta)), H = 6, n = 4;
 4. the scores on 300-599, each beside the zero-force predictor's, as ``activebonds evaluate
    MODEL DATA --frames 300:600 --origin 0 --horizon 10 --body Head,Withers,Sacrum --gait
    --feet HFL,HFR,HHL,HHR --up +Z`` (one step, 10 ahead, frames within 50 mm, body frames, the
@@ -50,7 +56,9 @@ frames 0-299 and judged on frames 300-599:
    frequency, per 150 frames of the recording (``clock_drift``, model-free).
 
 ``--variant`` scores variants outside the grid (fitted on 0-149 and free-run on 150-299,
-refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores;
+refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores
+(``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]``, a second signal with QGAIN a number or
+``balanced``);
 ``--survey`` writes item 6 and the example models' kappa and phase rates (no fit).
 """
 
