@@ -809,6 +809,16 @@ def survey(gait: str, model_file: Path) -> dict:
     c = model.spec.drive.coupling
     signal = signal_name([c.particle] if c.particle else c.particles)
     gain = float(getattr(c.gain, "value", c.gain))
+    second = {}
+    if c.quadrature is not None:
+        q = c.quadrature
+        q_signal = signal_name([q.particle] if q.particle else q.particles)
+        q_gain = float(getattr(q.gain, "value", q.gain))
+        second = {
+            "quadrature_signal": list(SIGNALS[q_signal]),
+            "quadrature_gain": q_gain,
+            "quadrature_strength": abs(coupling_strength(traj, q_gain, q_signal)),
+        }
     return {
         "gait": gait,
         "signals": signal_survey(traj),
@@ -820,7 +830,8 @@ def survey(gait: str, model_file: Path) -> dict:
             "coupling_strength": coupling_strength(traj, gain, signal),
             "phase_rate_fit": phase_rate(model, traj),
             "phase_rate_held_out": phase_rate(model, traj, TEST),
-        },
+        }
+        | second,
     }
 
 

@@ -183,10 +183,9 @@ def extended_back(s: np.ndarray, before: int, period: int) -> np.ndarray:
 
 def track(params: Params, topo: Topology, s, dt, substeps: int = 1, psi0=None):
     """The phase at every frame [F] of a recording whose signal is ``s`` [F] ([F, 2] with a
-    second signal), from ``psi0``
-    (default: the start phase) at its first frame: explicit Euler at ``substeps`` per frame,
-    the signal linear between frames (as the integrator advances it along the model's own
-    positions)."""
+    second signal), from ``psi0`` (default: the start phase) at its first frame: explicit
+    Euler at ``substeps`` per frame, the signal linear between frames (as the integrator
+    advances it along the model's own positions)."""
     s = jnp.asarray(s)
     psi0 = start_phase(params, topo) if psi0 is None else psi0
     h = dt / substeps
