@@ -2,7 +2,8 @@
 marker, the drive's phase entrained by a hoof; its free run scored as a gait.
 
     python scripts/horse_gait.py [--json docs/results/horse_gait.json] [--gait trot|walk|both]
-                                 [--out runs/gait] [--variant PARTICLES:H:GAIN:DECAY ...]
+                                 [--out runs/gait]
+                                 [--variant PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN] ...]
                                  [--survey]
 
 For each gait of the bundled VHDC horse (Horse1_M1 trot1 and walk1, all 7 markers), fitted on
@@ -28,7 +29,12 @@ frames 0-299 and judged on frames 300-599:
    targets there (period within 3 %, hoof excursions within 25 %, body within 100 mm,
    cycle RMS within 50 mm, frames within 50 mm >= 8, body frames >= 20, 10 ahead <= 100 mm),
    then the lowest 10-frames-ahead RMS, is refitted on 0-299 and saved. Nothing held out is
-   looked at by the choice; every variant's held-out scores are recorded beside it;
+   looked at by the choice; every variant's held-out scores are recorded beside it. The grid
+   also holds quarter-stride pairs (``[drive.coupling] quadrature``: d psi/dt = 2 pi f -
+   sigma s cos psi - sigma_b s_b sin psi): each of the two signals with its partner, the most
+   sinusoidal signal whose fundamental is 90 +- 30 degrees from it over 0-149, in either
+   order, the first at kappa 0.08, 0.16 or 0.32 (its gain from 0-149's amplitude), the second
+   balanced (``balanced_gain``: sigma_b A_b = sigma A sin(theta_b - theta)), H = 6, n = 4;
 4. the scores on 300-599, each beside the zero-force predictor's, as ``activebonds evaluate
    MODEL DATA --frames 300:600 --origin 0 --horizon 10 --body Head,Withers,Sacrum --gait
    --feet HFL,HFR,HHL,HHR --up +Z`` (one step, 10 ahead, frames within 50 mm, body frames, the
@@ -50,7 +56,9 @@ frames 0-299 and judged on frames 300-599:
    frequency, per 150 frames of the recording (``clock_drift``, model-free).
 
 ``--variant`` scores variants outside the grid (fitted on 0-149 and free-run on 150-299,
-refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores;
+refitted on 0-299 and judged on 300-599), nothing chosen or written but their scores
+(``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]``, a second signal with QGAIN a number or
+``balanced``);
 ``--survey`` writes item 6 and the example models' kappa and phase rates (no fit).
 """
 
@@ -79,6 +87,14 @@ GAINS = (0.0, 25.0, 50.0, 100.0, 200.0, 400.0)  # and coupling gains, rad/s per 
 # damping c >= 2 m f n (a free transient decays as exp(-c t / 2m), by n e-folds in a stride
 # 1/f); 0: the scaffold's own lower bound (1 % of its start value)
 DECAYS = (0.0, 1.0, 4.0)
+# Quarter-stride pairs ([drive.coupling] quadrature: d psi/dt = 2 pi f - sigma s cos psi -
+# sigma_b s_b sin psi): each signal of SIGNALS with its partner (the most sinusoidal signal
+# whose fundamental lies 90 +- QUARTER_TOLERANCE degrees from it over 0-149, quadrature_partner),
+# in either order; the first's gain at the coupling strength kappa of QUADRATURE_KAPPAS (from
+# its amplitude over 0-149), the second's balanced (balanced_gain); H = 6, n = 4 only (the
+# run's time)
+QUADRATURE_KAPPAS = (0.08, 0.16, 0.32)
+QUARTER_TOLERANCE = 30.0
 
 
 def signal_of(x: np.ndarray, names, signal: str) -> np.ndarray:
@@ -89,17 +105,29 @@ def signal_of(x: np.ndarray, names, signal: str) -> np.ndarray:
     return np.linalg.norm(x[:, which[1]] - x[:, which[0]], axis=-1)
 
 
-def drive_text(frequency: float, gain: float, offset: float, signal: str) -> str:
+def _signal_keys(signal: str) -> str:
+    """A signal's keys in the model file: ``particle = ..`` or ``signal = "length", ..``."""
     if len(SIGNALS[signal]) == 1:
-        what = f'particle = "{SIGNALS[signal][0]}"'
-    else:
-        a, b = SIGNALS[signal]
-        what = f'signal = "length", particles = ["{a}", "{b}"]'
+        return f'particle = "{SIGNALS[signal][0]}"'
+    a, b = SIGNALS[signal]
+    return f'signal = "length", particles = ["{a}", "{b}"]'
+
+
+def drive_text(frequency: float, gain: float, offset: float, signal: str, quadrature=None) -> str:
+    """The ``[drive]`` table; ``quadrature`` (signal, gain, offset): a second signal read
+    against sin psi."""
+    second = ""
+    if quadrature is not None:
+        q, q_gain, q_offset = quadrature
+        second = (
+            f", quadrature = {{ {_signal_keys(q)}, gain = {q_gain:.6g}, offset = {q_offset:.6g} }}"
+        )
     return (
         "\n[drive]\n"
         f"frequency = {frequency:.6g}  # Hz: the fit range's stride (the hoof height's period)\n"
-        f"coupling = {{ {what}, gain = {gain:.6g}, offset = {offset:.6g}, start_phase = 0.0 }}"
-        "  # offset: the signal's mean over the fit range\n"
+        f"coupling = {{ {_signal_keys(signal)}, gain = {gain:.6g}, offset = {offset:.6g}, "
+        f"start_phase = 0.0{second} }}"
+        "  # offset: the signals' means over the fit range\n"
     )
 
 
@@ -133,9 +161,58 @@ def stride_frequency(traj, frames=FIT) -> float:
     return traj.rate / g.dominant_period(x[:, list(traj.markers).index("HFL"), 2])
 
 
-def model_text(traj, harmonics: int, gain: float, signal: str = "height", frames=FIT) -> str:
+def balanced_gain(traj, gain: float, signal: str, second: str, frames=FIT) -> float:
+    """The second signal's gain sigma_b pairing it with the first as a quarter-stride pair:
+    for fundamentals s = A cos(phi - theta) and s_b = A_b cos(phi - theta_b), the sigma_b
+    whose sigma_b s_b sin psi is nearest (least squares over the stride) to sigma A sin(phi -
+    theta) sin psi, the term that turns sigma s cos psi into sigma A cos(phi - theta - psi):
+    sigma_b = sigma A sin(theta_b - theta) / A_b (negative where s_b leads s)."""
+    x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
+    names, f = list(traj.markers), stride_frequency(traj, frames)
+    _, a, theta = fundamental(signal_of(x, names, signal), f, traj.rate, phase=True)
+    _, b, theta_b = fundamental(signal_of(x, names, second), f, traj.rate, phase=True)
+    return float(gain * a * np.sin(np.radians(theta_b - theta)) / b)
+
+
+def quadrature_partner(traj, signal: str, frames=TRAIN) -> str:
+    """The most sinusoidal signal (:func:`signal_survey` over ``frames``) whose fundamental
+    lies a quarter stride (90 +- :data:`QUARTER_TOLERANCE` degrees) from ``signal``'s."""
+    found = signal_survey(traj, frames)
+    own = next(r for r in found if tuple(r["particles"]) == tuple(SIGNALS[signal]))
+    for r in found:  # most sinusoidal first
+        apart = abs((r["phase_deg"] - own["phase_deg"] + 180.0) % 360.0 - 180.0)
+        if abs(apart - 90.0) <= QUARTER_TOLERANCE:
+            return signal_name(r["particles"])
+    raise ValueError(f"no signal a quarter stride from {signal}")
+
+
+def quadrature_rows(traj) -> list[dict]:
+    """The grid's quarter-stride pairs (:data:`QUADRATURE_KAPPAS`): variant rows, their
+    signals and gains from 0-149."""
+    rows = []
+    for signal in list(SIGNALS)[:2]:  # height, length (not the signals added later)
+        partner = quadrature_partner(traj, signal)
+        for first, second in ((signal, partner), (partner, signal)):
+            for kappa in QUADRATURE_KAPPAS:
+                gain = round(gain_for(traj, kappa, first, TRAIN), 3)
+                rows.append(
+                    {
+                        "signal": first,
+                        "harmonics": 6,
+                        "gain": gain,
+                        "decay": 4.0,
+                        "quadrature": {"signal": second, "gain": None},
+                    }
+                )
+    return rows
+
+
+def model_text(
+    traj, harmonics: int, gain: float, signal: str = "height", frames=FIT, quadrature=None
+) -> str:
     """The scaffold's complete graph and anchors, no gravity, a periodic force per marker and
-    the entrained drive; every number from ``frames`` (the fit range)."""
+    the entrained drive; every number from ``frames`` (the fit range). ``quadrature``
+    (signal, gain): a second signal, its gain None for :func:`balanced_gain`'s."""
     from activebonds.identify.scaffold import scaffold
 
     base = scaffold(traj, frames=frames, gravity=False).text
@@ -146,7 +223,13 @@ def model_text(traj, harmonics: int, gain: float, signal: str = "height", frames
     acc = np.linalg.norm(np.diff(x, 2, axis=0), axis=-1).max(axis=0) * traj.rate**2
     masses = [1.0] * len(names)  # the scaffold's (1 kg a marker)
     header, _, bodies = base.partition("\n[[particle]]")
-    drive = drive_text(frequency, gain, float(s.mean()), signal)
+    second = None
+    if quadrature is not None:
+        q, q_gain = quadrature
+        if q_gain is None:
+            q_gain = balanced_gain(traj, gain, signal, q, frames)
+        second = (q, q_gain, float(signal_of(x, names, q).mean()))
+    drive = drive_text(frequency, gain, float(s.mean()), signal, second)
     text = header + drive + "\n[[particle]]" + bodies
     return text + periodic_text(names, masses, acc, harmonics)
 
@@ -492,10 +575,12 @@ def diagnosis(model, traj, gain: float, signal: str) -> dict:
     }
 
 
-def build_and_solve(traj, harmonics, gain, springs, frames, signal="height", decay=0.0):
-    """The variant fitted on ``frames``: its frequency, signal offset, anchors and damping
-    floor from those frames alone."""
-    text = model_text(traj, harmonics, gain, signal, frames)
+def build_and_solve(
+    traj, harmonics, gain, springs, frames, signal="height", decay=0.0, quadrature=None
+):
+    """The variant fitted on ``frames``: its frequency, signal offsets, anchors, damping
+    floor (and a balanced second gain) from those frames alone."""
+    text = model_text(traj, harmonics, gain, signal, frames, quadrature)
     floor = damping_floor(traj, decay, frames)
     return solved(variant_spec(text, traj, springs, frames, floor), traj, frames)
 
@@ -531,6 +616,21 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
                         f"gait targets met {row['tail_targets_met']} of {len(TAIL_TARGETS)}"
                     )
                     result["variants"].append(row)
+    for row in quadrature_rows(traj):  # the quarter-stride pairs
+        q = row["quadrature"]
+        model = build_and_solve(
+            traj, 6, row["gain"], "anchors", TRAIN, row["signal"], 4.0, quadrature_of(row)
+        )
+        row |= strengths(traj, row, TRAIN)
+        row["tail"] = summary(evaluated(model, traj, TAIL, True))
+        row["tail_targets_met"] = tail_targets(row["tail"])
+        say(
+            f"{gait} {row['signal']} + {q['signal']} H=6 sigma={row['gain']:g} "
+            f"(kappa {row['coupling_strength']:.2f}) decay=4: tail one-step "
+            f"{row['tail']['one_step_mm']:.3f} mm, 10 ahead {row['tail']['ahead_mm']:.1f} mm, "
+            f"gait targets met {row['tail_targets_met']} of {len(TAIL_TARGETS)}"
+        )
+        result["variants"].append(row)
     entrained = [r for r in result["variants"] if r["gain"] > 0]  # (the clocks: for the record)
     best = min(entrained, key=choice_key)
     earlier = min(
@@ -538,6 +638,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
         key=lambda r: (_float(r["tail"]["ahead_mm"]), _float(r["tail"]["one_step_mm"])),
     )
     signal, h, gain, decay = best["signal"], best["harmonics"], best["gain"], best["decay"]
+    quad = quadrature_of(best)
     result["chosen"] = {
         "signal": signal,
         "harmonics": h,
@@ -546,16 +647,26 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
         "damping_floor": damping_floor(traj, decay),
         "rule": RULE,
     }
+    if quad is not None:
+        result["chosen"]["quadrature"] = best["quadrature"]
     result["chosen_by_earlier_rule"] = {
         k: earlier[k] for k in ("signal", "harmonics", "gain", "decay")
     } | {"rule": "entrained, no damping floor, lowest 10-ahead RMS on 150-299"}
-    say(f"{gait}: chosen {signal} H={h} sigma={gain:g} decay={decay:g}")
+    second = "" if quad is None else f" + {quad[0]} (balanced)"
+    say(f"{gait}: chosen {signal}{second} H={h} sigma={gain:g} decay={decay:g}")
     # 2. every variant refitted on 0-299 and judged on 300-599 with the gait metrics (for the
     # record: not seen by the choice)
     for row in result["variants"]:
         chosen = row is best
         model = build_and_solve(
-            traj, row["harmonics"], row["gain"], "anchors", FIT, row["signal"], row["decay"]
+            traj,
+            row["harmonics"],
+            row["gain"],
+            "anchors",
+            FIT,
+            row["signal"],
+            row["decay"],
+            quadrature_of(row),
         )
         row["held_out"] = summary(evaluated(model, traj, TEST, True))
         row["passes"] = passes(row["held_out"], gait)
@@ -567,7 +678,7 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             result["passes"] = row["passes"]
             # the same without --origin: the phase from its start value at frame 300
             result["held_out_cold_start"] = summary(evaluated(model, traj, TEST, True, None))
-            result["diagnosis"] = diagnosis(model, traj, gain, signal)
+            result["diagnosis"] = diagnosis(model, traj, gain, signal) | strengths(traj, row)
     # 3. what else was tried, at the chosen harmonics, gain and damping floor; other signals
     # at the chosen coupling strength kappa (their gains scaled by the amplitudes' ratio): the
     # most sinusoidal distance other than the chosen signal, and a hind hoof's height
@@ -579,11 +690,20 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     )
     tried = {
         "clock (coupling gain 0)": (h, 0.0, "anchors", decay, signal),
-        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0, signal),
-        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay, signal),
-        "springs at the fit range's mean pose, plus anchors": (h, gain, "fixed", decay, signal),
-        "the scaffold's free springs and anchors": (h, gain, "free", decay, signal),
+        "no damping floor (the scaffold's bound)": (h, gain, "anchors", 0.0, signal, quad),
+        "a weak coupling (gain 5, nearly a clock)": (h, 5.0, "anchors", decay, signal, quad),
+        "springs at the fit range's mean pose, plus anchors": (
+            h,
+            gain,
+            "fixed",
+            decay,
+            signal,
+            quad,
+        ),
+        "the scaffold's free springs and anchors": (h, gain, "free", decay, signal, quad),
     }
+    if quad is not None:
+        tried["the first signal alone (no quadrature)"] = (h, gain, "anchors", decay, signal)
     for what, parts in (("the most sinusoidal other distance", other), ("a hind hoof", ["HHL"])):
         name = signal_name(parts)
         g = gain_for(traj, kappa, name)
@@ -595,8 +715,8 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
             name,
         )
     result["tried"] = {}
-    for name, (hh, gg, springs, dd, sig) in tried.items():
-        model = build_and_solve(traj, hh, gg, springs, FIT, sig, dd)
+    for name, (hh, gg, springs, dd, sig, *qq) in tried.items():
+        model = build_and_solve(traj, hh, gg, springs, FIT, sig, dd, *qq)
         result["tried"][name] = summary(evaluated(model, traj, TEST, True))
         result["tried"][name]["passes"] = passes(result["tried"][name], gait)
         result["tried"][name]["diagnosis"] = diagnosis(model, traj, gg, sig)
@@ -605,29 +725,73 @@ def run_gait(gait: str, out_dir: Path, say=print) -> dict:
     return result
 
 
+def parse_variant(text: str) -> dict:
+    """``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]`` as a variant row: PARTICLES one name for
+    a height or two joined by '-' for a distance; QPARTICLES a second signal (read against
+    sin psi), QGAIN its gain or ``balanced`` (:func:`balanced_gain`, from each fit's frames)."""
+    parts = text.split(":")
+    if len(parts) not in (4, 6):
+        raise SystemExit(f"--variant {text}: expected PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]")
+    row = {
+        "signal": signal_name(parts[0].split("-")),
+        "harmonics": int(parts[1]),
+        "gain": float(parts[2]),
+        "decay": float(parts[3]),
+    }
+    if len(parts) == 6:
+        q_gain = None if parts[5] == "balanced" else float(parts[5])
+        row["quadrature"] = {"signal": signal_name(parts[4].split("-")), "gain": q_gain}
+    return row
+
+
+def quadrature_of(row: dict):
+    """A variant row's second signal as ``build_and_solve`` takes it (None: one signal)."""
+    q = row.get("quadrature")
+    return None if q is None else (q["signal"], q["gain"])
+
+
+def strengths(traj, row: dict, frames=FIT) -> dict:
+    """kappa of the row's first signal and, with a second, kappa_b = |sigma_b| A_b / 2 /
+    (2 pi f) and the second's gain (the balanced one from ``frames``)."""
+    out = {"coupling_strength": coupling_strength(traj, row["gain"], row["signal"], frames)}
+    q = row.get("quadrature")
+    if q is not None:
+        g = q["gain"]
+        if g is None:
+            g = balanced_gain(traj, row["gain"], row["signal"], q["signal"], frames)
+        out["quadrature_gain"] = g
+        out["quadrature_strength"] = abs(coupling_strength(traj, g, q["signal"], frames))
+    return out
+
+
 def explore(gait: str, variants, say=print) -> dict:
-    """Variants outside the grid (``PARTICLES:H:GAIN:DECAY``, PARTICLES one name for a height
-    or two joined by '-' for a distance: "Withers-HHL:6:17.9:4"), each scored as the grid's are:
-    fitted on 0-149 and free-run on 150-299, refitted on 0-299 and judged on 300-599. Nothing
-    is chosen or written but the scores."""
+    """Variants outside the grid (``PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN]``,
+    :func:`parse_variant`: "Withers-HHL:6:17.9:4", "Sacrum-HFL:6:12.5:4:Withers-HHL:balanced"),
+    each scored as the grid's are: fitted on 0-149 and free-run on 150-299, refitted on 0-299
+    and judged on 300-599. Nothing is chosen or written but the scores."""
     from activebonds.data import read_trajectory
     from activebonds.data.bundled import dataset
 
     traj = read_trajectory(dataset(GAITS[gait]).path)
     rows = []
     for text in variants:
-        parts, h, gain, decay = text.split(":")
-        signal, h, gain, decay = signal_name(parts.split("-")), int(h), float(gain), float(decay)
-        row = {"signal": signal, "harmonics": h, "gain": gain, "decay": decay}
-        row["coupling_strength"] = coupling_strength(traj, gain, signal)
-        model = build_and_solve(traj, h, gain, "anchors", TRAIN, signal, decay)
+        row = parse_variant(text)
+        signal, h, gain, decay = (row[k] for k in ("signal", "harmonics", "gain", "decay"))
+        quad = quadrature_of(row)
+        row |= strengths(traj, row)
+        model = build_and_solve(traj, h, gain, "anchors", TRAIN, signal, decay, quad)
         row["tail"] = summary(evaluated(model, traj, TAIL, True))
         row["tail_targets_met"] = tail_targets(row["tail"])
-        model = build_and_solve(traj, h, gain, "anchors", FIT, signal, decay)
+        model = build_and_solve(traj, h, gain, "anchors", FIT, signal, decay, quad)
         row["held_out"] = summary(evaluated(model, traj, TEST, True))
         row["passes"] = passes(row["held_out"], gait)
         rows.append(row)
-        say(f"{gait} {text} (kappa {row['coupling_strength']:.3f}): 150-299 {line(row['tail'])}")
+        kappa = f"kappa {row['coupling_strength']:.3f}"
+        if "quadrature_strength" in row:
+            kappa += (
+                f", sigma_b {row['quadrature_gain']:.3g}, kappa_b {row['quadrature_strength']:.3f}"
+            )
+        say(f"{gait} {text} ({kappa}): 150-299 {line(row['tail'])}")
         say(f"    300-599 {line(row['held_out'])}, targets met {sum(row['passes'].values())}")
     return {"gait": gait, "explored": rows}
 
@@ -645,6 +809,16 @@ def survey(gait: str, model_file: Path) -> dict:
     c = model.spec.drive.coupling
     signal = signal_name([c.particle] if c.particle else c.particles)
     gain = float(getattr(c.gain, "value", c.gain))
+    second = {}
+    if c.quadrature is not None:
+        q = c.quadrature
+        q_signal = signal_name([q.particle] if q.particle else q.particles)
+        q_gain = float(getattr(q.gain, "value", q.gain))
+        second = {
+            "quadrature_signal": list(SIGNALS[q_signal]),
+            "quadrature_gain": q_gain,
+            "quadrature_strength": abs(coupling_strength(traj, q_gain, q_signal)),
+        }
     return {
         "gait": gait,
         "signals": signal_survey(traj),
@@ -656,7 +830,8 @@ def survey(gait: str, model_file: Path) -> dict:
             "coupling_strength": coupling_strength(traj, gain, signal),
             "phase_rate_fit": phase_rate(model, traj),
             "phase_rate_held_out": phase_rate(model, traj, TEST),
-        },
+        }
+        | second,
     }
 
 
@@ -703,7 +878,8 @@ def main(argv=None) -> int:
         "--variant",
         action="append",
         default=[],
-        help="PARTICLES:H:GAIN:DECAY (repeatable): score these variants only (no choice)",
+        help="PARTICLES:H:GAIN:DECAY[:QPARTICLES:QGAIN] (repeatable; QGAIN a number or "
+        "'balanced'): score these variants only (no choice)",
     )
     parser.add_argument(
         "--survey",

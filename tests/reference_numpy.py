@@ -20,8 +20,8 @@ conservative, its energy to ``KIND_ENERGIES``. Equations (SI units):
   and (model-wide) frequency f are 0 when ``p`` lacks them
 * entrained drive: its phase psi replaces 2 pi f t, d psi/dt = 2 pi f - sigma s cos psi, s the
   height (last coordinate) of the coupling's particle, or the distance between its two
-  particles, minus its offset; advanced by explicit
-  Euler from each step's start (``entrained_rollout``)
+  particles, minus its offset (with a second signal s_b, gain sigma_b: - sigma_b s_b sin psi
+  added); advanced by explicit Euler from each step's start (``entrained_rollout``)
 * periodic force on p: F_p += sum_{h=1..8} C_h cos(h psi) + S_h sin(h psi), psi the drive's
   phase (2 pi f t, or the entrained psi)
 * ternary flexion (i, j, k), angle th at j: E = 1/2 k_f (cos th - cos th0)^2, F = -grad E
@@ -346,12 +346,23 @@ def rollout(params, topo, x0, v0, dt, n_frames, substeps=1, method="euler", t0=0
     return np.stack(frames)
 
 
+def _coupling_signal(c, x) -> float:
+    """A coupling signal: the coordinate ``axis`` of one particle, or the distance between
+    two, minus ``offset``."""
+    ps = c["particles"]
+    if len(ps) == 1:
+        return float(x[ps[0], c["axis"]]) - c["offset"]
+    return float(np.linalg.norm(x[ps[1]] - x[ps[0]])) - c["offset"]
+
+
 def entrained_rollout(params, topo, x0, v0, dt, n_frames, coupling, substeps=1, t0=0.0):
     """Semi-implicit Euler with an entrained drive: positions [n_frames, P, D] and phases
     [n_frames]. ``coupling``: ``particles`` (one: its coordinate ``axis`` is the signal;
     two: their distance), ``axis``, ``offset`` (m), ``frequency`` (Hz), ``gain`` (rad/s per
-    m), ``psi0`` (the phase at x0). Each substep: v <- v + h F(x, v, psi)/m, x <- x + h v,
-    psi <- psi + h (2 pi f - sigma s(x_old) cos psi)."""
+    m), ``psi0`` (the phase at x0), optionally ``quadrature`` (a second signal: its
+    ``particles``, ``axis``, ``offset`` and ``gain`` sigma_b). Each substep: v <- v + h F(x,
+    v, psi)/m, x <- x + h v, psi <- psi + h (2 pi f - sigma s(x_old) cos psi - sigma_b
+    s_b(x_old) sin psi)."""
     h = dt / substeps
     m = _arr(params.mass)[:, None]
     x, v, psi = _arr(x0).copy(), _arr(v0).copy(), float(coupling["psi0"])
@@ -359,12 +370,11 @@ def entrained_rollout(params, topo, x0, v0, dt, n_frames, coupling, substeps=1, 
     for n in range(n_frames - 1):
         for k in range(substeps):
             time = t0 + n * dt + k * h
-            ps = coupling["particles"]
-            if len(ps) == 1:
-                s = float(x[ps[0], coupling["axis"]]) - coupling["offset"]
-            else:
-                s = float(np.linalg.norm(x[ps[1]] - x[ps[0]])) - coupling["offset"]
+            s = _coupling_signal(coupling, x)
             rate = 2.0 * math.pi * coupling["frequency"] - coupling["gain"] * s * math.cos(psi)
+            second = coupling.get("quadrature")
+            if second is not None:
+                rate -= second["gain"] * _coupling_signal(second, x) * math.sin(psi)
             v = v + h * total_force(params, topo, x, v, time, phase=psi) / m
             x = x + h * v
             psi = psi + h * rate

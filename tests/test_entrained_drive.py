@@ -70,7 +70,8 @@ def test_genes_are_named_and_the_model_writes_back():
     binary = model.params.bonds["binary"]
     np.testing.assert_array_equal(binary["drive_gain"], [20.0, 20.0, 0.0])  # neural bonds
     np.testing.assert_array_equal(binary["drive_start"], [0.5, 0.5, 0.0])
-    assert model.topology.drive == ((2,), 2, -0.1, 0, "binary")  # C's z, offset, held by bond 0
+    # C's z, offset, held by bond 0, no second signal
+    assert model.topology.drive == ((2,), 2, -0.1, 0, "binary", None)
     genome = model.layout.initial() + np.array([0.1, 5.0, 0.2, 0.1, 0.3, -0.1])
     text = dumps_model(model.with_genome(genome))
     again = loads_model(text)

@@ -235,7 +235,8 @@ def _population_forces(params, prepared, t0, n_p: int, dim: int):
 def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
     """The rhythmic drive's model-level numbers (``[drive]``), shared by every kind that reads
     the drive (one gene each whatever the kinds): its frequency, and an entrained drive's
-    coupling gain and start phase; taken by the bonds with flag ``when`` (None: every bond)."""
+    coupling gain, its second signal's gain (either sign) and its start phase; taken by the
+    bonds with flag ``when`` (None: every bond)."""
     return (
         Parameter(
             "drive.frequency",
@@ -252,6 +253,14 @@ def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
             lambda v: (0.0, max(100.0, 2 * abs(v))),
             log=False,
             check=NON_NEGATIVE,
+            when=when,
+        ),
+        Parameter(
+            "drive.coupling.quadrature.gain",
+            "drive_quadrature_gain",
+            0.0,
+            lambda v: (-max(100.0, 2 * abs(v)), max(100.0, 2 * abs(v))),
+            log=False,
             when=when,
         ),
         Parameter(

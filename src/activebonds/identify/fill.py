@@ -365,9 +365,10 @@ def fill_phases(
     topo = model.topology
     if not phase.entrained(topo):
         return None
-    marks = list(topo.drive.particles)
+    marks = list(topo.drive.read)
     missing = ~np.asarray(mask, bool)[:, marks].all(axis=1)
-    s = np.where(missing, 0.0, phase.signal(topo, positions, np))
+    s = phase.signal(topo, positions, np)
+    s = np.where(missing.reshape(-1, *[1] * (s.ndim - 1)), 0.0, s)
     params = model.layout.decode(genome)
     return np.asarray(phase.track(params, topo, jnp.asarray(s), dt, substeps, psi0))
 
@@ -497,7 +498,7 @@ def model_fill(
         mask_ahead = plan.traj.mask[: first + 1][:, cols]
         psi0 = fill_phases(model, genome, ahead, mask_ahead, dt, substeps)[-1]
     psi = fill_phases(model, genome, positions, mask, dt, substeps, psi0)
-    signal_cols = [] if psi is None else list(model.topology.drive.particles)
+    signal_cols = [] if psi is None else list(model.topology.drive.read)
     before = np.zeros_like(mask)  # the frames of the segments already filled
     sigma = np.zeros((n_frames, n_markers))
     segments = []

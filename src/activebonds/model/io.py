@@ -29,6 +29,7 @@ _EXPECTED = {
     "drive": "expected a table { frequency = .. } (Hz: a number or { value, min, max }; "
     "optionally coupling = { particle = .., gain = .. })",
     "coupling": "expected a table { particle = .., gain = .., offset = .., start_phase = .. }",
+    "quadrature": "expected a table { particle = .., gain = .., offset = .. } (a second signal)",
 }
 
 

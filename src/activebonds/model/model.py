@@ -12,7 +12,7 @@ from .. import bonds
 from .forms import form_of, set_value
 from .genome import Genome, put_bonds, put_gravity, put_masses, put_shared, shared_value, takes
 from .layout import Layout
-from .params import Coupling, Params, Topology
+from .params import Coupling, Params, Signal, Topology
 from .schema import GravityParam, ModelSpec
 
 
@@ -174,16 +174,22 @@ def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
         par = next(p for p in bonds.get(kind).shared if p.field == "drive_frequency")
         readers = [takes(b, par) for b in spec.bond if b.kind == kind]
         if any(readers):
-            axis = spec.dimension - 1  # "height": the last axis
-            which = [coupling.particle] if coupling.signal == "height" else coupling.particles
+            first = _signal(coupling, names, spec.dimension)
+            second = coupling.quadrature
             return Coupling(
-                tuple(names[n] for n in which),
-                axis,
-                float(coupling.offset),
+                *first,
                 readers.index(True),
                 kind,
+                None if second is None else _signal(second, names, spec.dimension),
             )
     return None
+
+
+def _signal(table, names, dimension: int) -> Signal:
+    """A coupling signal's static part: its particles, the height's axis (the last), its
+    offset."""
+    which = [table.particle] if table.signal == "height" else table.particles
+    return Signal(tuple(names[n] for n in which), dimension - 1, float(table.offset))
 
 
 def _file_params(spec: ModelSpec) -> Params:

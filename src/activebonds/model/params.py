@@ -15,18 +15,36 @@ from typing import NamedTuple
 import numpy as np
 
 
+class Signal(NamedTuple):
+    """A body signal (static): minus ``offset`` (m), the coordinate ``axis`` of particle
+    ``particles[0]`` (one particle: a height) or the distance between ``particles`` (two: a
+    length)."""
+
+    particles: tuple[int, ...]
+    axis: int
+    offset: float
+
+
 class Coupling(NamedTuple):
     """What pulls an entrained drive's phase (static): minus ``offset`` (m), the coordinate
     ``axis`` of particle ``particles[0]`` (one particle: a height) or the distance between
     ``particles`` (two: a length); the drive's shared numbers are read from the bond of kind
     ``kind`` at index ``holder`` among its kind's (the first that reads the drive: a neural
-    bond, or a periodic force)."""
+    bond, or a periodic force); ``quadrature`` a second signal, read against sin psi (None:
+    the one signal)."""
 
     particles: tuple[int, ...]
     axis: int
     offset: float
     holder: int
     kind: str
+    quadrature: Signal | None = None
+
+    @property
+    def read(self) -> tuple[int, ...]:
+        """Every particle the coupling reads (the first signal's, then the second's)."""
+        extra = () if self.quadrature is None else self.quadrature.particles
+        return self.particles + tuple(p for p in extra if p not in self.particles)
 
 
 @dataclass(frozen=True, eq=False)

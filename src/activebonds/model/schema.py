@@ -5,7 +5,8 @@ or a table ``{ value, min, max, direction }``: a magnitude, free or fixed, along
 direction) and ``total_mass`` (kg: the free masses are then identified as ratios of it),
 an optional ``[drive]`` table (``frequency`` in Hz, > 0, fixed or free: the rhythmic drive of
 the neurons, whose ``drive_weight`` and ``drive_phase`` need it; an optional ``coupling``
-table entrains its phase by the body, :class:`Coupling`); ``[[particle]]``
+table entrains its phase by the body, :class:`Coupling`, with an optional second signal
+``quadrature``, :class:`Quadrature`); ``[[particle]]``
 tables and ``[[bond]]`` tables. Every parameter is a number (fixed) or a table
 ``{ value = .., min = .., max = .., fixed = false, log = .. }``. Vector parameters (``anchor``,
 ``gravity``) take lists; neural ``weights`` take ``length`` and ``rate`` lists with one entry per
@@ -55,6 +56,22 @@ class GravityParam(Param):
 GRAVITY_ZERO = 1e-12  # a gravity direction this short is refused as zero
 
 
+class Quadrature(_Strict):
+    """A second signal of an entrained drive, read against sin psi: d psi/dt = 2 pi f -
+    gain s cos psi - gain_b s_b sin psi. Its ``signal``, ``particle``/``particles`` and
+    ``offset`` as the first's; ``gain`` (rad/s per m, either sign: the second signal may lead
+    or lag the first by a quarter stride; gene ``drive.coupling.quadrature.gain``) a number
+    or a ``{ value, min, max }`` table. Two signals a quarter period apart, their gains
+    times amplitudes equal, pull the phase without making it run unevenly within the
+    period (DESIGN.md §2, "Entrained drive")."""
+
+    signal: Literal["height", "length"] = "height"
+    particle: str | None = Field(default=None, min_length=1)
+    particles: list[str] | None = None
+    gain: FiniteFloat | Param
+    offset: FiniteFloat = 0.0
+
+
 class Coupling(_Strict):
     """The entrainment of the drive (DESIGN.md §2, "Entrained drive"): its phase psi is a
     state, d psi/dt = 2 pi f - gain s cos psi, pulled by the body's signal s minus ``offset``
@@ -63,7 +80,8 @@ class Coupling(_Strict):
     between the two ``particles`` (e.g. a leg bond's length). ``gain`` (rad/s per m, >= 0;
     gene ``drive.coupling.gain``) and ``start_phase`` (psi at the first frame of the window or
     the simulation, rad; gene ``drive.coupling.start_phase`` when free) are numbers or
-    ``{ value, min, max }`` tables."""
+    ``{ value, min, max }`` tables. An optional ``quadrature`` table adds a second signal
+    read against sin psi (:class:`Quadrature`)."""
 
     signal: Literal["height", "length"] = "height"
     particle: str | None = Field(default=None, min_length=1)
@@ -71,6 +89,7 @@ class Coupling(_Strict):
     gain: FiniteFloat | Param
     offset: FiniteFloat = 0.0
     start_phase: FiniteFloat | Param = 0.0
+    quadrature: Quadrature | None = None
 
 
 class Drive(_Strict):
@@ -89,6 +108,25 @@ def _reads_drive(bond) -> bool:
         return False
     par = next(p for p in bonds.get(bond.kind).shared if p.field == "drive_frequency")
     return not par.when or bool(getattr(bond, par.when, False))
+
+
+def _check_signal(table, where: str, names: set[str]) -> None:
+    """A coupling signal's particles: one known name for a height, two distinct known names
+    for a length (``where``: the table's dotted key, for the message)."""
+    if table.signal == "height":
+        if table.particle is None or table.particles is not None:
+            raise ValueError(f"{where}.particle: a height signal needs particle = .. (one name)")
+        named = [("particle", table.particle)]
+    else:
+        pair = table.particles
+        if table.particle is not None or pair is None or len(set(pair)) != 2:
+            raise ValueError(
+                f"{where}.particles: a length signal needs particles = [A, B] (two distinct names)"
+            )
+        named = [("particles", n) for n in pair]
+    for key, name in named:
+        if name not in names:
+            raise ValueError(f"{where}.{key}: unknown particle '{name}'")
 
 
 def entry_at(spec, key: str):
@@ -314,27 +352,13 @@ class ModelSpec(_Strict):
         return self
 
     def _check_coupling(self, names: set[str]) -> None:
-        """An entrained drive's signal names a particle, and some neural bond reads it."""
+        """An entrained drive's signals name particles, and some neural bond reads it."""
         coupling = self.drive.coupling if self.drive is not None else None
         if coupling is None:
             return
-        if coupling.signal == "height":
-            if coupling.particle is None or coupling.particles is not None:
-                raise ValueError(
-                    "drive.coupling.particle: a height signal needs particle = .. (one name)"
-                )
-            named = [("particle", coupling.particle)]
-        else:
-            pair = coupling.particles
-            if coupling.particle is not None or pair is None or len(set(pair)) != 2:
-                raise ValueError(
-                    "drive.coupling.particles: a length signal needs particles = [A, B] "
-                    "(two distinct names)"
-                )
-            named = [("particles", n) for n in pair]
-        for key, name in named:
-            if name not in names:
-                raise ValueError(f"drive.coupling.{key}: unknown particle '{name}'")
+        _check_signal(coupling, "drive.coupling", names)
+        if coupling.quadrature is not None:
+            _check_signal(coupling.quadrature, "drive.coupling.quadrature", names)
         if not any(_reads_drive(b) for b in self.bond):
             raise ValueError(
                 "drive.coupling: an entrained drive needs a neural bond or a periodic force to "

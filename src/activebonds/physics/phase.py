@@ -13,6 +13,19 @@ the phase to it (averaged over a cycle, the phase difference obeys ``d delta / d
 Omega - (sigma A / 2) cos(delta + ...)``) when ``sigma A / 2 > |2 pi f - Omega|``: the drive
 follows the body's gait instead of drifting against it.
 
+With one signal, lock and unevenness are one number: ``s cos psi = A/2 [cos(theta - psi) +
+cos(theta + psi)]`` for ``s = A cos theta``, the first term locking psi to the gait, the second
+making it run unevenly twice a period by as much. A second signal ``s_b`` (``[drive.coupling]
+quadrature``, gain ``sigma_b``, gene ``drive.coupling.quadrature.gain``, either sign) read
+against ``sin psi``,
+
+    d psi / dt = 2 pi f - sigma s cos psi - sigma_b s_b sin psi,
+
+cancels the second term when it is a quarter period from the first and ``sigma_b A_b =
+sigma A`` (``s_b = A sin theta``: the pull is ``sigma A cos(theta - psi)``, constant along the
+period once locked; Kuramoto's coupling to the gait's own phase). Without it the rate is
+computed as before, bit for bit.
+
 The integrators carry psi beside (x, v) and advance it at every substep by explicit Euler from
 the substep's start state (:mod:`activebonds.physics.integrate`), writing it into the binary
 bonds' parameters for the forces (:func:`at_phase`). Where a prediction starts from a
@@ -52,20 +65,36 @@ def start_phase(params: Params, topo: Topology):
     return numbers(params, topo)[2]
 
 
-def signal(topo: Topology, x, xp=jnp):
-    """The coupling's signal at positions x [..., P, D], minus its offset: a particle's
-    height, or the distance between two particles (``xp``: the array module)."""
-    c = topo.drive
+def quadrature_gain(params: Params, topo: Topology):
+    """The gain sigma_b of the coupling's second signal (read against sin psi)."""
+    return params.bonds[topo.drive.kind]["drive_quadrature_gain"][topo.drive.holder]
+
+
+def _one(c, x, xp):
+    """One signal (``c``: its particles, axis, offset) at positions x [..., P, D]."""
     if len(c.particles) == 1:
         return x[..., c.particles[0], c.axis] - c.offset
     d = x[..., c.particles[1], :] - x[..., c.particles[0], :]
     return xp.sqrt(xp.sum(d * d, axis=-1)) - c.offset
 
 
+def signal(topo: Topology, x, xp=jnp):
+    """The coupling's signal at positions x [..., P, D], minus its offset: a particle's
+    height, or the distance between two particles (``xp``: the array module); with a
+    second signal (``quadrature``) the pair [..., 2], the first signal then the second."""
+    c = topo.drive
+    if c.quadrature is None:
+        return _one(c, x, xp)
+    return xp.stack([_one(c, x, xp), _one(c.quadrature, x, xp)], axis=-1)
+
+
 def rate_of(params: Params, topo: Topology, s, psi):
-    """d psi / dt for signal ``s``."""
+    """d psi / dt for signal ``s`` (with a second signal, ``s`` [..., 2]: the pair)."""
     f, gain, _ = numbers(params, topo)
-    return 2.0 * jnp.pi * f - gain * s * jnp.cos(psi)
+    if topo.drive.quadrature is None:
+        return 2.0 * jnp.pi * f - gain * s * jnp.cos(psi)
+    gain_b = quadrature_gain(params, topo)
+    return 2.0 * jnp.pi * f - gain * s[..., 0] * jnp.cos(psi) - gain_b * s[..., 1] * jnp.sin(psi)
 
 
 def rate(params: Params, topo: Topology, x, psi):
@@ -90,24 +119,28 @@ def at_phase(params: Params, psi) -> Params:
 def recorded_signal(
     topo: Topology, positions: np.ndarray, mask: np.ndarray | None = None, period: int = 0
 ):
-    """The signal along a recording [F] (NumPy): positions [F, P, D] (NaN or ``mask`` False
-    where missing), gaps filled linearly in time, the end held; the frames before the
-    signal is first recorded get its first period repeated backwards
-    (:func:`extended_back`: the period of :func:`signal_period`, else ``period`` frames,
-    else held)."""
+    """The signal along a recording [F] (NumPy; [F, 2] with a second signal): positions
+    [F, P, D] (NaN or ``mask`` False where missing), gaps filled linearly in time, the end
+    held; the frames before the signal is first recorded get its first period repeated
+    backwards (:func:`extended_back`: the period of :func:`signal_period` of the first
+    signal, else ``period`` frames, else held)."""
     c = topo.drive
     s = signal(topo, np.asarray(positions, np.float64), np)
-    ok = np.isfinite(s)
+    ok = np.isfinite(s) if s.ndim == 1 else np.isfinite(s).all(axis=1)
     if mask is not None:
-        ok &= np.asarray(mask, bool)[:, list(c.particles)].all(axis=1)
+        ok &= np.asarray(mask, bool)[:, list(c.read)].all(axis=1)
     if not ok.any():
         raise ValueError("the entrained drive's signal particle is never recorded")
     frames = np.arange(len(s))
     first = int(np.argmax(ok))
-    s = np.interp(frames[first:], frames[ok], s[ok])
+    if s.ndim == 1:
+        s = np.interp(frames[first:], frames[ok], s[ok])
+    else:
+        s = np.stack([np.interp(frames[first:], frames[ok], col[ok]) for col in s.T], axis=1)
     if first == 0:
         return s
-    return extended_back(s, first, signal_period(s, period or len(s)))
+    first_signal = s if s.ndim == 1 else s[:, 0]
+    return extended_back(s, first, signal_period(first_signal, period or len(s)))
 
 
 def period_frames(params: Params, topo: Topology, dt: float) -> int:
@@ -140,8 +173,8 @@ def signal_period(s: np.ndarray, fallback: int) -> int:
 
 
 def extended_back(s: np.ndarray, before: int, period: int) -> np.ndarray:
-    """The signal [before + F] with ``before`` frames prepended: its first ``period`` frames
-    repeated backwards in time (a periodic extension joining at its first frame)."""
+    """The signal [before + F, ...] with ``before`` frames prepended: its first ``period``
+    frames repeated backwards in time (a periodic extension joining at its first frame)."""
     s = np.asarray(s, np.float64)
     period = max(1, min(int(period), len(s)))
     k = np.arange(-before, 0)
@@ -149,10 +182,10 @@ def extended_back(s: np.ndarray, before: int, period: int) -> np.ndarray:
 
 
 def track(params: Params, topo: Topology, s, dt, substeps: int = 1, psi0=None):
-    """The phase at every frame [F] of a recording whose signal is ``s`` [F], from ``psi0``
-    (default: the start phase) at its first frame: explicit Euler at ``substeps`` per frame,
-    the signal linear between frames (as the integrator advances it along the model's own
-    positions)."""
+    """The phase at every frame [F] of a recording whose signal is ``s`` [F] ([F, 2] with a
+    second signal), from ``psi0`` (default: the start phase) at its first frame: explicit
+    Euler at ``substeps`` per frame, the signal linear between frames (as the integrator
+    advances it along the model's own positions)."""
     s = jnp.asarray(s)
     psi0 = start_phase(params, topo) if psi0 is None else psi0
     h = dt / substeps
