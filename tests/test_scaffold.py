@@ -250,3 +250,15 @@ def test_neural_turns_the_present_springs_of_a_structure_result_into_neural_bond
     anchors = [b for b in neural.bond if len(b.particles) == 1]  # a small scaffold's anchors
     assert springs and all(b.neural for b in springs)
     assert len(anchors) == 3 and len(springs) + 3 == len(neural.bond)
+
+
+def test_the_default_masses_are_said_to_set_the_force_scale(tmp_path):
+    data = _recording(tmp_path, _wobble())
+    quiet = cli_in_process("scaffold", data, "--out", tmp_path / "a.toml", "--no-gravity")
+    given = cli_in_process(
+        "scaffold", data, "--out", tmp_path / "b.toml", "--no-gravity", "--total-mass", "2"
+    )
+    assert quiet.returncode == 0 and given.returncode == 0, quiet.stderr + given.stderr
+    said = quiet.stdout + quiet.stderr
+    assert "1 kg per marker (no --total-mass)" in said and "--total-mass KG" in said
+    assert "no --total-mass" not in given.stdout + given.stderr

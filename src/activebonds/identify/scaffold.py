@@ -328,6 +328,11 @@ def scaffold(
     duration = (f_count - 1) * dt
     if total_mass is None:
         total, mass_note = p * MASS_PER_MARKER, f"{MASS_PER_MARKER:g} kg per marker (default)"
+        notes.append(
+            f"masses: {MASS_PER_MARKER:g} kg per marker (no --total-mass): every stiffness and "
+            "damping identified scales with the masses (markers alone cannot tell the force "
+            "scale); give --total-mass KG for forces in newtons"
+        )
     else:
         total, mass_note = float(total_mass), "--total-mass"
     m = total / p
