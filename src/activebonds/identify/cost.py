@@ -205,7 +205,6 @@ def _predictor(
     out (a population's cost runs faster so: :func:`~activebonds.physics.integrate.advance`)."""
     topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
-    x_prev = jnp.asarray(windows.x_prev)
     t0 = jnp.asarray(windows.times)
     dt, horizon = windows.dt, windows.horizon
     exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
@@ -216,22 +215,7 @@ def _predictor(
     def velocities(params):
         if exact_backward:
             return v0
-        start = jax.vmap(
-            lambda a, b, t: start_velocity(
-                params,
-                topo,
-                a,
-                b,
-                dt,
-                substeps,
-                method,
-                START_ITERATIONS,
-                t,
-                newton=newton,
-                unroll=unroll,
-            )
-        )
-        return start(x_prev, x0, t0)
+        return _start_velocities(params, topo, windows, substeps, method, newton, unroll)
 
     def predict(params):
         v = velocities(params)
@@ -251,6 +235,31 @@ def _predictor(
     return predict
 
 
+def _start_velocities(params, topo, windows, substeps, method, newton, unroll, psi=None):
+    """Every restart's start velocity (:func:`~activebonds.physics.integrate.start_velocity`,
+    vmapped over the restarts), with an entrained drive's phases ``psi`` at the frames
+    before them."""
+
+    def one(a, b, t, *p):
+        return start_velocity(
+            params,
+            topo,
+            a,
+            b,
+            windows.dt,
+            substeps,
+            method,
+            START_ITERATIONS,
+            t,
+            psi=p[0] if p else None,
+            newton=newton,
+            unroll=unroll,
+        )
+
+    args = (jnp.asarray(windows.x_prev), jnp.asarray(windows.x0), jnp.asarray(windows.times))
+    return jax.vmap(one)(*args, *(() if psi is None else (psi,)))
+
+
 def _phased_predictor(
     model: Model,
     windows: Windows,
@@ -265,7 +274,6 @@ def _phased_predictor(
     then moves with the predicted state."""
     topo = model.topology
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
-    x_prev = jnp.asarray(windows.x_prev)
     t0 = jnp.asarray(windows.times)
     dt, horizon = windows.dt, windows.horizon
 
@@ -273,22 +281,7 @@ def _phased_predictor(
         psi_prev, psi0 = phases(params)
         v = v0
         if not (substeps == 1 and method == "euler"):
-            v = jax.vmap(
-                lambda a, b, t, p: start_velocity(
-                    params,
-                    topo,
-                    a,
-                    b,
-                    dt,
-                    substeps,
-                    method,
-                    START_ITERATIONS,
-                    t,
-                    psi=p,
-                    newton=newton,
-                    unroll=unroll,
-                )
-            )(x_prev, x0, t0, psi_prev)
+            v = _start_velocities(params, topo, windows, substeps, method, newton, unroll, psi_prev)
 
         def run(x, v, t, p):
             xs = rollout_states(params, topo, x, v, dt, horizon, substeps, method, t, p, unroll)
