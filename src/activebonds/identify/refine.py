@@ -386,7 +386,7 @@ class Refinement:
         windows = join_shooting(
             [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in self.recordings]
         )
-        # the dense path's forward mode over every unknown runs its substeps written out
+        # the dense path (forward mode over every unknown) keeps its substeps written out
         residuals, trajectory = make_shooting(
             self.ident.model, windows, s.substeps, s.integrator, unroll=self.solver == "dense"
         )

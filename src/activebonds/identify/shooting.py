@@ -170,7 +170,7 @@ def make_shooting(
 ):
     """``(genome, states) -> residuals`` (a pytree of arrays, metres) and
     ``(genome, states) -> frame states`` of the windows' trajectories. ``unroll``: the
-    substeps written out (the dense path's forward mode over every unknown runs faster so).
+    substeps written out (:func:`~activebonds.physics.integrate.advance`; the dense path's).
 
     ``states = (X [K, P, D], V [K, P, D])``: each window's start state. The trajectory's
     ``run`` attribute is its jitted ``(genome, states) -> (positions, velocities)``

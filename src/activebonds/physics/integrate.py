@@ -132,11 +132,12 @@ def advance(
     returns (x, v), or (x, v, psi) with an entrained drive's phase ``psi`` (required then).
 
     ``unroll``: the substeps written out in the program (up to :data:`UNROLLED`) rather than
-    run as a loop. Written out, a population's cost (vmapped over a few hundred genomes)
-    runs 25-45 % faster, and a forward-mode Jacobian over a thousand unknowns (the dense
-    shooting path) much faster; a loop traces and compiles in about half the time and runs
-    as fast for everything else (one trajectory, a Jacobian over the parameters, the
-    shooting's normal equations by window: ``benchmarks/README.md``), so it is the default.
+    run as a loop. Written out, a population's cost (vmapped over 100 genomes) runs 25-50 %
+    faster; a loop traces in under half the time, compiles in 45-85 % and runs as fast for
+    one trajectory, a Jacobian over the parameters and the shooting's normal equations by
+    window (``benchmarks/substeps.py``), so it is the default. The dense shooting path (a
+    forward-mode Jacobian over every window's state) keeps its substeps written out, as
+    measured when it was chosen; measured again, the two forms were within the noise.
 
     With substeps (> 1) and a stiff kind (:func:`stiff_kinds`), every substep's kick is
     linearly implicit in that kind's velocity dependence (:func:`kick`): substeps exist to
