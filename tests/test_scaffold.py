@@ -262,3 +262,23 @@ def test_the_default_masses_are_said_to_set_the_force_scale(tmp_path):
     said = quiet.stdout + quiet.stderr
     assert "1 kg per marker (no --total-mass)" in said and "--total-mass KG" in said
     assert "no --total-mass" not in given.stdout + given.stderr
+
+
+def test_the_next_command_keeps_the_frames_and_markers(tmp_path):
+    data = _recording(tmp_path, _wobble())
+    proc = cli_in_process(
+        "scaffold",
+        data,
+        "--out",
+        tmp_path / "a.toml",
+        "--no-gravity",
+        "--frames",
+        "0:40",
+        "--markers",
+        "M0,M1,M2",
+    )
+    assert proc.returncode == 0, proc.stderr
+    hint = (proc.stdout + proc.stderr).split("next: ")[1]
+    assert "--frames 0:40" in hint and "--markers M0,M1,M2" in hint
+    plain = cli_in_process("scaffold", data, "--out", tmp_path / "b.toml", "--no-gravity")
+    assert "--frames" not in (plain.stdout + plain.stderr).split("next: ")[1]

@@ -89,10 +89,13 @@ def scaffold(
         fail(e)
     for note in found.notes:
         out.print(note, markup=False, highlight=False)
+    same = (f" --frames {frames}" if frames.strip() not in ("", "0:") else "") + (
+        f" --markers {markers}" if markers else ""
+    )  # the next command reads the frames and markers the scaffold was made of
     out.print(
         f"wrote {out_file}: {found.particles} particles, {found.bonds} candidate springs "
         f"(optional), {found.contacts} ground contacts, gravity {found.gravity}; next: "
-        f"activebonds structure {out_file} {traj} --out found.toml",
+        f"activebonds structure {out_file} {traj}{same} --out found.toml",
         markup=False,
         highlight=False,
     )
