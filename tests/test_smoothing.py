@@ -1,4 +1,5 @@
-"""Savitzky-Golay smoothing of the cost's restart states (``fit --smooth N``)."""
+"""Savitzky-Golay smoothing of the cost's restart states (``fit --smooth N``) and the marker
+noise that decides whether `auto` chooses a structure on smoothed positions."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 
 from activebonds import load_model
-from activebonds.data.smoothing import smooth_positions
+from activebonds.data.smoothing import noise_of, smooth_positions
 from activebonds.identify.cost import make_windows
 from activebonds.identify.lsq import least_squares
 from activebonds.identify.settings import FitSettings
@@ -77,3 +78,53 @@ def test_smoothing_the_restart_states_removes_most_of_the_noise_bias():
     )
     np.testing.assert_array_equal(w0.target, w9.target)
     assert not np.allclose(w0.v0, w9.v0)
+
+
+def _orbit(frames: int = 400, rate: float = 100.0) -> np.ndarray:
+    """Three markers on slow 3D orbits (1-2 Hz, centimetres): [F, 3, 3] metres."""
+    t = np.arange(frames)[:, None] / rate
+    x = np.zeros((frames, 3, 3))
+    for p, f in enumerate((1.0, 1.6, 2.1)):
+        x[:, p] = 0.03 * np.hstack(
+            [np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t), np.sin(np.pi * f * t)]
+        ) + [p * 0.3, 0.0, 0.0]
+    return x
+
+
+def test_the_noise_is_measured_and_a_window_chosen_only_where_it_dominates():
+    from activebonds.data.smoothing import NOISE_SHARE, WINDOWS, _second_difference_gain
+
+    clean = _orbit()
+    quiet = noise_of(clean)
+    assert quiet.sigma < 1e-3 and quiet.window == 0 and not quiet.dominated
+    # zero force's one-step RMS of the clean motion is its second difference's
+    acc = clean[2:] - 2 * clean[1:-1] + clean[:-2]
+    assert quiet.zero_force == pytest.approx(np.sqrt(np.mean(np.sum(acc**2, -1))) * 1e3)
+    rng = np.random.default_rng(0)
+    for sigma_mm in (0.05, 0.5, 2.0):
+        noisy = noise_of(clean + rng.normal(0.0, sigma_mm / 1000, clean.shape))
+        assert noisy.sigma == pytest.approx(sigma_mm, rel=0.08)
+        assert noisy.floor == pytest.approx(np.sqrt(18) * noisy.sigma, rel=1e-12)
+        if sigma_mm < 0.1:  # the motion is what the noise leaves of zero force's error:
+            assert noisy.motion == pytest.approx(quiet.zero_force, rel=0.05)  # told apart
+        if noisy.floor <= NOISE_SHARE * noisy.motion:
+            assert noisy.window == 0
+        else:  # the smallest window that brings the floor under the share, or the largest
+            fits = [w for w in WINDOWS if noisy.floor * _second_difference_gain(w)
+                    <= NOISE_SHARE * noisy.motion]  # fmt: skip
+            assert noisy.window == (fits[0] if fits else WINDOWS[-1])
+    assert noise_of(clean + rng.normal(0.0, 5e-6, clean.shape)).window == 0
+    assert noise_of(clean + rng.normal(0.0, 5e-4, clean.shape)).window > 0
+
+
+def test_a_window_gain_is_the_filtered_second_difference_of_white_noise():
+    from activebonds.data.smoothing import _second_difference_gain
+
+    rng = np.random.default_rng(1)
+    e = rng.normal(size=(200_000, 1, 1))
+    raw = np.std(e[2:] - 2 * e[1:-1] + e[:-2])
+    mask = np.ones((e.shape[0], 1), bool)
+    for window in (5, 21):
+        s = smooth_positions(e, mask, window)
+        ratio = np.std(s[2:] - 2 * s[1:-1] + s[:-2]) / raw
+        assert ratio == pytest.approx(_second_difference_gain(window), rel=0.02)

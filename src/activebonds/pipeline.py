@@ -61,6 +61,10 @@ AHEAD = 10  # frames ahead of the multi-step verdict
 POPULATION = 40  # the ES's, small: it starts at the structure's exact optimum
 GENERATIONS = 200
 CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most these)
+# where marker noise dominates the one-step scores (:class:`~.data.smoothing.Noise`), the fit
+# refines by multiple shooting, whose optimum noise does not bias, up to this many parameters
+MAX_SHOT = 100
+SHOOTING = {"cost": "shooting", "horizon": (10,), "integrator": "verlet", "substeps": 5}
 MIN_FRAMES = 10  # frames of the fitted window and of the held-out tail, at least
 STEPS = ("scaffold", "structure", "fit", "evaluate", "report")
 STATE = "auto.json"
@@ -129,6 +133,7 @@ class Folder:
     ground = property(lambda self: self.path / "ground.toml")
     run = property(lambda self: self.path / "run")
     run_ground = property(lambda self: self.path / "run-ground")
+    run_shot = property(lambda self: self.path / "run-shot")
     evaluation = property(lambda self: self.path / "evaluation.json")
     report = property(lambda self: self.path / "report.html")
     state = property(lambda self: self.path / STATE)
@@ -230,6 +235,8 @@ def run(
         gravity=options.gravity,
         name=recording_path.stem,
     )
+    noise = noise_of_fitted(recording, split, options)
+    structural = smoothed(recording, split, noise.window)
     state = prepare(out, recording_path, options, overwrite)
     folder = Folder(out)
     if state is None:
@@ -255,6 +262,8 @@ def run(
         f"frames {a}:{b}: fitting {a}:{s} ({s - a} frames), holding out {s}:{b} "
         f"({b - s} frames, the last {100 * options.held_out:g} %)"
     )
+    say(noise.line())
+    state["noise"] = asdict(noise)
 
     def step(k: int, name: str, what: str, body: Callable[[], str]) -> None:
         if name in steps:
@@ -289,14 +298,16 @@ def run(
         "structure",
         "which candidate bonds the fitted frames need (exact least squares, BIC, a validation "
         "tail)",
-        lambda: _structure(folder, recording, split, options, say),
+        lambda: _structure(folder, structural, split, options, say),
     )
     step(
         3,
         "fit",
         f"from the structure's exact optimum, population {options.population}, "
         f"{options.generations} generations, then the refinement",
-        lambda: _fit(folder, recording_path, recording, split, options, say, fit_progress, state),
+        lambda: _fit(
+            folder, recording_path, structural, split, options, say, fit_progress, state, noise
+        ),
     )
     kept = folder.path / steps["fit"].get("run", "run")
     held, fitted = _evaluations(kept, recording, split, options)
@@ -428,6 +439,31 @@ def _undecided(folder: Folder, recording, split: Windows, options: Options, say)
     )
 
 
+def noise_of_fitted(recording, split: Windows, options: Options):
+    """:func:`~.data.smoothing.noise_of` the fitted frames of the markers asked."""
+    from .data.smoothing import noise_of
+
+    seen = recording.select(list(options.markers)) if options.markers else recording
+    a, s = split.fitted
+    return noise_of(seen.positions[a:s])
+
+
+def smoothed(recording, split: Windows, window: int):
+    """``recording`` with its fitted frames smoothed over ``window`` frames (0: as it is),
+    each marker's run of recorded frames apart, never across the held-out boundary: the
+    recording the structure is chosen on."""
+    import dataclasses
+
+    from .data.smoothing import smooth_positions
+
+    if not window:
+        return recording
+    a, s = split.fitted
+    positions = recording.positions.copy()
+    positions[a:s] = smooth_positions(positions[a:s], recording.mask[a:s], window)
+    return dataclasses.replace(recording, positions=positions)
+
+
 def recording_name(recording) -> str:
     """The model's name: the recording file's stem."""
     return Path(str(recording.source or "scaffold")).stem
@@ -450,10 +486,12 @@ def _decide(model, recording, split: Windows, say):
     return result, eliminate, n
 
 
-def _fit(folder, recording_path, recording, split, options, say, fit_progress, state) -> str:
-    """The structure fitted from its exact optimum on the one-step cost (OUT/run); where
+def _fit(folder, recording_path, recording, split, options, say, fit_progress, state, noise) -> str:
+    """The structure fitted from its exact optimum on the one-step cost (OUT/run)
+    (``recording``: the one the structure was chosen on, smoothed as ``noise`` says); where
     there is a ground model, it fitted too (OUT/run-ground, the cost as fit --cost auto) and
-    kept where its one-step BIC on the fitted frames is lower. Records the kept run's name in
+    kept where its one-step BIC on the fitted frames is lower; where ``noise`` dominates, the
+    kept one refined by multiple shooting (:func:`_shoot`). Records the kept run's name in
     the fit step of ``state``."""
     from .identify.rundir import RunDir
     from .identify.structure_choice import criterion
@@ -492,8 +530,37 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
         state["parts"]["fit"] = {
             "criterion": {"run": plain.record(), "run-ground": ground.record()}
         }
+    if noise.dominated:
+        kept, shot = _shoot(folder, kept, recording_path, settings, say, fit_progress)
+        why += shot
     state["parts"].setdefault("fit", {})["run"] = kept.name
     return f"best one-step RMS {linear:.4g} mm on the fitted frames: {folder.run}{why}"
+
+
+def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> tuple[Path, str]:
+    """Where marker noise dominates: the kept run's model refined by multiple shooting
+    (:data:`SHOOTING`, OUT/run-shot), whose optimum the noise does not bias; kept in its
+    place unless it has more than :data:`MAX_SHOT` parameters. (kept run, note)."""
+    from .identify.rundir import RunDir
+    from .model import load_model
+
+    start = RunDir(kept).best_model_path
+    genes = load_model(start).layout.n_genes
+    if genes > MAX_SHOT:
+        say(
+            f"      the one-step optimum is biased by the marker noise (its dampings above "
+            f"all); multiple shooting, which is not, is left to fit --cost shooting above "
+            f"{MAX_SHOT} parameters ({genes} here)"
+        )
+        return kept, f"; not shot ({genes} parameters)"
+    say(
+        f"      the marker noise biases the one-step optimum (its dampings above all): "
+        f"{kept.name}'s model refined by multiple shooting (horizon {SHOOTING['horizon'][0]}, "
+        f"{SHOOTING['substeps']} Verlet substeps), which it does not bias"
+    )
+    shooting = settings.model_copy(update={**SHOOTING, "population": 4, "generations": 1})
+    _fit_into(folder.run_shot, start, recording_path, shooting, say, fit_progress)
+    return folder.run_shot, f"; refined by multiple shooting: {folder.run_shot}"
 
 
 def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress) -> float:

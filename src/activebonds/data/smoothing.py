@@ -7,12 +7,17 @@ out far too large. Smoothing the inputs with a local polynomial (Savitzky & Gola
 ``savgol_filter``) removes most of that noise while keeping motion up to the polynomial's
 order exact. Each marker is smoothed separately over each run of consecutive recorded frames;
 a run shorter than the window is left as recorded, and a gap stays a gap.
+
+How noisy a recording is, and which window makes its one-step scores judge the motion rather
+than the noise: :func:`noise_of`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter
 
 ORDER = 3  # polynomial order: a cubic motion passes unchanged
 
@@ -41,3 +46,72 @@ def smooth_positions(positions: np.ndarray, mask: np.ndarray, window: int) -> np
             if stop - start >= window:
                 out[start:stop, p] = savgol_filter(out[start:stop, p], window, ORDER, axis=0)
     return out
+
+
+WINDOWS = (5, 7, 9, 11, 15, 21, 31, 41)  # the windows noise_window chooses from
+NOISE_SHARE = 0.25  # the smoothed noise's one-step floor at most this share of the motion's
+
+
+@dataclass(frozen=True)
+class Noise:
+    """What a recording's marker noise does to one-step scores (every figure in mm).
+
+    ``sigma``: the noise per coordinate, from the fourth differences (white noise of
+    variance s^2 gives them 70 s^2; a motion sampled finely enough adds almost nothing), by
+    the median so that a few sharp events do not count: ``median |d4| / (0.6745 sqrt(70))``.
+    ``floor``: the zero-force predictor's one-step RMS that noise alone gives (its second
+    difference: ``sqrt(6 D) sigma``). ``zero_force``: that predictor's one-step RMS over the
+    recording; ``motion``: its part the noise does not explain, ``sqrt(zero_force^2 -
+    floor^2)``. ``window``: the smallest Savitzky-Golay window (:data:`WINDOWS`, 0: none)
+    after which the noise's floor is at most :data:`NOISE_SHARE` of ``motion``, or the
+    largest where none is."""
+
+    sigma: float
+    floor: float
+    zero_force: float
+    motion: float
+    window: int
+
+    @property
+    def dominated(self) -> bool:
+        return self.window != 0
+
+    def line(self) -> str:
+        head = (
+            f"marker noise about {self.sigma:.3g} mm (fourth differences): its one-step floor "
+            f"{self.floor:.3g} mm of zero force's {self.zero_force:.3g} mm"
+        )
+        if not self.dominated:
+            return f"{head}: negligible, nothing smoothed"
+        return (
+            f"{head}: one-step scores would judge the noise, so the structure is chosen on "
+            f"positions smoothed over {self.window} frames (Savitzky-Golay, cubic); the fit "
+            "and the held-out scores are on the recording"
+        )
+
+
+def noise_of(positions: np.ndarray) -> Noise:
+    """:class:`Noise` of positions [F, P, D] (metres; NaN where missing)."""
+    x = np.asarray(positions, np.float64)
+    d4 = np.diff(x, 4, axis=0)
+    d4 = np.abs(d4[np.isfinite(d4)])
+    sigma = float(np.median(d4) / (0.6745 * np.sqrt(70.0))) if d4.size else 0.0
+    acc = x[2:] - 2 * x[1:-1] + x[:-2]
+    err2 = np.sum(acc**2, axis=-1)
+    err2 = err2[np.isfinite(err2)]
+    zero = float(np.sqrt(err2.mean())) if err2.size else 0.0
+    floor = float(np.sqrt(6.0 * x.shape[-1]) * sigma)
+    motion = float(np.sqrt(max(zero**2 - floor**2, 0.0)))
+    window = 0
+    if floor > NOISE_SHARE * motion:
+        gains = {w: _second_difference_gain(w) for w in WINDOWS}
+        fits = [w for w in WINDOWS if floor * gains[w] <= NOISE_SHARE * motion]
+        window = fits[0] if fits else WINDOWS[-1]
+    mm = 1000.0
+    return Noise(sigma * mm, floor * mm, zero * mm, motion * mm, window)
+
+
+def _second_difference_gain(window: int) -> float:
+    """How much a cubic Savitzky-Golay window scales white noise's second difference."""
+    h = np.convolve(savgol_coeffs(window, ORDER), [1.0, -2.0, 1.0])
+    return float(np.sqrt(np.sum(h**2) / 6.0))

@@ -13,7 +13,11 @@ error on the rest, the **validation tail**, beside the zero-force predictor's th
   acceleration over the frames (the same total): a pair of bodies pushed apart by one force
   accelerate in inverse proportion to their masses, so a marker that barely accelerates (a
   horse's withers) is heavy beside one that does (a hoof), and a spring that moves the hoof
-  hardly moves it;
+  hardly moves it; or **conserving momentum**: the masses (same total) whose centre of mass
+  moves as internal forces and a uniform gravity let it, on a parabola in time
+  (:func:`momentum_masses`), unbiased by equal marker noise. Where another outside force
+  acts (the ground, a treadmill, a hand) they mean nothing; the tail decides, and a vector
+  of mixed signs is no variant at all;
 * **anchors** (a scaffold's unary spring-dampers): as scaffolded (springs with free anchors),
   as dampers alone (stiffness 0: a drag towards rest in the room, no place to hold), or none;
 * **decided**: the candidates the BIC keeps, or every candidate.
@@ -23,7 +27,9 @@ of every variant: they are the fit's to add (``activebonds auto`` fits them from
 variant and keeps them where the BIC of the fitted frames says they earn their parameters).
 
 The chosen variant is the one with the lowest one-step RMS on the tail among those that beat
-zero force at every marker there; if none does, the lowest RMS. It is then decided and solved
+zero force at every marker there (if none does, among all); variants within :data:`TIE` of
+that RMS are tied, and the one with the fewest bonds among them is chosen (a candidate whose
+value the tail cannot tell from zero is not kept). It is then decided and solved
 again on all the fitted frames (:func:`decide`).
 """
 
@@ -39,8 +45,9 @@ from ..model import Model, build
 from ..model.schema import ModelSpec
 
 TRAIN = 0.8  # the share of the fitted frames each variant is fitted on; the rest is the tail
+TIE = 0.01  # variants within this share of the lowest tail RMS are tied: the fewest bonds win
 MIN_TAIL = 10  # frames: a shorter tail chooses nothing (the default variant is kept)
-MASSES = ("scaffold", "acceleration")
+MASSES = ("scaffold", "acceleration", "momentum")
 ANCHORS = ("springs", "dampers", "none")
 
 
@@ -53,7 +60,11 @@ class Variant:
     decided: bool = True  # the BIC's elimination (False: every candidate present)
 
     def text(self) -> str:
-        masses = "scaffold masses" if self.masses == "scaffold" else "masses ~ 1/rms acceleration"
+        masses = {
+            "scaffold": "scaffold masses",
+            "acceleration": "masses ~ 1/rms acceleration",
+            "momentum": "masses conserving momentum",
+        }[self.masses]
         anchors = {"springs": "anchors", "dampers": "anchors as dampers", "none": "no anchor"}
         decided = "BIC-decided" if self.decided else "every candidate"
         return f"{masses}, {anchors[self.anchors]}, {decided}"
@@ -93,7 +104,8 @@ class Choice:
     def record(self) -> dict:
         return {
             "rule": "lowest one-step RMS on the validation tail among the variants better than "
-            "zero force at every marker there (else the lowest RMS)",
+            f"zero force at every marker there (else among all); within {TIE:.0%} of it, the "
+            "fewest bonds",
             "train_frames": list(self.train),
             "tail_frames": list(self.tail),
             "markers": list(self.markers),
@@ -116,10 +128,17 @@ def has_anchors(spec: ModelSpec) -> bool:
     return any(b.kind == bonds.unary.KIND.name for b in spec.bond)
 
 
-def variants(spec: ModelSpec) -> list[Variant]:
-    """Every variant of the scaffold ``spec``, in the order ties are settled."""
+def variants(spec: ModelSpec, positions=None, dt: float = 1.0) -> list[Variant]:
+    """Every variant of the scaffold ``spec``, in the order ties are settled; the momentum
+    masses only where ``positions`` [F, P, D] give positive ones (:func:`momentum_masses`)."""
     anchors = ANCHORS if has_anchors(spec) else ("springs",)
-    return [Variant(m, a, d) for m, a, d in product(MASSES, anchors, (True, False))]
+    masses = [
+        m
+        for m in MASSES
+        if m != "momentum"
+        or (positions is not None and momentum_masses(positions, dt, 1.0) is not None)
+    ]
+    return [Variant(m, a, d) for m, a, d in product(masses, anchors, (True, False))]
 
 
 def acceleration_masses(positions: np.ndarray, dt: float, total: float) -> np.ndarray:
@@ -135,6 +154,32 @@ def acceleration_masses(positions: np.ndarray, dt: float, total: float) -> np.nd
         return np.full(x.shape[1], total / x.shape[1])
     inverse = 1.0 / rms
     return total * inverse / inverse.sum()
+
+
+def momentum_masses(positions: np.ndarray, dt: float, total: float) -> np.ndarray | None:
+    """Masses summing to ``total`` whose centre of mass moves as internal forces (and a
+    uniform gravity) let it: on a parabola in time, ``sum_i m_i x_i(t) = a + b t + c t^2``.
+    The unit ``m`` minimising the part of ``sum_i m_i x_i(t)`` no parabola explains over the
+    frames where every marker is recorded (the right singular vector, with the smallest
+    singular value, of the markers' positions with each one's best parabola removed), scaled
+    to ``total``. Positions, not accelerations: their noise is not amplified by differences,
+    and equal noise on every marker adds a multiple of the identity to the Gram matrix, which
+    moves no singular vector. None where fewer frames are complete than that takes or the
+    vector has a sign change or a zero (no set of masses moves so), [P] otherwise."""
+    x = np.asarray(positions, np.float64)
+    f, p, d = x.shape
+    complete = np.isfinite(x).all(axis=(1, 2))
+    if p < 2 or complete.sum() < p + 3:
+        return None
+    t = np.flatnonzero(complete) * dt
+    basis, _ = np.linalg.qr(np.vander((t - t.mean()) / max(np.ptp(t), dt), 3))
+    seen = x[complete]
+    rest = seen - np.einsum("fk,gk,gpd->fpd", basis, basis, seen)  # the parabolas removed
+    _, _, vt = np.linalg.svd(np.moveaxis(rest, 1, -1).reshape(-1, p), full_matrices=False)
+    m = vt[-1] * np.sign(vt[-1].sum())
+    if not np.all(m > 1e-6 * np.abs(m).max()):
+        return None
+    return total * m / m.sum()
 
 
 def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> ModelSpec:
@@ -153,9 +198,14 @@ def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> Mode
             b = b.model_copy(update={"stiffness": 0.0, "anchor": [float(a) for a in anchor]})
         kept.append(b)
     particles = list(spec.particle)
-    if variant.masses == "acceleration":
+    if variant.masses != "scaffold":
         total = sum(_mass(p) for p in particles)
-        masses = acceleration_masses(positions, dt, total)
+        if variant.masses == "momentum":
+            masses = momentum_masses(positions, dt, total)
+            if masses is None:  # not on these frames: equal, as scaffolded
+                masses = np.full(len(particles), total / len(particles))
+        else:
+            masses = acceleration_masses(positions, dt, total)
         particles = [
             p.model_copy(update={"mass": float(m)}) for p, m in zip(particles, masses, strict=True)
         ]
@@ -200,7 +250,8 @@ def choose(model: Model, recording, frames: tuple[int, int], say=None) -> Choice
     zero_each = rms_mm(zero, rec)
     zero_all = _overall(zero, rec)
     scored = []
-    for variant in variants(model.spec):
+    train = select_data(model, recording, FitSettings(frames=(a, split)))
+    for variant in variants(model.spec, train.positions, train.dt):
         found = decide(model, recording, (a, split), variant)
         fitted = build(found.spec)
         one = one_step(fitted, rec, tail.dt)
@@ -219,7 +270,9 @@ def choose(model: Model, recording, frames: tuple[int, int], say=None) -> Choice
             say(f"      {variant.text()}: {s.tail_rms_mm:.4g} mm on the tail{flag}")
     better = [s for s in scored if s.every_marker_better and np.isfinite(s.tail_rms_mm)]
     pool = better or [s for s in scored if np.isfinite(s.tail_rms_mm)] or scored
-    best = min(pool, key=lambda s: s.tail_rms_mm if np.isfinite(s.tail_rms_mm) else np.inf)
+    lowest = min(s.tail_rms_mm if np.isfinite(s.tail_rms_mm) else np.inf for s in pool)
+    tied = [s for s in pool if s.tail_rms_mm <= (1.0 + TIE) * lowest] or pool
+    best = min(tied, key=lambda s: (s.bonds, s.tail_rms_mm))
     return Choice(best.variant, tuple(scored), (a, split), (split, b), tuple(tail.markers))
 
 
