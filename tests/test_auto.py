@@ -55,15 +55,17 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
     for name in FILES:
         assert (out / name).is_file(), name
     assert (out / "run" / "best_model.toml").is_file()
-    # the three springs of the truth are found, and beat zero force on the held-out frames
-    # (not to rounding: the scaffold's masses are equal, the truth's 1, 1.5 and 2 kg)
+    # the three springs of the truth are found, with the truth's mass ratios (1 : 1.5 : 2:
+    # those conserving momentum), and beat zero force on the held-out frames
     found = load_model(out / "structure.toml")
+    masses = [p.mass.value if hasattr(p.mass, "value") else p.mass for p in found.spec.particle]
+    assert masses == pytest.approx([2 / 3, 1.0, 4 / 3], rel=1e-3)  # 1 kg a marker in all
     springs = [b for b in found.spec.bond if len(b.particles) == 2]
     anchors = [b for b in found.spec.bond if len(b.particles) == 1]  # candidates, or none
     assert len(springs) == 3 and all(not b.absent for b in springs)
     assert all(b.absent for b in anchors)
     record = json.loads((out / "structure.json").read_text())
-    assert len(record["choice"]["variants"]) == 12  # chosen on the tail 192:240
+    assert len(record["choice"]["variants"]) == 18  # chosen on the tail 192:240
     assert record["choice"]["tail_frames"] == [192, 240]
     held = json.loads((out / "evaluation.json").read_text())["held_out"]
     assert held["frames"] == [240, 300]

@@ -5,12 +5,15 @@ The steps, each one's output in the output folder ``OUT``:
 1. **scaffold** (:func:`~.scaffold.scaffold`) on the fitted frames: ``OUT/scaffold.toml``;
 2. **structure** (:mod:`~.identify.structure_choice`, :func:`~.structure.structure_of`):
    ``OUT/structure.toml`` and ``OUT/structure.json``. Up to :data:`MAX_DECIDED` candidates,
-   variants of the scaffold's linear part (its masses as scaffolded or in inverse proportion to
-   each marker's acceleration; its anchors as springs, as dampers alone or none; the
-   candidates the BIC keeps or every one) are fitted by exact least squares on the first 80 %
-   of the fitted frames and scored on the rest, the validation tail; the variant with the
-   lowest one-step RMS there among those better than zero force at every marker (else the
-   lowest) is decided and solved again on every fitted frame. Where the scaffold has gravity
+   variants of the scaffold's linear part (its masses as scaffolded, in inverse proportion to
+   each marker's acceleration or conserving momentum; its anchors as springs, as dampers
+   alone or none; the candidates the BIC keeps or every one) are fitted by exact least squares
+   on the first 80 % of the fitted frames and scored on the rest, the validation tail; the
+   variant with the lowest one-step RMS there among those better than zero force at every
+   marker (else the lowest; within 1 %, the fewest bonds) is decided and solved again on every
+   fitted frame. Where marker noise dominates the one-step scores
+   (:func:`~.data.smoothing.noise_of`, said before step 1), this step sees the fitted frames
+   smoothed (:func:`smoothed`). Where the scaffold has gravity
    or ground contacts, they are added to it in ``OUT/ground.toml``, its linear parameters
    solved again with the contacts held (the start of the ground fit). Backward elimination
    solves every remaining structure at each step (about ``n^2 / 2`` exact least squares for
@@ -29,8 +32,10 @@ The steps, each one's output in the output folder ``OUT``:
    fitted frames is lower than the structure's (its contacts and gravity earn their
    parameters) or ``--up`` / ``--gravity`` insists on gravity, else the structure's fit is
    (:func:`~.structure_choice.criterion`).
-   ``auto.json`` names the kept run (``steps.fit.run``). For parameters unbiased by marker
-   noise, refit the kept model with ``fit --cost shooting``;
+   Where marker noise dominates, the kept model is refined by multiple shooting
+   (``OUT/run-shot/``, :func:`_shoot`), up to :data:`MAX_SHOT` parameters.
+   ``auto.json`` names the kept run (``steps.fit.run``). Elsewhere, for parameters unbiased by
+   marker noise, refit the kept model with ``fit --cost shooting``;
 4. **evaluate** (:func:`~activebonds.report.evaluate.evaluate`) the kept model on the
    held-out tail (the last :data:`HELD_OUT` of the frames, never seen by steps 1-3) and on
    the fitted frames, one step and :data:`AHEAD` frames ahead, beside zero force:
@@ -61,8 +66,9 @@ AHEAD = 10  # frames ahead of the multi-step verdict
 POPULATION = 40  # the ES's, small: it starts at the structure's exact optimum
 GENERATIONS = 200
 CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most these)
-# where marker noise dominates the one-step scores (:class:`~.data.smoothing.Noise`), the fit
-# refines by multiple shooting, whose optimum noise does not bias, up to this many parameters
+# where marker noise dominates the one-step scores (:class:`~.data.smoothing.Noise`), the kept
+# model is refined by multiple shooting, whose optimum noise does not bias, up to this many
+# parameters (a stage of the 5-mass, 24-parameter MuJoCo recording: 16-20 s)
 MAX_SHOT = 100
 SHOOTING = {"cost": "shooting", "horizon": (10,), "integrator": "verlet", "substeps": 5}
 MIN_FRAMES = 10  # frames of the fitted window and of the held-out tail, at least

@@ -393,7 +393,7 @@ def scaffold(
         bond_blocks += _contacts(x, mask, names, axis, sign, total, dt, notes)
         contacts = len(bond_blocks)
     lines.append(
-        f"total_mass = {_f(total)}  # kg: {mass_note}, split equally over the {p} particles"
+        f"total_mass = {total!r}  # kg: {mass_note}, split equally over the {p} particles"
     )
     for i, n in enumerate(names):
         lines += [
