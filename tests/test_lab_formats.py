@@ -413,3 +413,32 @@ def test_mat_reading_raises_nothing_but_input_errors(tmp_path):
                     assert "\n" not in str(exc) and p.name in str(exc)
                     outcomes["error"] += 1
     assert outcomes["error"] >= 20, outcomes
+
+
+def test_a_body_in_metres_without_a_units_line_is_doubted_in_one_line(tmp_path, capsys):
+    from activebonds.data._common import UnitsWarning
+
+    rows = [f"{i},{i / 100},{0.1 + 0.01 * i},0.2,1.0,0.5,0.3,1.2" for i in range(20)]
+    body = "Frame#,Time,AX,AY,AZ,BX,BY,BZ\n" + "\n".join(rows) + "\n"
+    doubted = tmp_path / "metres.csv"
+    doubted.write_text(body)
+    with pytest.warns(UnitsWarning) as record:
+        traj = read_trajectory(doubted)
+    assert len(record) == 1
+    message = str(record[0].message)
+    assert message.startswith(f"{doubted}: ") and "'# units: m'" in message
+    assert "0.4 mm" in message  # A moves 0.19 units, B sits 0.4 from A: read as millimetres
+    assert traj.source_units == "mm"  # still read as the format says
+    declared = tmp_path / "declared.csv"
+    declared.write_text("# units: mm\n" + body)  # said so: no doubt
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_trajectory(declared)
+        metres = tmp_path / "m.csv"
+        metres.write_text("# units: m\n" + body)
+        assert np.nanmax(read_trajectory(metres).positions) == pytest.approx(1.2)
+    # the command line prints it as one warning line and goes on
+    proc = cli("info", doubted)
+    assert proc.returncode == 0
+    warned = [line for line in proc.stderr.splitlines() if line.startswith("warning: ")]
+    assert len(warned) == 1 and "'# units: m'" in warned[0]

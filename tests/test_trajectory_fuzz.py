@@ -40,6 +40,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
+from activebonds.data._common import FileWarning
 from activebonds.data.readers import TruncatedRowWarning
 from activebonds.errors import InputError
 
@@ -253,7 +254,7 @@ def run_case(path: Path, fmt: str, kwargs: dict) -> tuple[str, list[str]]:
     """Read one file in-process; return (outcome, problems)."""
     try:
         with warnings.catch_warnings(record=True) as caught:  # other warnings stay errors
-            warnings.simplefilter("always", TruncatedRowWarning)
+            warnings.simplefilter("always", FileWarning)  # one-line doubts about the file
             t = read_trajectory(path, **kwargs)
     except InputError as exc:
         return "error", error_problems(str(exc), path)
@@ -265,6 +266,9 @@ def run_case(path: Path, fmt: str, kwargs: dict) -> tuple[str, list[str]]:
         problems.append(f"{len(dropped)} truncation warnings for one file")
     for w in dropped:  # an incomplete last row dropped: one line naming the file
         problems += error_problems(str(w.message), path)
+    for w in caught:  # any other doubt (units): one line naming the file too
+        if issubclass(w.category, FileWarning) and w not in dropped:
+            problems += error_problems(str(w.message), path)
     if fmt in ("csv", "trc") and not problems:
         problems += text_row_problems(t, path.read_bytes(), fmt, len(dropped))
     return "ok", problems

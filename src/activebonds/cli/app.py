@@ -68,11 +68,11 @@ _warned: set[str] = set()
 
 def show_warning_line(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` of the command line: a reader's warning about the user's
-    file (a truncated last row) prints as one line on stderr, ``warning: FILE: line N:
+    file (a truncated last row, units in doubt) prints as one line on stderr, ``warning: FILE: line N:
     ...``, once per message; any other warning prints as Python prints it."""
-    from ..data.readers import TruncatedRowWarning
+    from ..data._common import FileWarning
 
-    if not issubclass(category, TruncatedRowWarning):
+    if not issubclass(category, FileWarning):
         _python_showwarning(message, category, filename, lineno, file, line)
         return
     text = " ".join(str(message).split())

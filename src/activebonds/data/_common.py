@@ -220,18 +220,56 @@ def ends_with_line_break(text: str) -> bool:
     return "\n" in text[len(text.rstrip()) :]
 
 
-class TruncatedRowWarning(UserWarning):
+class FileWarning(UserWarning):
+    """A doubt about a trajectory file that does not stop the reading: one line, ``FILE:
+    [line N: ]what``, like an :class:`~activebonds.errors.InputError` (the command line prints
+    it as ``warning: ...``)."""
+
+    def __init__(self, source: str | Path, message: str, line: int | None = None):
+        self.source = str(source)
+        self.line = line
+        where = f"line {line}" if line is not None else None
+        super().__init__(InputError(source, message, where=where).line())
+
+
+class TruncatedRowWarning(FileWarning):
     """The last data row of a text trajectory file was incomplete and has been dropped.
 
-    The message is one line, ``FILE: line N: what was wrong``, like an
-    :class:`~activebonds.errors.InputError`; ``source`` and ``line`` hold the file and the
-    line number.  ``strict=True`` turns the same finding into an InputError.
+    ``source`` and ``line`` hold the file and the line number. ``strict=True`` turns the same
+    finding into an InputError.
     """
 
     def __init__(self, source: str | Path, line: int, message: str):
-        self.source = str(source)
-        self.line = line
-        super().__init__(InputError(source, message, where=f"line {line}").line())
+        super().__init__(source, message, line)
+
+
+class UnitsWarning(FileWarning):
+    """A file without a units line, read as millimetres, whose markers span so little that
+    it is more likely in metres (or centimetres)."""
+
+
+#: A recording read as millimetres by default that spans less than this (m) is doubted.
+SMALL_SPAN = 0.01
+
+
+def warn_small_span(source: str | Path, positions: np.ndarray) -> None:
+    """The :class:`UnitsWarning` of a file read as millimetres without a units line whose
+    markers span less than :data:`SMALL_SPAN` on every axis (no motion-capture volume is
+    that small; a body in metres read as millimetres spans one or two)."""
+    x = np.asarray(positions, np.float64)
+    if not np.isfinite(x).any():
+        return
+    span = float(np.max(np.nanmax(x, axis=(0, 1)) - np.nanmin(x, axis=(0, 1))))
+    if span < SMALL_SPAN:
+        warnings.warn(
+            UnitsWarning(
+                source,
+                f"no units line, so read as millimetres, and the markers span only "
+                f"{span * 1000:.3g} mm: if the file is in metres, add the line '# units: m' "
+                "(or cm) above the header",
+            ),
+            stacklevel=4,
+        )
 
 
 #: A field that may be the beginning of a number cut short ("12.", "1e", "-", "na").

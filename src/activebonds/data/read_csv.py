@@ -14,7 +14,9 @@ Layout (comma separated, LF or CRLF, optional UTF-8 BOM, fields may be quoted)::
   letter may follow a separator (``Head X``, ``Head_x``, ``Head.X``) and is case-blind.
   Every marker must have the same axes, in X, Y[, Z] order.
 * Units: the ``units`` argument of :func:`read_trajectory` if given, else a leading
-  ``# units: <mm|cm|m>`` comment, else **millimetres** (the motion-capture default).
+  ``# units: <mm|cm|m>`` comment, else **millimetres** (the motion-capture default), with a
+  :class:`~activebonds.data._common.UnitsWarning` where the markers then span less than a
+  centimetre (a body in metres read as millimetres).
 * Rate: the ``rate`` argument if given, else a ``# rate: <Hz>`` comment, else estimated
   from the time column (snapped to its rounding, so a 60 Hz column written with 3 decimals
   gives exactly 60).  Declared rates that disagree with the time column by more than 1 %
@@ -45,6 +47,7 @@ from activebonds.data._common import (
     read_text,
     resolve_rate,
     warn_incomplete_row,
+    warn_small_span,
 )
 from activebonds.data._common import (
     ends_with_line_break as _ends_line,
@@ -188,4 +191,6 @@ def read_csv(
     )
     if what is not None:
         warn_incomplete_row(path, last_line, what, len(rows))
+    if units is None and "units" not in meta:
+        warn_small_span(path, positions)
     return trajectory
