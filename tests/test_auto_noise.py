@@ -57,6 +57,13 @@ def test_auto_finds_the_structure_masses_and_parameters_under_noise(recording, t
     state = json.loads((tmp_path / "out" / "auto.json").read_text())
     assert state["noise"]["sigma"] == pytest.approx(0.5, rel=0.05) and state["noise"]["window"]
     assert state["steps"]["fit"]["run"] == "run-shot"
+    refined = json.loads((tmp_path / "out" / "run-shot" / "refine.json").read_text())
+    (stage,) = refined["stages"]
+    assert stage["cost"] == "shooting" and stage["accepted"]
+    assert 0 <= stage["warm_steps"] <= stage["steps"]
+    said_stage = next(line for line in said if "refinement 1/1 (shooting" in line)
+    assert f"in {stage['steps']} steps" in said_stage
+    assert ("of them its warm start" in said_stage) == (stage["warm_steps"] > 0)
     model = load_model(tmp_path / "out" / "run-shot" / "best_model.toml")
     names = list(truth.markers)
     masses = [_value(p.mass) for p in model.spec.particle]

@@ -10,7 +10,7 @@ The steps, each one's output in the output folder ``OUT``:
    alone or none; the candidates the BIC keeps or every one) are fitted by exact least squares
    on the first 80 % of the fitted frames and scored on the rest, the validation tail; the
    variant with the lowest one-step RMS there among those better than zero force at every
-   marker (else the lowest; within 1 %, the fewest bonds) is decided and solved again on every
+   marker (else the lowest; within 0.1 %, the fewest bonds) is decided and solved again on every
    fitted frame. Where marker noise dominates the one-step scores
    (:func:`~.data.smoothing.noise_of`, said before step 1), this step sees the fitted frames
    smoothed (:func:`smoothed`). Where the scaffold has gravity

@@ -77,6 +77,7 @@ class Stage:
     genome: list[float] = field(default_factory=list)  # the result (the start if rejected)
     # why shooting was not kept, when this one-step stage was refined in its place, else ""
     instead_of_shooting: str = ""
+    warm_steps: int = 0  # of ``steps``, the shooting's warm start's on the restart cost
 
     def record(self) -> dict:
         return asdict(self)
@@ -443,6 +444,7 @@ class Refinement:
             warm.steps + steps,
             message,
         )
+        stage.warm_steps = int(warm.steps)
         if stopped is not None:  # what it reached, its states kept for the resumed stage
             if stage.accepted:
                 self.states = trajectory(to_genome(y[0]), (y[1], y[2]))

@@ -45,7 +45,11 @@ from ..model import Model, build
 from ..model.schema import ModelSpec
 
 TRAIN = 0.8  # the share of the fitted frames each variant is fitted on; the rest is the tail
-TIE = 0.01  # variants within this share of the lowest tail RMS are tied: the fewest bonds win
+# variants within this share of the lowest tail RMS are tied: the fewest bonds win. At 1 % the
+# horses' held-out scores got worse (trot fitted on 0-479: one step 4.666 -> 4.746 mm; walk
+# fitted on 0-299: 3.089 -> 3.100 mm, ten ahead 79.88 -> 81.89 mm); at 0.1 % they keep their
+# choices, and MuJoCo's noisy tendons (tests/test_auto_noise.py) lose their spurious bonds
+TIE = 0.001
 MIN_TAIL = 10  # frames: a shorter tail chooses nothing (the default variant is kept)
 MASSES = ("scaffold", "acceleration", "momentum")
 ANCHORS = ("springs", "dampers", "none")
@@ -104,7 +108,7 @@ class Choice:
     def record(self) -> dict:
         return {
             "rule": "lowest one-step RMS on the validation tail among the variants better than "
-            f"zero force at every marker there (else among all); within {TIE:.0%} of it, the "
+            f"zero force at every marker there (else among all); within {TIE:.1%} of it, the "
             "fewest bonds",
             "train_frames": list(self.train),
             "tail_frames": list(self.tail),

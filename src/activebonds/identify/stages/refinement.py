@@ -124,8 +124,13 @@ class RefinementStage:
             )
             out.append(
                 f"refinement {i}/{len(stages)} ({st['cost']}, horizon {st['horizon']}): "
-                f"{st['start_rms_mm']:.4g} -> {st['end_rms_mm']:.4g} mm in {st['steps']} steps, "
-                f"{st['seconds']:.3g} s{joined}; {st['message']}"
+                f"{st['start_rms_mm']:.4g} -> {st['end_rms_mm']:.4g} mm in {st['steps']} steps"
+                + (
+                    f" ({st['warm_steps']} of them its warm start on the one-step cost)"
+                    if st.get("warm_steps")
+                    else ""
+                )
+                + f", {st['seconds']:.3g} s{joined}; {st['message']}"
                 + (
                     "; raise the limit with fit --max-steps"
                     if "step limit" in st["message"]
