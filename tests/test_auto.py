@@ -130,3 +130,39 @@ def test_a_folder_of_something_else_is_refused(triangle, tmp_path):
     proc = cli_in_process("auto", triangle, "--out", out, "--no-gravity", "--overwrite")
     assert proc.returncode == 2 and "not a folder of activebonds auto" in proc.stderr
     assert [p.name for p in out.iterdir()] == ["mine.txt"]
+
+
+@pytest.mark.parametrize("shot_mm, kept_name", [(40.0, "run-shot"), (60.0, "run")])
+def test_a_shot_model_is_kept_only_where_it_predicts_the_fitted_frames_better(
+    triangle, tmp_path, monkeypatch, shot_mm, kept_name
+):
+    """``_shoot`` compares the two runs' 10-frames-ahead RMS on their fitted frames (their
+    baselines' records) and keeps the shot model only where it is lower."""
+    from activebonds.identify.rundir import RunDir
+
+    folder = pipeline.Folder(tmp_path)
+
+    def write_run(path, ahead_mm):
+        path.mkdir()
+        RunDir(path).best_model_path.write_text(dataset("triangle.toml").path.read_text())
+        judged = [{"horizon": 1, "model_mm": 1.0}, {"horizon": 10, "model_mm": ahead_mm}]
+        (path / "baselines.json").write_text(json.dumps({"judged": judged}))
+
+    write_run(folder.run, 50.0)
+    shot = []
+    monkeypatch.setattr(
+        pipeline, "_fit_into", lambda run, *a: shot.append(run) or write_run(run, shot_mm)
+    )
+    said = []
+    kept, note = pipeline._shoot(
+        folder,
+        folder.run,
+        triangle,
+        pipeline.fit_settings(pipeline.Options(), pipeline.windows(300, (0, None), 0.2)),
+        said.append,
+        None,
+    )
+    assert shot == [folder.run_shot] and kept.name == kept_name
+    assert f"{shot_mm:.4g} vs 50 mm" in note
+    if kept_name == "run":
+        assert any("no better than run's" in line for line in said)

@@ -70,7 +70,15 @@ CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most t
 # model is refined by multiple shooting, whose optimum noise does not bias, up to this many
 # parameters (a stage of the 5-mass, 24-parameter MuJoCo recording: 16-20 s)
 MAX_SHOT = 100
-SHOOTING = {"cost": "shooting", "horizon": (10,), "integrator": "verlet", "substeps": 5}
+SHOOTING = {
+    "cost": "shooting",
+    "horizon": (10,),
+    "integrator": "verlet",
+    "substeps": 5,
+    # a model that explains the motion converges in tens of steps (MuJoCo's tendons: 20-48);
+    # one that does not crawls, and a crawl's end is no better an answer
+    "max_steps": 100,
+}
 MIN_FRAMES = 10  # frames of the fitted window and of the held-out tail, at least
 STEPS = ("scaffold", "structure", "fit", "evaluate", "report")
 STATE = "auto.json"
@@ -545,8 +553,11 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
 
 def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> tuple[Path, str]:
     """Where marker noise dominates: the kept run's model refined by multiple shooting
-    (:data:`SHOOTING`, OUT/run-shot), whose optimum the noise does not bias; kept in its
-    place unless it has more than :data:`MAX_SHOT` parameters. (kept run, note)."""
+    (:data:`SHOOTING`, OUT/run-shot), whose optimum the noise does not bias, unless it has
+    more than :data:`MAX_SHOT` parameters; the shot model kept in its place where it predicts
+    the fitted frames the shooting's horizon ahead better (a family that cannot explain the
+    motion, such as springs without the gravity and ground they stand on, shoots worse).
+    (kept run, note)."""
     from .identify.rundir import RunDir
     from .model import load_model
 
@@ -566,7 +577,28 @@ def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> t
     )
     shooting = settings.model_copy(update={**SHOOTING, "population": 4, "generations": 1})
     _fit_into(folder.run_shot, start, recording_path, shooting, say, fit_progress)
-    return folder.run_shot, f"; refined by multiple shooting: {folder.run_shot}"
+    before, after = _ahead_mm(kept), _ahead_mm(folder.run_shot)
+    h = SHOOTING["horizon"][0]
+    if not after < before:  # shooting fits several frames ahead: judged there, fitted frames
+        say(
+            f"      the shot model predicts the fitted frames {h} ahead no better than "
+            f"{kept.name}'s ({after:.4g} vs {before:.4g} mm): the model family does not "
+            f"explain this motion well enough for shooting to help; {kept.name} kept"
+        )
+        return kept, f"; shot, not kept ({h} ahead {after:.4g} vs {before:.4g} mm)"
+    return folder.run_shot, (
+        f"; refined by multiple shooting: {folder.run_shot} ({h} frames ahead on the fitted "
+        f"frames {after:.4g} vs {before:.4g} mm)"
+    )
+
+
+def _ahead_mm(run: Path) -> float:
+    """A run's RMS (mm) :data:`SHOOTING`'s horizon frames ahead on its fitted frames (its
+    baselines' ``judged`` comparisons; inf where it has none)."""
+    record = json.loads((run / "baselines.json").read_text(encoding="utf-8"))
+    h = SHOOTING["horizon"][0]
+    found = [c["model_mm"] for c in record.get("judged", []) if c.get("horizon") == h]
+    return float(found[0]) if found and math.isfinite(found[0]) else math.inf
 
 
 def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress) -> float:
