@@ -289,3 +289,22 @@ def test_a_model_whose_predictions_cannot_be_computed_is_not_said_to_lose():
         "its 1-frame predictions cannot be computed at these parameters (a start velocity or a "
         "prediction diverged: more --substeps may hold them)"
     )
+
+
+def test_a_shooting_line_says_the_warm_start_and_why_the_markers_rms_rose():
+    from activebonds.identify.stages.refinement import STAGE
+
+    stage = {
+        "cost": "shooting", "horizon": 10, "steps": 150, "warm_steps": 50, "seconds": 12.0,
+        "start_rms_mm": 21.36, "end_rms_mm": 56.7, "continuity_mm": 0.19,
+        "start_objective": 0.5, "end_objective": 0.02, "message": "converged",
+    }  # fmt: skip
+    (line,) = STAGE.lines({"stages": [stage]})
+    assert "21.36 -> 56.7 mm in 150 steps (50 of them its warm start" in line
+    assert "fell from 0.5 to 0.02 m^2" in line
+    fell = {**stage, "end_rms_mm": 1.0, "warm_steps": 0}  # the markers' RMS fell: not said
+    (line,) = STAGE.lines({"stages": [fell]})
+    assert "in 150 steps, 12 s" in line and "m^2" not in line
+    old = {k: v for k, v in stage.items() if "objective" not in k and k != "warm_steps"}
+    (line,) = STAGE.lines({"stages": [old]})  # a record written before: as it was
+    assert "in 150 steps, 12 s, windows join within 0.19 mm; converged" in line

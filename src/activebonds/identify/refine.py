@@ -78,6 +78,10 @@ class Stage:
     # why shooting was not kept, when this one-step stage was refined in its place, else ""
     instead_of_shooting: str = ""
     warm_steps: int = 0  # of ``steps``, the shooting's warm start's on the restart cost
+    # the stage's whole objective (m^2: a shooting stage's continuity defects counted), at its
+    # start and end (the start value if rejected); None in records written before
+    start_objective: float | None = None
+    end_objective: float | None = None
 
     def record(self) -> dict:
         return asdict(self)
@@ -546,6 +550,8 @@ class Refinement:
             steps=steps,
             start_rms_mm=rms[0],
             end_rms_mm=rms[1] if accepted else rms[0],
+            start_objective=float(start),
+            end_objective=float(end) if accepted else float(start),
             continuity_mm=None,
             seconds=0.0,
             genome=[float(g) for g in (result if accepted else start_genome)],

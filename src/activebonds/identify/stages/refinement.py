@@ -130,7 +130,7 @@ class RefinementStage:
                     if st.get("warm_steps")
                     else ""
                 )
-                + f", {st['seconds']:.3g} s{joined}; {st['message']}"
+                + f", {st['seconds']:.3g} s{joined}{_objective(st)}; {st['message']}"
                 + (
                     "; raise the limit with fit --max-steps"
                     if "step limit" in st["message"]
@@ -145,6 +145,20 @@ class RefinementStage:
     def columns(self, record: dict) -> dict:
         stages = record.get("stages", [])
         return {"refinement_steps": sum(int(s["steps"]) for s in stages)} if stages else {}
+
+
+def _objective(st: dict) -> str:
+    """Where a shooting stage's position RMS rose while its objective fell (its windows gave
+    up fitting the markers to join): both, said."""
+    a, b = st.get("start_objective"), st.get("end_objective")
+    if st.get("cost") != "shooting" or a is None or b is None:
+        return ""
+    if not st["end_rms_mm"] > st["start_rms_mm"]:
+        return ""
+    return (
+        f" (the markers' RMS rose as the windows were made to join: the objective, markers "
+        f"and joins together, fell from {a:.4g} to {b:.4g} m^2)"
+    )
 
 
 def table(record: dict) -> Table:
