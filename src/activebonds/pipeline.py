@@ -68,7 +68,7 @@ GENERATIONS = 200
 CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most these)
 # where marker noise dominates the one-step scores (:class:`~.data.smoothing.Noise`), the kept
 # model is refined by multiple shooting, whose optimum noise does not bias, up to this many
-# parameters (a stage of the 5-mass, 24-parameter MuJoCo recording: 16-20 s)
+# parameters (the stage of the 5-mass, 24-parameter MuJoCo recording: 5-16 s)
 MAX_SHOT = 100
 SHOOTING = {
     "cost": "shooting",
