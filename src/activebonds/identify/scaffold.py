@@ -392,9 +392,7 @@ def scaffold(
         lines.append(f"gravity = {_vec(g)}  # m/s^2: {notes[-1]}")
         bond_blocks += _contacts(x, mask, names, axis, sign, total, dt, notes)
         contacts = len(bond_blocks)
-    lines.append(
-        f"total_mass = {total!r}  # kg: {mass_note}, split equally over the {p} particles"
-    )
+    lines.append(f"total_mass = {total!r}  # kg: {mass_note}, split equally over the {p} particles")
     for i, n in enumerate(names):
         lines += [
             "",

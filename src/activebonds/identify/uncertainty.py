@@ -308,7 +308,7 @@ def warnings(
             out.append(head + tried + then)
         else:
             out.append(head + "refit with --cost shooting for intervals that hold")
-    if int(substeps) == 1 and hasattr(checked, "warning"):
+    if hasattr(checked, "warning"):
         if checked.warning():
             out.append(checked.warning())
     elif int(substeps) == 1:

@@ -38,7 +38,7 @@ class UncertaintyStage:
             return Outcome({"not_computed": str(err)}, files={"csv": None})
         record = report.record()
         checked = None
-        if fit.settings.substeps == 1:  # is one step per frame enough?
+        if integrator_check.applies(fit.settings):  # are the integrator's steps enough?
             checked = integrator_check.check(
                 fit.ident, fit.settings, fit.genome, horizon, report.estimates, report.cost, states
             )
