@@ -25,11 +25,11 @@ mujoco_truth = pytest.importorskip("mujoco_truth")  # needs mujoco
 NOISE = 5e-4  # m
 
 
-def noisy_tendons():
-    """(MuJoCo's truth, the noisy recording as a Trajectory)."""
+def noisy_tendons(noise: float = NOISE):
+    """(MuJoCo's truth, the recording with ``noise`` (m) as a Trajectory)."""
     truth = mujoco_truth.tendon_system(5, rate=100.0, seconds=5.0, seed=0, neighbours=3)
     clean = truth.trajectory()
-    noisy = clean.positions + np.random.default_rng(7).normal(0.0, NOISE, clean.positions.shape)
+    noisy = clean.positions + np.random.default_rng(7).normal(0.0, noise, clean.positions.shape)
     return truth, Trajectory(
         positions=noisy, mask=clean.mask, markers=clean.markers, rate=clean.rate
     )
