@@ -253,12 +253,13 @@ SMALL_SPAN = 0.01
 
 
 def warn_small_span(source: str | Path, positions: np.ndarray) -> None:
-    """The :class:`UnitsWarning` of a file read as millimetres without a units line whose
-    markers span less than :data:`SMALL_SPAN` on every axis (no motion-capture volume is
-    that small; a body in metres read as millimetres spans one or two)."""
+    """The :class:`UnitsWarning` of a file of two markers or more, read as millimetres without
+    a units line, whose markers span less than :data:`SMALL_SPAN` on every axis (no
+    motion-capture marker set is that small; a body in metres read as millimetres spans one
+    or two)."""
     x = np.asarray(positions, np.float64)
-    if not np.isfinite(x).any():
-        return
+    if x.shape[1] < 2 or not np.isfinite(x).any():
+        return  # one marker's path says nothing of a body's size
     span = float(np.max(np.nanmax(x, axis=(0, 1)) - np.nanmin(x, axis=(0, 1))))
     if span < SMALL_SPAN:
         warnings.warn(
