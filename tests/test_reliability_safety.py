@@ -165,10 +165,11 @@ def test_npz_trajectory_with_an_object_array_is_refused(tmp_path, tmp_path_facto
 
 
 def _bad_data(tmp_path: Path) -> dict[str, Path]:
-    ws_csv = "Frame#,Time,AX,AY,AZ,BX,BY,BZ,CX,CY,CZ\n"
+    # in metres, said so: each file is refused for its own fault, not doubted for its units
+    ws_csv = "# units: m\nFrame#,Time,AX,AY,AZ,BX,BY,BZ,CX,CY,CZ\n"
     files = {
         "two_frames.csv": (ws_csv + "1,0.0,0,0,0,1,0,0,0,1,0\n2,0.1,0,0,0,1,0,0,0,1,0\n").encode(),
-        "flat_2d.csv": b"Frame#,Time,AX,AY,BX,BY,CX,CY\n"
+        "flat_2d.csv": b"# units: m\nFrame#,Time,AX,AY,BX,BY,CX,CY\n"
         + b"".join(f"{i + 1},{i / 10:.1f},0,0,1,0,0,1\n".encode() for i in range(6)),
         "all_gaps.csv": (
             ws_csv + "".join(f"{i + 1},{i / 10:.1f},,,,,,,,,\n" for i in range(6))
