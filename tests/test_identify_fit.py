@@ -28,7 +28,14 @@ from activebonds.identify import es, evolve, fit
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
-from helpers import NEURAL_TRIANGLE, TRIANGLE, cli, cli_popen
+from helpers import (
+    NEURAL_TRIANGLE,
+    TRIANGLE,
+    cli,
+    cli_in_process,
+    cli_popen,
+    each_case_both_ways,
+)
 
 # --------------------------------------------------------------------------------------------
 # Recovery (Python API)
@@ -207,15 +214,22 @@ def _cli_runs(base, model, data, seeds: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def cli_ref(tmp_path_factory):
-    """A model copy, a recorded (simulated) CSV, and the reference run in a fresh process."""
+def cli_inputs(tmp_path_factory):
+    """A model copy and a recorded (simulated) CSV."""
     base = tmp_path_factory.mktemp("cli")
     model = base / "triangle.toml"
     shutil.copyfile(TRIANGLE, model)
     data = base / "triangle.csv"
     write_trajectory(simulate(load_model(TRIANGLE), n_frames=60, rate=60.0), data)
-    _cli_runs(base, model, data, {"ref": SEED})
-    return {"base": base, "model": model, "data": data, "ref": base / "ref"}
+    return {"base": base, "model": model, "data": data}
+
+
+@pytest.fixture(scope="module")
+def cli_ref(cli_inputs):
+    """The inputs and the reference run in a fresh process."""
+    base = cli_inputs["base"]
+    _cli_runs(base, cli_inputs["model"], cli_inputs["data"], {"ref": SEED})
+    return {**cli_inputs, "ref": base / "ref"}
 
 
 @pytest.fixture(scope="module")
@@ -357,17 +371,19 @@ def test_run_directory_contents(cli_ref, tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("option", "named"),
-    [
-        (("--population", "0"), "--population"),
-        (("--frames", "5:2"), "--frames"),
-        (("--markers", "A,B,Nope"), "Nope"),
-    ],
-    ids=["population-0", "frames-5:2", "unknown-marker"],
+    *each_case_both_ways(
+        "option, named",
+        [
+            (("--population", "0"), "--population"),
+            (("--frames", "5:2"), "--frames"),
+            (("--markers", "A,B,Nope"), "Nope"),
+        ],
+        ids=["population-0", "frames-5:2", "unknown-marker"],
+    )
 )
-def test_fit_refuses_a_bad_option(cli_ref, tmp_path, option, named):
+def test_fit_refuses_a_bad_option(cli_inputs, tmp_path, run, option, named):
     out = tmp_path / "run"
-    proc = cli("fit", cli_ref["model"], cli_ref["data"], "--out", out, *option)
+    proc = run("fit", cli_inputs["model"], cli_inputs["data"], "--out", out, *option)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and named in lines[0], proc.stderr
@@ -375,11 +391,16 @@ def test_fit_refuses_a_bad_option(cli_ref, tmp_path, option, named):
     assert [p.name for p in tmp_path.iterdir()] == []  # no half-written run either
 
 
-def test_fit_refuses_an_existing_run_without_overwrite(cli_ref, tmp_path):
+# a fresh process's stderr is checked by test_fit_refuses_a_bad_option's first case; this one
+# in a fresh process is in `pytest -m slow`
+@pytest.mark.parametrize(
+    "run", [cli_in_process, pytest.param(cli, marks=pytest.mark.slow)], ids=["in", "fresh"]
+)
+def test_fit_refuses_an_existing_run_without_overwrite(cli_inputs, tmp_path, run):
     out = tmp_path / "run"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    proc = cli("fit", cli_ref["model"], cli_ref["data"], "--out", out, "--generations", "5")
+    proc = run("fit", cli_inputs["model"], cli_inputs["data"], "--out", out, "--generations", "5")
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "--overwrite" in lines[0], proc.stderr
