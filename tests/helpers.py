@@ -63,6 +63,16 @@ def each_case_both_ways(argnames: str, cases, ids=None) -> tuple[str, list]:
     return f"run,{argnames}", params
 
 
+def both_ways_fresh_in_slow() -> tuple[str, list]:
+    """``pytest.mark.parametrize`` arguments for a ``run`` runner: :func:`cli_in_process` in
+    the default run, :func:`cli` (a fresh process) in ``pytest -m slow``; for a refusal whose
+    command a fresh process of the default run already checks (:func:`each_case_both_ways`)."""
+    import pytest
+
+    fresh = pytest.param(cli, id="fresh-process", marks=pytest.mark.slow)
+    return "run", [pytest.param(cli_in_process, id="in-process"), fresh]
+
+
 def cli_popen(*args, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
     """Start ``activebonds ARGS`` in the background (output to ``log`` or discarded)."""
     env = dict(os.environ, COLUMNS="200", NO_COLOR="1")
