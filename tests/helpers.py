@@ -65,8 +65,9 @@ def each_case_both_ways(argnames: str, cases, ids=None) -> tuple[str, list]:
 
 def both_ways_fresh_in_slow() -> tuple[str, list]:
     """``pytest.mark.parametrize`` arguments for a ``run`` runner: :func:`cli_in_process` in
-    the default run, :func:`cli` (a fresh process) in ``pytest -m slow``; for a refusal whose
-    command a fresh process of the default run already checks (:func:`each_case_both_ways`)."""
+    the default run, :func:`cli` (a fresh process, 3 s of imports) in ``pytest -m slow``; for a
+    check of what a command does, where a fresh process's own output (nothing else on stderr)
+    is checked in the default run by other tests (:func:`each_case_both_ways`)."""
     import pytest
 
     fresh = pytest.param(cli, id="fresh-process", marks=pytest.mark.slow)

@@ -274,7 +274,11 @@ def test_baselines_command_prints_the_references(horse):
     )
     assert got["momentum_floor_mm"] == pytest.approx(4.1066, abs=1e-3)
     assert got["least_squares_rms_mm"] == pytest.approx(least_squares(model, windows).rms_mm)
-    bad = cli("baselines", HORSE_LIMB, "missing.csv")
+
+
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_baselines_command_refuses_a_missing_recording_in_one_line(run):
+    bad = run("baselines", HORSE_LIMB, "missing.csv")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
 
 

@@ -31,6 +31,7 @@ from activebonds.simulation import simulate
 from helpers import (
     NEURAL_TRIANGLE,
     TRIANGLE,
+    both_ways_fresh_in_slow,
     cli,
     cli_in_process,
     cli_popen,
@@ -325,7 +326,7 @@ def sha256(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def test_run_directory_contents(cli_ref, tmp_path):
+def test_run_directory_contents(cli_ref):
     ref, model, data = cli_ref["ref"], cli_ref["model"], cli_ref["data"]
     meta = json.loads((ref / "run.json").read_text())
     settings = meta["settings"]
@@ -364,8 +365,12 @@ def test_run_directory_contents(cli_ref, tmp_path):
     # the ES's last best, then the refinement's (one-step LM), which can only lower it
     assert status["best_rms_mm"] <= history[-1, 4] * (1 + 1e-12)
 
+
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_the_runs_best_model_simulates_on_the_command_line(cli_ref, tmp_path, run):
     out = tmp_path / "x.csv"
-    sim = cli("simulate", ref / "best_model.toml", "--n-frames", "20", "--rate", "60", "--out", out)
+    best = cli_ref["ref"] / "best_model.toml"
+    sim = run("simulate", best, "--n-frames", "20", "--rate", "60", "--out", out)
     assert sim.returncode == 0, sim.stderr
     assert read_trajectory(out).n_frames == 20
 
