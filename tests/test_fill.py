@@ -147,10 +147,17 @@ def test_apply_fill_writes_the_gaps_and_lists_every_sample():
 # ----------------------------------------------------------------------------- the model
 
 
-def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly():
+@pytest.fixture(scope="module")
+def triangle():
+    """examples/triangle.toml as one object for the true model's fills of this file: the fill
+    keeps its compiled programs per model object, so they are traced once, not per test."""
+    return load_model(TRIANGLE)
+
+
+def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly(triangle):
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     t = _traj(truth.positions, missing=[(1, 40, 70)], markers=model.markers)
     found = model_fill(model, plan_fill(t, model.markers))
@@ -160,10 +167,10 @@ def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly():
     assert np.array_equal(found.values[t.mask], t.positions[t.mask])  # the record kept
 
 
-def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
+def test_model_fill_with_half_millimetre_noise_is_within_the_noise(triangle):
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
     t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
@@ -184,14 +191,14 @@ def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
     assert after < 0.5 * before
 
 
-def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill():
+def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill(triangle):
     """The true triangle, 0.5 mm noise, a 30-frame gap: the PCA fill of three markers is far
     off (over 50 mm), its cross-validated error says so, and as a prior it weighs almost
     nothing against the true model's fit: the fused fill stays within the noise of the truth
     and of the pure fill (measured 0.47 and 0.39 mm off the truth; the prior's weight 0.0065)."""
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
     t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
@@ -342,12 +349,12 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
 
 
 @pytest.fixture(scope="module")
-def gap_of_240():
+def gap_of_240(triangle):
     """240 frames of the triangle, B missing in frames 100:160, and the true model's fill of
     it (the same for every wrong model compared with it: made once)."""
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth(240)
     t = _traj(truth.positions, missing=[(1, 100, 160)], markers=model.markers)
     return truth, t, model_fill(model, plan_fill(t, model.markers))
