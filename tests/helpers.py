@@ -47,6 +47,33 @@ def cli_in_process(*args) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(argv, res.exit_code, res.stdout, res.stderr)
 
 
+def each_case_both_ways(argnames: str, cases, ids=None) -> tuple[str, list]:
+    """``pytest.mark.parametrize`` arguments running each refusal case two ways, the runner
+    (:func:`cli_in_process` or :func:`cli`) first: every case in this process in the default
+    run, and in a fresh process (nothing else on its stderr: no import or shutdown noise) the
+    first case in the default run, the others in ``pytest -m slow`` (3 s of imports each)."""
+    import pytest
+
+    params = []
+    for i, case in enumerate(cases):
+        name = ids[i] if ids else str(i)
+        params.append(pytest.param(cli_in_process, *case, id=f"{name}-in-process"))
+        slow = () if i == 0 else pytest.mark.slow
+        params.append(pytest.param(cli, *case, id=f"{name}-fresh-process", marks=slow))
+    return f"run,{argnames}", params
+
+
+def both_ways_fresh_in_slow() -> tuple[str, list]:
+    """``pytest.mark.parametrize`` arguments for a ``run`` runner: :func:`cli_in_process` in
+    the default run, :func:`cli` (a fresh process, 3 s of imports) in ``pytest -m slow``; for a
+    check of what a command does, where a fresh process's own output (nothing else on stderr)
+    is checked in the default run by other tests (:func:`each_case_both_ways`)."""
+    import pytest
+
+    fresh = pytest.param(cli, id="fresh-process", marks=pytest.mark.slow)
+    return "run", [pytest.param(cli_in_process, id="in-process"), fresh]
+
+
 def cli_popen(*args, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
     """Start ``activebonds ARGS`` in the background (output to ``log`` or discarded)."""
     env = dict(os.environ, COLUMNS="200", NO_COLOR="1")

@@ -1,7 +1,8 @@
 """Ground truth from an independent fine integrator: a hopper (a body and a foot) on the ground.
 
 Written in NumPy from the laws' definitions (DESIGN.md §2), not by calling activebonds'
-physics, so a fit of its samples cannot agree with it by sharing a bug:
+physics, so a fit of its samples cannot agree with it by sharing a bug (:func:`forces`; the
+generator runs the same operations on Python floats, :func:`integrate`, bit for bit):
 
 * a viscoelastic leg between body (b) and foot (f): with ``u = (x_f - x_b) / L``, ``L`` the
   length and ``Ldot = (v_f - v_b) . u``, the tension ``T = k (L - l0) + c Ldot`` pulls them
@@ -28,6 +29,7 @@ in contact, sliding and sticking) within 2.5 s.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -182,18 +184,70 @@ damping = {free("leg.damping")}
 {contact}"""
 
 
+def integrate_numpy(x, v, n_frames: int, per_frame: int, step: float, p: dict = TRUTH):
+    """Semi-implicit Euler with :func:`forces`: ``n_frames`` samples (positions, velocities
+    [n_frames, 2, 3], the first the given state), ``per_frame`` steps apart."""
+    m = np.array([p["body_mass"], p["foot_mass"]])[:, None]
+    x, v = np.array(x, np.float64), np.array(v, np.float64)
+    xs, vs = [x.copy()], [v.copy()]
+    for _ in range(n_frames - 1):
+        for _ in range(per_frame):
+            v = v + step * forces(x, v, p) / m
+            x = x + step * v
+        xs.append(x.copy())
+        vs.append(v.copy())
+    return np.array(xs), np.array(vs)
+
+
+def integrate(x, v, n_frames: int, per_frame: int, step: float, p: dict = TRUTH):
+    """:func:`integrate_numpy` written out on Python floats, the same operations in the same
+    order (so the same numbers to the bit; tests/test_hopper_recovery.py checks it), about 30
+    times faster than NumPy on arrays of two particles."""
+    mb, mf = p["body_mass"], p["foot_mass"]
+    k, l0, c = p["leg.stiffness"], p["leg.rest_length"], p["leg.damping"]
+    h, kg, cg, mu = (
+        p["ground.height"],
+        p["ground.stiffness"],
+        p["ground.damping"],
+        p["ground.friction"],
+    )
+    gb, gf, eps2 = -(mb * G), -(mf * G), EPS**2
+    (bx, by, bz), (fx, fy, fz) = (map(float, row) for row in x)
+    (ubx, uby, ubz), (ufx, ufy, ufz) = (map(float, row) for row in v)
+    sqrt = math.sqrt
+    xs = [[[bx, by, bz], [fx, fy, fz]]]
+    vs = [[[ubx, uby, ubz], [ufx, ufy, ufz]]]
+    for _ in range(n_frames - 1):
+        for _ in range(per_frame):
+            dx, dy, dz = fx - bx, fy - by, fz - bz
+            length = sqrt(dx * dx + dy * dy + dz * dz)
+            ux, uy, uz = dx / length, dy / length, dz / length
+            t = k * (length - l0) + c * ((ufx - ubx) * ux + (ufy - uby) * uy + (ufz - ubz) * uz)
+            fbx, fby, fbz = t * ux, t * uy, gb + t * uz  # leg and gravity
+            ffx, ffy, ffz = -(t * ux), -(t * uy), gf - t * uz
+            depth = h - bz  # the ground, where a particle is below it
+            if depth > 0.0:
+                fn = max(0.0, kg * depth - cg * ubz)
+                drag = mu * fn / sqrt(ubx * ubx + uby * uby + 0.0 + eps2)
+                fbx, fby, fbz = fbx - drag * ubx, fby - drag * uby, fbz + fn
+            depth = h - fz
+            if depth > 0.0:
+                fn = max(0.0, kg * depth - cg * ufz)
+                drag = mu * fn / sqrt(ufx * ufx + ufy * ufy + 0.0 + eps2)
+                ffx, ffy, ffz = ffx - drag * ufx, ffy - drag * ufy, ffz + fn
+            ubx, uby, ubz = ubx + step * fbx / mb, uby + step * fby / mb, ubz + step * fbz / mb
+            ufx, ufy, ufz = ufx + step * ffx / mf, ufy + step * ffy / mf, ufz + step * ffz / mf
+            bx, by, bz = bx + step * ubx, by + step * uby, bz + step * ubz
+            fx, fy, fz = fx + step * ufx, fy + step * ufy, fz + step * ufz
+        xs.append([[bx, by, bz], [fx, fy, fz]])
+        vs.append([[ubx, uby, ubz], [ufx, ufy, ufz]])
+    return np.array(xs), np.array(vs)
+
+
 @lru_cache(maxsize=4)
 def hopper(seconds: float = 2.5, rate: float = 200.0, step: float = 1e-5) -> HopperTruth:
     """Simulate the hopper of :data:`TRUTH` from :data:`X0`, :data:`V0`."""
     per_frame = int(round(1.0 / (rate * step)))
     n_frames = int(round(seconds * rate)) + 1
-    m = np.array([TRUTH["body_mass"], TRUTH["foot_mass"]])[:, None]
-    x, v = X0.copy(), V0.copy()
-    xs, vs = [x.copy()], [v.copy()]
-    for _ in range(n_frames - 1):
-        for _ in range(per_frame):
-            v = v + step * forces(x, v, TRUTH) / m
-            x = x + step * v
-        xs.append(x.copy())
-        vs.append(v.copy())
-    return HopperTruth(np.array(xs), np.array(vs), rate, step)
+    xs, vs = integrate(X0, V0, n_frames, per_frame, step)
+    return HopperTruth(xs, vs, rate, step)

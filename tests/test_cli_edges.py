@@ -17,7 +17,7 @@ from typer.main import get_command
 from activebonds import FitSettings, write_trajectory
 from activebonds.cli.main import app
 from activebonds.data.trajectory import Trajectory
-from helpers import ROOT, TRIANGLE, cli
+from helpers import ROOT, TRIANGLE, both_ways_fresh_in_slow, cli
 
 COMMANDS = dict(get_command(app).commands)
 
@@ -111,14 +111,15 @@ def test_max_steps_bounds_every_refinement_stage(tmp_path):
     assert "fit --max-steps" in proc.stdout
 
 
-def test_init_lsq_names_an_option_not_a_function(tmp_path):
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_init_lsq_names_an_option_not_a_function(tmp_path, run):
     text = TRIANGLE.read_text().replace(
         "mass = 1.5\n", "mass = { value = 1.5, min = 1.0, max = 2.0 }\n", 1
     )
     assert text != TRIANGLE.read_text()
     model = tmp_path / "free_mass.toml"
     model.write_text(text)
-    proc = cli(
+    proc = run(
         *("fit", model, ROOT / "examples" / "triangle.csv", "--init", "lsq"),
         *("--generations", "2", "--population", "8", "--out", tmp_path / "run"),
     )

@@ -14,7 +14,7 @@ from activebonds.data.coverage import count_gaps, coverage, longest, present_win
 from activebonds.data.orientation import G, guess_gravity
 from activebonds.errors import InputError
 from activebonds.identify.cost import count_predictions, make_windows
-from helpers import EXAMPLES, HORSE_TROT, TRIANGLE, cli
+from helpers import EXAMPLES, HORSE_TROT, TRIANGLE, both_ways_fresh_in_slow
 
 HORSE_WALK = HORSE_TROT.with_name("Horse1_M1_walk1_kinematics.csv")
 
@@ -147,11 +147,12 @@ def test_fit_says_what_the_gaps_removed(gappy, tmp_path, monkeypatch):
     assert "gaps removed 0 of 258 predictions (0 %) in frames 32:120" in full.stdout
 
 
-def test_fit_refuses_a_window_with_too_few_predictions(gappy, tmp_path):
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_fit_refuses_a_window_with_too_few_predictions(gappy, tmp_path, run):
     """Frames 28:36 (A missing at 30, 31): 8 of 18 predictions left, 24 coordinates for the
     neural triangle's 27 parameters. One line, exit 2, no run directory, nothing compiled."""
-    run = tmp_path / "run"
-    proc = cli("fit", TRIANGLE, gappy, "--frames", "28:36", "--bonds", "neural", "--out", run)
+    out = tmp_path / "run"
+    proc = run("fit", TRIANGLE, gappy, "--frames", "28:36", "--bonds", "neural", "--out", out)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
@@ -159,7 +160,7 @@ def test_fit_refuses_a_window_with_too_few_predictions(gappy, tmp_path):
     assert line.startswith("error: --frames: gaps removed 10 of 18 predictions")
     assert "24 coordinates for the model's 27 free parameters" in line
     assert "32:120 (88 frames), 11:30 (19 frames), 0:10 (10 frames)" in line
-    assert not run.exists() and list(tmp_path.iterdir()) == []
+    assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
 def test_fit_refuses_a_window_without_predictions(gappy, tmp_path, monkeypatch):

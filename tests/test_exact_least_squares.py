@@ -26,7 +26,7 @@ from activebonds.identify.lsq import equation_error_fit, least_squares, linear_p
 from activebonds.identify.predictions import one_step
 from activebonds.model import as_standard, load_model, loads_model
 from activebonds.simulation import simulate
-from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, ROOT, cli
+from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, ROOT, both_ways_fresh_in_slow, cli
 
 TETRA = ROOT / "tests" / "models" / "tetra.toml"
 
@@ -242,7 +242,8 @@ def test_init_lsq_puts_the_optimum_in_the_first_population(tetra):
     assert linear_problem(model, make_windows(data.positions, data.mask, data.dt, 1)).pairs
 
 
-def test_init_lsq_refuses_a_non_linear_model_in_one_line(tmp_path):
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_init_lsq_refuses_a_non_linear_model_in_one_line(tmp_path, run):
     text = TETRA.read_text().replace("mass = 1.0\n", "mass = { value = 1.0, min = 0.5, max = 2 }\n")
     path = tmp_path / "m.toml"
     path.write_text(text)
@@ -250,7 +251,7 @@ def test_init_lsq_refuses_a_non_linear_model_in_one_line(tmp_path):
     from activebonds.data import write_trajectory
 
     write_trajectory(simulate(load_model(TETRA), 30, 50.0), data)
-    proc = cli("fit", path, data, "--init", "lsq", "--out", tmp_path / "run")
+    proc = run("fit", path, data, "--init", "lsq", "--out", tmp_path / "run")
     assert proc.returncode == 2, proc.stderr
     assert "--init lsq" in proc.stderr and "mass" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
@@ -273,7 +274,11 @@ def test_baselines_command_prints_the_references(horse):
     )
     assert got["momentum_floor_mm"] == pytest.approx(4.1066, abs=1e-3)
     assert got["least_squares_rms_mm"] == pytest.approx(least_squares(model, windows).rms_mm)
-    bad = cli("baselines", HORSE_LIMB, "missing.csv")
+
+
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_baselines_command_refuses_a_missing_recording_in_one_line(run):
+    bad = run("baselines", HORSE_LIMB, "missing.csv")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
 
 

@@ -147,10 +147,17 @@ def test_apply_fill_writes_the_gaps_and_lists_every_sample():
 # ----------------------------------------------------------------------------- the model
 
 
-def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly():
+@pytest.fixture(scope="module")
+def triangle():
+    """examples/triangle.toml as one object for the true model's fills of this file: the fill
+    keeps its compiled programs per model object, so they are traced once, not per test."""
+    return load_model(TRIANGLE)
+
+
+def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly(triangle):
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     t = _traj(truth.positions, missing=[(1, 40, 70)], markers=model.markers)
     found = model_fill(model, plan_fill(t, model.markers))
@@ -160,10 +167,10 @@ def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly():
     assert np.array_equal(found.values[t.mask], t.positions[t.mask])  # the record kept
 
 
-def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
+def test_model_fill_with_half_millimetre_noise_is_within_the_noise(triangle):
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
     t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
@@ -184,14 +191,14 @@ def test_model_fill_with_half_millimetre_noise_is_within_the_noise():
     assert after < 0.5 * before
 
 
-def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill():
+def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill(triangle):
     """The true triangle, 0.5 mm noise, a 30-frame gap: the PCA fill of three markers is far
     off (over 50 mm), its cross-validated error says so, and as a prior it weighs almost
     nothing against the true model's fit: the fused fill stays within the noise of the truth
     and of the pure fill (measured 0.47 and 0.39 mm off the truth; the prior's weight 0.0065)."""
     from activebonds.identify.fill import model_fill
 
-    model = load_model(TRIANGLE)
+    model = triangle
     truth = _truth()
     noise = np.random.default_rng(0).normal(0.0, 5e-4, truth.positions.shape)
     t = _traj(truth.positions + noise, missing=[(1, 40, 70)], markers=model.markers)
@@ -341,8 +348,20 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
     assert rms(found.values) < 0.2 * rms(spline)
 
 
+@pytest.fixture(scope="module")
+def gap_of_240(triangle):
+    """240 frames of the triangle, B missing in frames 100:160, and the true model's fill of
+    it (the same for every wrong model compared with it: made once)."""
+    from activebonds.identify.fill import model_fill
+
+    model = triangle
+    truth = _truth(240)
+    t = _traj(truth.positions, missing=[(1, 100, 160)], markers=model.markers)
+    return truth, t, model_fill(model, plan_fill(t, model.markers))
+
+
 @pytest.mark.parametrize("stiffness", [0.3, 3.0])
-def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffness):
+def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffness, gap_of_240):
     """Every stiffness off by ``stiffness``, a 60-frame gap of a noiseless recording: the fill
     is 11 (x0.3) and 18 mm (x3) off (RMS). The posterior standard error alone said 3.6 and 6.2 mm
     (a third of it): the fit follows the markers present, and the model's error shows as
@@ -351,11 +370,10 @@ def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffnes
     uncertainty is of the error's order: measured 1.04 and 0.98 times it."""
     from activebonds.identify.fill import model_fill
 
+    truth, t, right = gap_of_240
     model = load_model(TRIANGLE)
-    truth = _truth(240)
     genome = np.asarray(model.layout.initial(), np.float64).copy()
     genome[0::3] += np.log(stiffness)
-    t = _traj(truth.positions, missing=[(1, 100, 160)], markers=model.markers)
     found = model_fill(model.with_genome(genome), plan_fill(t, model.markers))
     err = np.linalg.norm(found.values[100:160, 1] - truth.positions[100:160, 1], axis=-1)
     real = float(np.sqrt(np.mean(err**2)))
@@ -367,7 +385,6 @@ def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffnes
     assert "continuity defects around the gaps are correlated (tau up to" in found.note()
     # the true model of the same gap: exact, and its uncertainty too (the noise floor of a
     # noiseless record: the motion's own fourth difference, under a micrometre)
-    right = model_fill(model, plan_fill(t, model.markers))
     assert right.uncertainty[0].max() < 1e-6
     assert right.segments[0].tau < 4.0 and "correlated" not in right.note()
 

@@ -25,7 +25,7 @@ from activebonds.identify.lsq import least_squares
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force
 from activebonds.simulation import simulate
-from helpers import cli
+from helpers import both_ways_fresh_in_slow
 
 # --------------------------------------------------------------------------------------------
 # Moving anchors
@@ -417,11 +417,12 @@ def test_bad_mass_and_gravity_input_is_one_line(text, message):
         loads_model(text, "bad.toml")
 
 
-def test_bad_model_through_the_cli_is_one_line_and_exit_2(tmp_path):
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_bad_model_through_the_cli_is_one_line_and_exit_2(tmp_path, run):
     for n, (text, message) in enumerate(BAD[:1] + BAD[-1:]):
         path = tmp_path / f"bad{n}.toml"
         path.write_text(text)
-        proc = cli("simulate", path, "--n-frames", "3", "--rate", "10", "--out", tmp_path / "o.csv")
+        proc = run("simulate", path, "--n-frames", "3", "--rate", "10", "--out", tmp_path / "o.csv")
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and str(path.name) in lines[0] and message in lines[0], lines

@@ -34,6 +34,24 @@ def test_the_generator_lands_slides_sticks_and_bounces(truth):
     assert (truth.positions[:, 0, 2] > 0.15).sum() > 50  # the body bounces off the ground
 
 
+def test_the_generators_float_loop_is_its_numpy_definition_to_the_bit(truth):
+    """The generator runs on Python floats (hopper_truth.integrate); from the samples before
+    the foot lands (then slides and sticks), the body lands, and both are on the ground, four
+    frames of it are those of the NumPy definition (hopper_truth.forces), to the bit."""
+    contact = truth.in_contact()
+    starts = [np.argmax(contact[:, 1]) - 1, np.argmax(contact[:, 0]) - 1]
+    starts.append(np.argmax(contact[:, 0] & contact[:, 1]) - 1)
+    assert truth.sticking()[starts[0] : starts[0] + 4, 1].any()
+    per_frame = int(round(1.0 / (truth.rate * truth.step)))
+    for f in starts:
+        x, v = truth.positions[f], truth.velocities[f]
+        want = hopper_truth.integrate_numpy(x, v, 4, per_frame, truth.step)
+        got = hopper_truth.integrate(x, v, 4, per_frame, truth.step)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(got[0][1:], truth.positions[f + 1 : f + 4])
+
+
 def test_substeps_integrate_a_sticking_contact_close_to_the_fine_integrator(truth):
     """From the true states, one frame at 20 Verlet substeps lands within 0.1 mm of the fine
     integrator in every frame (sticking included) and within 10 um in the median."""

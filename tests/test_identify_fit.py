@@ -28,7 +28,15 @@ from activebonds.identify import es, evolve, fit
 from activebonds.identify.cost import make_cost, make_windows, rms_mm
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
-from helpers import NEURAL_TRIANGLE, TRIANGLE, cli, cli_popen
+from helpers import (
+    NEURAL_TRIANGLE,
+    TRIANGLE,
+    both_ways_fresh_in_slow,
+    cli,
+    cli_in_process,
+    cli_popen,
+    each_case_both_ways,
+)
 
 # --------------------------------------------------------------------------------------------
 # Recovery (Python API)
@@ -207,15 +215,22 @@ def _cli_runs(base, model, data, seeds: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def cli_ref(tmp_path_factory):
-    """A model copy, a recorded (simulated) CSV, and the reference run in a fresh process."""
+def cli_inputs(tmp_path_factory):
+    """A model copy and a recorded (simulated) CSV."""
     base = tmp_path_factory.mktemp("cli")
     model = base / "triangle.toml"
     shutil.copyfile(TRIANGLE, model)
     data = base / "triangle.csv"
     write_trajectory(simulate(load_model(TRIANGLE), n_frames=60, rate=60.0), data)
-    _cli_runs(base, model, data, {"ref": SEED})
-    return {"base": base, "model": model, "data": data, "ref": base / "ref"}
+    return {"base": base, "model": model, "data": data}
+
+
+@pytest.fixture(scope="module")
+def cli_ref(cli_inputs):
+    """The inputs and the reference run in a fresh process."""
+    base = cli_inputs["base"]
+    _cli_runs(base, cli_inputs["model"], cli_inputs["data"], {"ref": SEED})
+    return {**cli_inputs, "ref": base / "ref"}
 
 
 @pytest.fixture(scope="module")
@@ -311,7 +326,7 @@ def sha256(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def test_run_directory_contents(cli_ref, tmp_path):
+def test_run_directory_contents(cli_ref):
     ref, model, data = cli_ref["ref"], cli_ref["model"], cli_ref["data"]
     meta = json.loads((ref / "run.json").read_text())
     settings = meta["settings"]
@@ -350,24 +365,30 @@ def test_run_directory_contents(cli_ref, tmp_path):
     # the ES's last best, then the refinement's (one-step LM), which can only lower it
     assert status["best_rms_mm"] <= history[-1, 4] * (1 + 1e-12)
 
+
+@pytest.mark.parametrize(*both_ways_fresh_in_slow())
+def test_the_runs_best_model_simulates_on_the_command_line(cli_ref, tmp_path, run):
     out = tmp_path / "x.csv"
-    sim = cli("simulate", ref / "best_model.toml", "--n-frames", "20", "--rate", "60", "--out", out)
+    best = cli_ref["ref"] / "best_model.toml"
+    sim = run("simulate", best, "--n-frames", "20", "--rate", "60", "--out", out)
     assert sim.returncode == 0, sim.stderr
     assert read_trajectory(out).n_frames == 20
 
 
 @pytest.mark.parametrize(
-    ("option", "named"),
-    [
-        (("--population", "0"), "--population"),
-        (("--frames", "5:2"), "--frames"),
-        (("--markers", "A,B,Nope"), "Nope"),
-    ],
-    ids=["population-0", "frames-5:2", "unknown-marker"],
+    *each_case_both_ways(
+        "option, named",
+        [
+            (("--population", "0"), "--population"),
+            (("--frames", "5:2"), "--frames"),
+            (("--markers", "A,B,Nope"), "Nope"),
+        ],
+        ids=["population-0", "frames-5:2", "unknown-marker"],
+    )
 )
-def test_fit_refuses_a_bad_option(cli_ref, tmp_path, option, named):
+def test_fit_refuses_a_bad_option(cli_inputs, tmp_path, run, option, named):
     out = tmp_path / "run"
-    proc = cli("fit", cli_ref["model"], cli_ref["data"], "--out", out, *option)
+    proc = run("fit", cli_inputs["model"], cli_inputs["data"], "--out", out, *option)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and named in lines[0], proc.stderr
@@ -375,11 +396,16 @@ def test_fit_refuses_a_bad_option(cli_ref, tmp_path, option, named):
     assert [p.name for p in tmp_path.iterdir()] == []  # no half-written run either
 
 
-def test_fit_refuses_an_existing_run_without_overwrite(cli_ref, tmp_path):
+# a fresh process's stderr is checked by test_fit_refuses_a_bad_option's first case; this one
+# in a fresh process is in `pytest -m slow`
+@pytest.mark.parametrize(
+    "run", [cli_in_process, pytest.param(cli, marks=pytest.mark.slow)], ids=["in", "fresh"]
+)
+def test_fit_refuses_an_existing_run_without_overwrite(cli_inputs, tmp_path, run):
     out = tmp_path / "run"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    proc = cli("fit", cli_ref["model"], cli_ref["data"], "--out", out, "--generations", "5")
+    proc = run("fit", cli_inputs["model"], cli_inputs["data"], "--out", out, "--generations", "5")
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "--overwrite" in lines[0], proc.stderr

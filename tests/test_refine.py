@@ -14,7 +14,7 @@ from activebonds.identify import rundir
 from activebonds.identify.refine import Bounded
 from activebonds.identify.shooting import shooting_windows
 from activebonds.model import load_model, loads_model
-from helpers import EXAMPLES, cli
+from helpers import EXAMPLES, each_case_both_ways
 
 # The triangle of examples/triangle.toml (its file values are the truth), 60 frames at 60 Hz,
 # fitted with standard bonds: 9 genes (stiffness, rest length, damping of 3 bond types).
@@ -197,25 +197,27 @@ def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path
 
 
 @pytest.mark.parametrize(
-    "options, message",
-    [
-        (
-            ["--horizon", "1,5", "--refine", "none"],
-            "a horizon curriculum (several horizons) is run by the refinement",
-        ),
-        (
-            ["--cost", "shooting", "--refine", "none"],
-            "the shooting cost is the refinement's; add --refine lm",
-        ),
-        (["--horizon", "0"], "horizons must be integers >= 1"),
-        (["--horizon", "1,x"], "expected integers separated by commas"),
-        (["--refine", "newton"], "--refine"),
-    ],
+    *each_case_both_ways(
+        "options, message",
+        [
+            (
+                ["--horizon", "1,5", "--refine", "none"],
+                "a horizon curriculum (several horizons) is run by the refinement",
+            ),
+            (
+                ["--cost", "shooting", "--refine", "none"],
+                "the shooting cost is the refinement's; add --refine lm",
+            ),
+            (["--horizon", "0"], "horizons must be integers >= 1"),
+            (["--horizon", "1,x"], "expected integers separated by commas"),
+            (["--refine", "newton"], "--refine"),
+        ],
+    )
 )
-def test_bad_refinement_options_are_one_line(tmp_path, triangle, options, message):
+def test_bad_refinement_options_are_one_line(tmp_path, triangle, run, options, message):
     data = tmp_path / "tri.npz"
     activebonds.data.write_trajectory(triangle[1], data)
-    res = cli("fit", EXAMPLES / "triangle.toml", data, "--out", tmp_path / "r", *options)
+    res = run("fit", EXAMPLES / "triangle.toml", data, "--out", tmp_path / "r", *options)
     assert res.returncode == 2
     assert message in res.stderr and len(res.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "r").exists()
