@@ -276,7 +276,7 @@ def run(
         f"frames {a}:{b}: fitting {a}:{s} ({s - a} frames), holding out {s}:{b} "
         f"({b - s} frames, the last {100 * options.held_out:g} %)"
     )
-    say(noise.line())
+    say(noise_line(noise))
     state["noise"] = asdict(noise)
 
     def step(k: int, name: str, what: str, body: Callable[[], str]) -> None:
@@ -453,6 +453,17 @@ def _undecided(folder: Folder, recording, split: Windows, options: Options, say)
     )
 
 
+def noise_line(noise) -> str:
+    """What the marker ``noise`` makes ``auto`` do, in one line."""
+    if not noise.dominated:
+        return f"{noise.line()}: negligible, nothing smoothed"
+    return (
+        f"{noise.line()}: one-step scores would judge the noise, so the structure is chosen on "
+        f"positions smoothed over {noise.window} frames (Savitzky-Golay, cubic); the fit "
+        "and the held-out scores are on the recording"
+    )
+
+
 def noise_of_fitted(recording, split: Windows, options: Options):
     """:func:`~.data.smoothing.noise_of` the fitted frames of the markers asked."""
     from .data.smoothing import noise_of
@@ -595,7 +606,9 @@ def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> t
 def _ahead_mm(run: Path) -> float:
     """A run's RMS (mm) :data:`SHOOTING`'s horizon frames ahead on its fitted frames (its
     baselines' ``judged`` comparisons; inf where it has none)."""
-    record = json.loads((run / "baselines.json").read_text(encoding="utf-8"))
+    from .identify.rundir import read_record
+
+    record = read_record(run, "baselines") or {}
     h = SHOOTING["horizon"][0]
     found = [c["model_mm"] for c in record.get("judged", []) if c.get("horizon") == h]
     return float(found[0]) if found and math.isfinite(found[0]) else math.inf

@@ -77,16 +77,10 @@ class Noise:
         return self.window != 0
 
     def line(self) -> str:
-        head = (
+        """The noise in words: its size, its one-step floor beside zero force's error."""
+        return (
             f"marker noise about {self.sigma:.3g} mm (fourth differences): its one-step floor "
             f"{self.floor:.3g} mm of zero force's {self.zero_force:.3g} mm"
-        )
-        if not self.dominated:
-            return f"{head}: negligible, nothing smoothed"
-        return (
-            f"{head}: one-step scores would judge the noise, so the structure is chosen on "
-            f"positions smoothed over {self.window} frames (Savitzky-Golay, cubic); the fit "
-            "and the held-out scores are on the recording"
         )
 
 
