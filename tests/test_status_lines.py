@@ -71,3 +71,31 @@ def test_a_terminal_gets_a_spinner_and_no_line_a_log_gets_the_line_only_when_wor
         shown.close()
         if not terminal:
             assert text.getvalue() == "refining the best model ...\n"
+
+
+def test_a_phase_s_detail_updates_its_line_and_a_log_gets_it_at_most_every_so_often(
+    monkeypatch,
+):
+    import activebonds.cli.progress as progress
+
+    phase = "refining the best model (Levenberg-Marquardt, 1 stage)"
+    for terminal in (True, False):
+        for every in (0.0, 1e9):  # a log: each detail, or none within the interval
+            monkeypatch.setattr(progress, "DETAIL_SECONDS", every)
+            text = io.StringIO()
+            console = Console(file=text, force_terminal=terminal, width=200)
+            shown = FitProgress(10, Console(file=io.StringIO()), console)
+            shown.status(phase)
+            first = shown.spinner
+            for step in (2, 3):
+                shown.status(f"{phase} - stage 1/1 (horizon 10), shooting: step {step}/100")
+                assert shown.spinner is first  # the same line, updated (a terminal)
+            assert shown.said.endswith("step 3/100")
+            shown.status("measuring the fit beside its baselines")  # another phase: a new line
+            assert (shown.spinner is not first) == terminal
+            shown.close()
+            if not terminal:
+                lines = text.getvalue().splitlines()
+                details = [line for line in lines if " - stage 1/1" in line]
+                assert len(details) == (2 if every == 0.0 else 0), lines
+                assert lines[0] == f"{phase} ..." and lines[-1].startswith("measuring")

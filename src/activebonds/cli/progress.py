@@ -16,6 +16,8 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+DETAIL_SECONDS = 30.0  # a phase's detail line printed at most this often in a log
+
 
 class FitProgress:
     """What a fit shows while it runs: ``progress(generation, total, rms)`` after each chunk
@@ -43,6 +45,7 @@ class FitProgress:
         self.g = 0
         self.spinner = None
         self.said = ""  # the status shown
+        self.detail_at = 0.0  # when a phase's detail was last printed (a log)
         self.live = False  # the bar is shown
 
     def __call__(self, generation: int, total_now: int, rms: float) -> None:
@@ -65,14 +68,29 @@ class FitProgress:
             self.on_update()
 
     def status(self, text: str) -> None:
-        """Say what happens next, until the next chunk or status (or the end)."""
+        """Say what happens next, until the next chunk or status (or the end). A text
+        ``"PHASE - DETAIL"`` after ``PHASE`` (e.g. a refinement's step) updates the line in
+        a terminal, and is printed at most every :data:`DETAIL_SECONDS` in a log."""
         if self.live:
             self.bar.stop()
             self.live = False
-        if self.spinner is not None and self.said == text:
+        if self.said == text and (self.spinner is not None or not self.status_console.is_terminal):
             return  # already shown
+        phase = text.split(" - ", 1)[0]
+        if phase != text and self.said.split(" - ", 1)[0] == phase:  # a detail of the phase
+            if self.spinner is not None:
+                self.spinner.update(status=f"{text} ...")
+                self.said = text
+                return
+            if not self.status_console.is_terminal:
+                if time.time() - self.detail_at >= DETAIL_SECONDS:
+                    show_status(self.status_console, text)
+                    self.detail_at = time.time()
+                self.said = text
+                return
         self._stop_spinner()
         self.spinner, self.said = show_status(self.status_console, text), text
+        self.detail_at = time.time()
 
     def begin(self, text: str) -> None:
         """A spinner from the start (in a terminal only: a plain line comes with the first

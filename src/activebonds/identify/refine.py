@@ -55,6 +55,10 @@ MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 # body on the bundled human walk at H = 10: 0.6 % of its loss in steps 60-100, 2.4 s a step),
 # and the shooting refines from wherever it got
 WARM_STEPS = 50
+# the warm start also ends once its cost fell by less than 1 % over 5 accepted steps: its
+# point is a start, and on a slow restart cost (contacts, Newton's start velocities) its
+# last steps crawl (a thrown MuJoCo body: 0.07515 -> 0.07474 m^2 in its last 30 of 50 steps)
+WARM_STALL = (5, 1e-2)
 # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
 INITIAL_DAMPING = 1e-3
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
@@ -161,10 +165,11 @@ def _dense_step(system, damping):
     return jnp.linalg.solve(jtj + jnp.diag(damp), -grad)
 
 
-def _solve(residual, y0, max_steps: int, interior=None, jacobian=None):
+def _solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=None, stall=None):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
     accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`.
-    ``jacobian``: ``y -> J`` (default: forward mode through ``residual``)."""
+    ``jacobian``: ``y -> J`` (default: forward mode through ``residual``); ``on_step(steps,
+    loss)`` after every evaluation; ``stall``: :func:`.lm.levenberg_marquardt`'s."""
     if jacobian is None:
         jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
 
@@ -188,6 +193,8 @@ def _solve(residual, y0, max_steps: int, interior=None, jacobian=None):
         linear_enough=interior,
         diagonal=_dense_diagonal,
         damping=INITIAL_DAMPING,
+        on_step=on_step,
+        stall=stall,
     )
 
 
@@ -208,7 +215,9 @@ def _ravel(tree):
     return ravel_pytree(tree)[0]
 
 
-def _solve_shooting(residual, normal, y0, max_steps: int, interior=None, step=damped_step):
+def _solve_shooting(
+    residual, normal, y0, max_steps: int, interior=None, step=damped_step, on_step=None
+):
     """Levenberg-Marquardt on a shooting stage's structured normal equations
     (:mod:`.shooting_normal`): as :func:`_solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
     u0, x0, v0 = y0
@@ -241,6 +250,7 @@ def _solve_shooting(residual, normal, y0, max_steps: int, interior=None, step=da
             linear_enough=None if interior is None else (lambda z: interior(z[0])),
             diagonal=marquardt_diagonal,
             damping=INITIAL_DAMPING,
+            on_step=on_step,
         )
     except Interrupted as stop:  # the last accepted point, in the caller's form
         raise Interrupted(split(stop.value), stop.steps) from None
@@ -268,6 +278,15 @@ class Refinement:
         # the bounds' transform as one program: the restart residuals of u are those of
         # its genome, by the shared program (bit for bit those of both compiled together)
         self._to_genome = jax.jit(self.bounded.to_genome)
+        # ``on_step(part, steps, max_steps, objective)`` after each Levenberg-Marquardt
+        # evaluation (part: "warm start", "shooting" or "one-step"; objective |r|^2, m^2)
+        self.on_step = None
+
+    def _steps(self, part: str, max_steps: int):
+        """The solver's ``on_step`` for ``part``, or None."""
+        if self.on_step is None:
+            return None
+        return lambda steps, loss: self.on_step(part, steps, max_steps, 2.0 * loss)
 
     def stage(self, horizon: int, genome: np.ndarray, max_steps: int | None = None) -> Stage:
         """One stage; ``max_steps`` Levenberg-Marquardt steps at most (default: the
@@ -323,7 +342,7 @@ class Refinement:
         self._jacobians.clear()
         return True
 
-    def _restart(self, horizon, genome, max_steps) -> Stage:
+    def _restart(self, horizon, genome, max_steps, part: str = "one-step") -> Stage:
         windows, residuals = self._restart_residuals(horizon)
         to_genome = self.bounded.to_genome
 
@@ -352,7 +371,13 @@ class Refinement:
                         return residuals(self._to_genome(u))
 
                     u, steps, message = _solve(
-                        residual, u0, max_steps, self.bounded.interior, self._jacobian(horizon)
+                        residual,
+                        u0,
+                        max_steps,
+                        self.bounded.interior,
+                        self._jacobian(horizon),
+                        self._steps(part, max_steps),
+                        WARM_STALL if part == "warm start" else None,
                     )
             except Interrupted as stop:
                 stopped = stop
@@ -412,7 +437,7 @@ class Refinement:
         self._check_ahead(1, y0[0])
         trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # last needed, last
         # interrupted: the stage's start
-        warm = self._restart(horizon, genome, min(max_steps, WARM_STEPS))
+        warm = self._restart(horizon, genome, min(max_steps, WARM_STEPS), "warm start")
         if warm.accepted:
             genome = np.asarray(warm.genome)
             # the restart cost's optimum at this horizon (its RMS already measured by the
@@ -428,7 +453,13 @@ class Refinement:
         else:
             try:
                 y, steps, message = _solve_shooting(
-                    residual, normal, y0, max_steps, self.bounded.interior, step
+                    residual,
+                    normal,
+                    y0,
+                    max_steps,
+                    self.bounded.interior,
+                    step,
+                    self._steps("shooting", max_steps),
                 )
             except Interrupted as stop:
                 stopped = stop

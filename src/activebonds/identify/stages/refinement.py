@@ -7,6 +7,8 @@ a resumed run continues that stage from there."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ...document import Section, Table
@@ -14,6 +16,38 @@ from ..refine import Refinement, Stage, StageInterrupted
 from .base import Fit, Outcome
 
 NAME = "refine"
+
+
+STEP_SECONDS = 1.0  # a stage's step said at most this often
+
+
+def step_text(doing: str, i: int, n: int, horizon: int, part, steps, max_steps, objective) -> str:
+    """What a refinement stage shows while it runs: ``doing`` (the phase's status), then
+    `` - `` and where the stage is (the detail a progress display updates in place)."""
+    return (
+        f"{doing} - stage {i}/{n} (horizon {horizon}), {part}: step {steps}/{max_steps}, "
+        f"objective {objective:.4g} m^2"
+    )
+
+
+def _step_lines(fit: Fit, doing: str, i: int, horizon: int):
+    """``Refinement.on_step`` saying the stage's steps through ``fit.say`` (None without),
+    at most every :data:`STEP_SECONDS`."""
+    if fit.say is None:
+        return None
+    n, last, lowest = len(fit.settings.horizon), [0.0], {}
+
+    def on_step(part, steps, max_steps, objective):
+        # the lowest cost met in this part (a rejected trial step's is not where it stands)
+        if objective == objective:
+            lowest[part] = min(objective, lowest.get(part, objective))
+        now = time.monotonic()
+        if now - last[0] >= STEP_SECONDS:
+            last[0] = now
+            shown = lowest.get(part, objective)
+            fit.say(step_text(doing, i, n, horizon, part, steps, max_steps, shown))
+
+    return on_step
 
 
 def costs_line(settings) -> str:
@@ -67,7 +101,8 @@ class RefinementStage:
         if partial is not None:
             current = np.asarray(partial.genome)
         outcome = self._outcome(fit, start, stages, refinement, current)
-        for horizon in settings.horizon[len(stages) :]:
+        for i, horizon in enumerate(settings.horizon[len(stages) :], len(stages) + 1):
+            refinement.on_step = _step_lines(fit, self.doing(fit), i, horizon)
             try:
                 stage = refinement.stage(horizon, current)
             except StageInterrupted as stop:  # saved where it got to, as the ES's checkpoint
