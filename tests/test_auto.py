@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+import html
 import json
 
 import pytest
 
 from activebonds import pipeline
 from activebonds.data.bundled import dataset
+from activebonds.identify.verdict import comparisons_from
 from activebonds.model import load_model
 from activebonds.simulation import simulate_to_file
 from helpers import cli_in_process
@@ -72,6 +74,11 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
     one, ahead = held["comparisons"]
     assert one["model_mm"] < 0.5 * one["zero_force_mm"]
     assert ahead["horizon"] == 10 and ahead["model_mm"] < 0.5 * ahead["zero_force_mm"]
+    # the report says the held-out verdicts the terminal said: the evaluation's, both kinds
+    report = html.unescape((out / "report.html").read_text(encoding="utf-8"))
+    for c in comparisons_from(held["comparisons"]):
+        for line in c.lines("frames beyond the fit 240:300"):
+            assert line in report, line
     state = json.loads((out / "auto.json").read_text())
     assert set(state["steps"]) == set(pipeline.STEPS)
     assert state["fitted_frames"] == [0, 240] and state["held_out_frames"] == [240, 300]

@@ -1,5 +1,5 @@
 """Safety: nothing is unpickled, run directories appear whole and are not overwritten, and
-output paths cannot climb out with ``..``.
+an output path through ``..`` is written where the system follows it.
 
 * Planted checkpoints (``RUN/checkpoints/gen-000999999.npz`` a raw pickle, ``gen-000999998``
   an .npz holding a pickled object array, ``gen-000999997`` an .npy pickle), each armed to
@@ -9,7 +9,8 @@ output paths cannot climb out with ``..``.
   exit 2, no marker, no run directory).
 * ``fit`` with bad data (2 frames, 2-D, gaps everywhere, other markers) leaves no RUN and no hidden ``.RUN.partial-*``; an existing run is
   never replaced without ``--overwrite`` (and with it, nothing is left behind).
-* ``--out`` paths containing ``..`` are refused.
+* ``--out`` paths containing ``..`` are written where the system follows them (as ``fill`` and
+  ``scaffold`` always did); tests/test_output_dotdot.py covers every writing command.
 """
 
 from __future__ import annotations
@@ -261,7 +262,7 @@ def test_overwrite_only_replaces_a_run_directory(tmp_path, kind):
     assert (target / "chapter1.tex" if kind == "folder" else target).read_text() == "precious"
 
 
-def test_fit_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
+def test_fit_out_with_dotdot_is_written_where_the_system_follows_it(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     (tmp_path / "sub").mkdir()
     (fit,) = cli_many(
@@ -273,12 +274,15 @@ def test_fit_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
         ],
         ws["cache"],
     )
-    assert fit.returncode == 2 and ".." in one_line_error(fit)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+    assert fit.returncode == 0, fit.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["RUN", "sub"]
+    assert (tmp_path / "RUN" / "run.json").is_file()
     assert list((tmp_path / "sub").iterdir()) == []
 
 
-def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
+def test_simulate_out_with_dotdot_is_written_where_the_system_follows_it(
+    tmp_path, tmp_path_factory
+):
     (tmp_path / "sub").mkdir()
     (proc,) = cli_many(
         [
@@ -289,8 +293,8 @@ def test_simulate_out_with_dotdot_is_refused(tmp_path, tmp_path_factory):
         ],
         workspace(tmp_path_factory)["cache"],
     )
-    assert proc.returncode == 2 and ".." in one_line_error(proc)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub", "x.csv"]
 
 
 @pytest.mark.slow  # integration scale: in `pytest -m slow` (every landing)

@@ -14,6 +14,20 @@ from typing import IO
 TMP_PREFIX = ".tmp-"
 
 
+def output_path(path: str | Path) -> Path:
+    """An output path with its ``..`` resolved as the system would follow it (symbolic links
+    before a ``..`` included), so that its name and its folder are the real ones: ``sub/../x``
+    is ``x`` in the current folder, ``a/..`` is the current folder itself (whose name, not
+    ``..``, every later check sees: an existing folder is never mistaken for a new one). A
+    path without ``..`` is returned as given (its messages keep the user's spelling)."""
+    path = Path(path)
+    if ".." not in path.parts:
+        return path
+    if path.name in ("", ".", ".."):
+        return path.resolve()
+    return path.parent.resolve() / path.name
+
+
 def write_atomic(path: str | Path, write: Callable[[IO[bytes]], None]) -> Path:
     """Write through ``write(fh)`` into a temporary sibling, fsync, then rename over ``path``
     (keeping the mode of a file it replaces). On any error the target is left untouched."""

@@ -336,7 +336,7 @@ def run(
         5,
         "report",
         "the HTML report of the run over the fitted and held-out frames",
-        lambda: _report(kept, folder.report, b - a),
+        lambda: _report(kept, folder.report, b - a, folder.evaluation),
     )
     state["total_seconds"] = round(sum(v["seconds"] for v in steps.values()), 1)
     folder.write_state(state)
@@ -712,7 +712,10 @@ def _write_evaluation(folder: Folder, held, fitted) -> str:
     )
 
 
-def _report(run: Path, report: Path, frames: int) -> str:
+def _report(run: Path, report: Path, frames: int, evaluation: Path) -> str:
+    """The run's report, its held-out verdicts (one step and K ahead) the evaluation's."""
     from .report import write_report
+    from .report.html import Beyond
 
-    return str(write_report(run, report, frames=frames))
+    held = json.loads(evaluation.read_text(encoding="utf-8"))["held_out"]
+    return str(write_report(run, report, frames=frames, beyond=Beyond.from_record(held)))

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .atomic import output_path
 from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
 from .model import Model, build, load_model
@@ -146,8 +147,7 @@ def check_finite(model: Model, xs: np.ndarray, rate: float) -> None:
 def simulate_to_file(
     model_path, n_frames, rate, out, start_path=None, substeps=1, integrator="euler"
 ):
-    if ".." in Path(out).parts:
-        raise InputError(out, "an output path may not contain '..'")
+    out = output_path(out)
     model = load_model(model_path)
     start = read_trajectory(start_path) if start_path is not None else None
     if start is None:

@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from ..atomic import output_path
 from ..errors import InputError
 from .app import app, console, fail, out
 
@@ -123,8 +124,7 @@ def reproduce(
             )
         if scale not in EXPERIMENTS[experiment].scales:
             raise InputError("--scale", f"expected tiny, quick or paper, got '{scale}'")
-        if ".." in out_dir.parts:
-            raise InputError(out_dir, "an output path may not contain '..'")
+        out_dir = output_path(out_dir)
         summaries = _progress_runner([experiment], scale, _parse_seeds(seeds), out_dir)
         _finish(summaries, out_dir, started)
     except InputError as e:
@@ -140,8 +140,7 @@ def demo(
     trajectory and the real horse trot, standard vs neural bonds), then the report."""
     started = time.time()
     try:
-        if ".." in out_dir.parts:
-            raise InputError(out_dir, "an output path may not contain '..'")
+        out_dir = output_path(out_dir)
         summaries = _progress_runner(["synthetic", "horse"], "quick", _parse_seeds(seeds), out_dir)
         _finish(summaries, out_dir, started)
     except InputError as e:

@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import bonds
-from ..atomic import write_text_atomic
+from ..atomic import output_path, write_text_atomic
 from ..errors import InputError
 
 AXES = "xyz"
@@ -358,9 +358,7 @@ def write_mjcf(
 ) -> Path:
     """Write :func:`to_mjcf` atomically (a temporary sibling, then rename); nothing is written
     when the model is refused."""
-    path = Path(path)
-    if ".." in path.parts:
-        raise InputError(path, "an output path may not contain '..'")
+    path = output_path(path)
     if not path.parent.exists():
         raise InputError(path, "the folder does not exist")
     text = to_mjcf(model, rate=rate, substeps=substeps, source=source)

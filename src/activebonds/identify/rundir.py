@@ -111,9 +111,7 @@ def backend() -> dict:
 
 
 def _safe_run_path(out: str | Path) -> Path:
-    out = Path(out)
-    if ".." in out.parts:
-        raise InputError(out, "a run directory path may not contain '..'")
+    out = atomic.output_path(out)
     if out.name in ("", ".", "/"):
         raise InputError(out, "give a new folder name for the run")
     return out
@@ -121,7 +119,7 @@ def _safe_run_path(out: str | Path) -> Path:
 
 def check_new(out: str | Path, overwrite: bool) -> Path:
     """Refuse (:class:`InputError`) a run directory path that :func:`create` would refuse:
-    '..', an existing run without ``overwrite``, anything else that exists, a parent folder
+    an existing run without ``overwrite``, anything else that exists, a parent folder
     that does not exist or is a file."""
     out = _safe_run_path(out)
     if out.exists() and not overwrite:

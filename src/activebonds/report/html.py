@@ -21,6 +21,8 @@ import numpy as np
 from ..document import Figure, Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
+from ..identify.ahead import DEFAULT_AHEAD
+from ..identify.ahead import comparisons as ahead_comparisons
 from ..identify.baselines import zero_force_predictions
 from ..identify.metrics import FreeRunMetrics
 from ..identify.predictions import rms_mm
@@ -277,41 +279,95 @@ def zero_force_one_step_mm(pred: Prediction) -> tuple[np.ndarray, np.ndarray | N
     return rms_mm(one, pred.recorded, slice(0, fit)), beyond
 
 
-def errors_table(pred: Prediction, caption: str = "RMS position error per particle (mm)") -> Table:
+def errors_table(
+    pred: Prediction,
+    caption: str = "RMS position error per particle (mm)",
+    beyond: Beyond | None = None,
+) -> Table:
     """Per particle, the model's one-step and free-run RMS beside zero force's one-step RMS,
-    on the fitted frames and beyond them; red where the model is not better."""
+    on the fitted frames and beyond them; red where the model is not better. With ``beyond``
+    (the frames beyond scored as ``evaluate`` scores them), its one step and K frames ahead
+    beyond the fit, each beside zero force's."""
     zero_fit, zero_beyond = zero_force_one_step_mm(pred)
     cols = ["particle", "marker", "one-step (fit)", "zero force (fit)", "free run (fit)"]
+    scored = beyond.comparisons if beyond is not None and pred.extended else ()
     if pred.extended:
         cols += ["one-step (beyond)", "zero force (beyond)", "free run (beyond)"]
+    for c in scored[1:]:
+        cols += [f"{c.horizon} ahead (beyond)", f"zero force {c.horizon} ahead (beyond)"]
     rows = []
     for p, (n, m) in enumerate(zip(pred.names, pred.markers, strict=True)):
         one = float(pred.one_step_rms_mm[p])
         row = [n, m, _judged(one, zero_fit[p]), float(zero_fit[p]), float(pred.free_run_rms_mm[p])]
         if pred.extended:
-            one = float(pred.one_step_rms_mm_beyond[p])
+            one, zero = float(pred.one_step_rms_mm_beyond[p]), float(zero_beyond[p])
+            if scored:  # evaluate's terms, as the verdict beyond
+                one, zero = scored[0].model_per_marker[p], scored[0].zero_force_per_marker[p]
+            row += [_judged(one, zero), zero, float(pred.free_run_rms_mm_beyond[p])]
+        for c in scored[1:]:
             row += [
-                _judged(one, zero_beyond[p]),
-                float(zero_beyond[p]),
-                float(pred.free_run_rms_mm_beyond[p]),
+                _judged(c.model_per_marker[p], c.zero_force_per_marker[p]),
+                c.zero_force_per_marker[p],
             ]
         rows.append(row)
     caption += f"; red: {WORSE} (the constant-velocity predictor, same terms)"
     if pred.extended:
         caption += (
-            "; free run beyond: a run of its own from the first two frames beyond the fit, as "
-            "evaluate --frames scores those frames"
+            "; beyond: the frames after the fitted ones as a window of their own, as "
+            "evaluate --frames scores them (the free run from their first two frames"
+            + (
+                ", the one-step and K-ahead predictions from their third frame on)"
+                if scored
+                else ")"
+            )
         )
     return Table(columns=cols, rows=rows, caption=caption)
 
 
-def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
+@dataclass(frozen=True)
+class Beyond:
+    """The frames beyond the fit scored as ``evaluate --frames START:STOP --horizon K`` scores
+    them (:func:`~activebonds.identify.ahead.comparisons`): their frames [start, stop) of the
+    recording and the comparisons, one step then K frames ahead, overall and per marker."""
+
+    frames: tuple[int, int]
+    comparisons: tuple[Comparison, ...]
+
+    @classmethod
+    def from_record(cls, record: dict) -> Beyond:
+        """From an evaluation's record (:meth:`.evaluate.Evaluation.record`, as ``auto``'s
+        evaluation.json keeps its held-out one)."""
+        a, b = record["frames"]
+        return cls((int(a), int(b)), tuple(comparisons_from(record["comparisons"])))
+
+    def lines(self) -> list[str]:
+        a, b = self.frames
+        return verdict_lines(f"frames beyond the fit {a}:{b}", self.comparisons)
+
+
+def beyond_scores(record: RunRecord, pred: Prediction, horizon: int = DEFAULT_AHEAD) -> Beyond:
+    """The frames the report predicts beyond the fitted window, scored by ``evaluate``'s code
+    as ``evaluate RUN/best_model.toml DATA --frames START:STOP --horizon HORIZON`` scores them:
+    a window of their own (the first prediction from their first two frames; the model's time
+    starting at their first frame), the run's substeps and integrator."""
+    from ..data import Trajectory
+
+    s, fit = record.settings, pred.fit_frames
+    rec = pred.recorded[fit:]
+    window = Trajectory(rec, np.isfinite(rec).all(axis=-1), pred.markers, 1.0 / pred.dt)
+    found = ahead_comparisons(
+        record.model, window, horizon, substeps=s.substeps, method=s.integrator
+    )
+    start = int(s.frames[0])
+    return Beyond((start + fit, start + pred.n_frames), tuple(found))
+
+
+def verdict_text(record: RunRecord, pred: Prediction, beyond: Beyond | None = None) -> list[str]:
     """The verdicts in words (:mod:`activebonds.identify.verdict`): on the fitted frames and,
     after ``fit --validate``, the validation frames (one step and K frames ahead, overall and
-    per marker, as ``fit`` printed them), and one step on the frames the report predicts
-    beyond the fitted window."""
+    per marker, as ``fit`` printed them), and on the frames beyond the fitted window
+    (``beyond``: one step and K frames ahead, as ``evaluate`` scores them)."""
     out = []
-    start = int(record.settings.frames[0])
     fitted = record.records.get(baselines.NAME, {})
     out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
     if "fitted" in fitted:
@@ -321,36 +377,9 @@ def verdict_text(record: RunRecord, pred: Prediction) -> list[str]:
     if held is not None and "judged" in held:
         a, b = held["frames"]
         out += verdict_lines(f"validation frames {a}:{b}", comparisons_from(held["judged"]))
-    if pred.extended:
-        _, zero = zero_force_one_step_mm(pred)
-        model = pred.one_step_rms_mm_beyond
-        fit, n = pred.fit_frames, pred.n_frames
-        c = Comparison(
-            1,
-            _pooled(model, pred, fit, n),
-            _pooled(zero, pred, fit, n),
-            tuple(pred.markers),
-            tuple(float(x) for x in model),
-            tuple(float(x) for x in zero),
-        )
-        out += c.lines(f"frames beyond the fit {start + fit}:{start + n}")
+    if beyond is not None:
+        out += beyond.lines()
     return out
-
-
-def _pooled(per: np.ndarray, pred: Prediction, lo: int, hi: int) -> float:
-    """One RMS over particles from per-particle one-step RMS values, each weighted by its
-    count of terms (recorded target, complete input frames)."""
-    rec = pred.recorded
-    complete = np.isfinite(rec).all(axis=(1, 2))
-    inputs = np.zeros(rec.shape[0], bool)
-    inputs[2:] = complete[1:-1] & complete[:-2]
-    n = (np.isfinite(rec).all(axis=-1) & inputs[:, None])[lo:hi].sum(axis=0)
-    per = np.asarray(per, np.float64)
-    ok = n > 0
-    if not ok.any():
-        return float("nan")
-    with np.errstate(over="ignore", invalid="ignore"):
-        return float(np.sqrt(np.sum(per[ok] ** 2 * n[ok]) / n[ok].sum()))
 
 
 def free_run_table(record: RunRecord) -> Table | None:
@@ -514,6 +543,7 @@ def write_report(
     *,
     frames: int | None = None,
     status=None,
+    beyond: Beyond | None = None,
 ) -> Path:
     """Write the report of one run: ``RUN/report.html`` (or ``out``) and its figures
     (``RUN/figures/*.png|svg``, ``animation.gif`` and, with ffmpeg, ``animation.mp4``;
@@ -522,7 +552,10 @@ def write_report(
     ``frames``: how many frames of the original recording to predict, from the fitted
     window's start (default: twice the window; only the window if the recording is gone or
     changed). ``status``: called with a line saying what is being done, once the run and the
-    output are checked (the command line shows it). Raises :class:`InputError` for a missing
+    output are checked (the command line shows it). ``beyond``: the frames beyond the fit
+    already scored (``auto``'s held-out evaluation, so that its report says what its
+    terminal said); by default they are scored here as ``evaluate --horizon 10`` scores them.
+    Raises :class:`InputError` for a missing
     or invalid run."""
     run = Path(run_dir)
     record = load_run(run)
@@ -536,18 +569,24 @@ def write_report(
         status("writing the report (predictions, figures, animation)")
     pred, _ = predict_run(record, frames if frames is not None else default_frames(record))
     with staged_directory(fig_dir) as tmp:
-        sections = run_sections(record, pred, tmp)
+        sections = run_sections(record, pred, tmp, beyond)
         title = f"activebonds report: {run.resolve().name}"
         subtitle = f"{record.model.name}, {record.settings.bonds} bonds — {record.status.get('status', 'unknown')}"
         write_comparison_report(html_path, title, sections, subtitle=subtitle)
     return html_path
 
 
-def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Section]:
+def run_sections(
+    record: RunRecord, pred: Prediction, fig_dir: Path, beyond: Beyond | None = None
+) -> list[Section]:
     """The sections of a one-run report; figures are written into ``fig_dir``. Frames are
     numbered as in the recording (the fitted window's first frame is the run's ``--frames``
-    start)."""
+    start). ``beyond``: the frames beyond the fit already scored (``auto``'s held-out
+    evaluation); else, when the report predicts beyond the fit, they are scored here
+    (:func:`beyond_scores`)."""
     model = record.model
+    if beyond is None and pred.extended:
+        beyond = beyond_scores(record, pred)
     first = int(record.settings.frames[0])
     frame_at = {"first_frame": first, "start_time": float(record.window.start_time)}
     labels = plots.bond_labels(model)
@@ -572,10 +611,14 @@ def run_sections(record: RunRecord, pred: Prediction, fig_dir: Path) -> list[Sec
     sections = [
         Section(
             "Summary",
-            text=verdict_text(record, pred),
+            text=verdict_text(record, pred, beyond),
             tables=[
                 t
-                for t in (summary_table(record, pred), free_run_table(record), errors_table(pred))
+                for t in (
+                    summary_table(record, pred),
+                    free_run_table(record),
+                    errors_table(pred, beyond=beyond),
+                )
                 if t is not None
             ],
             anchor="summary",
