@@ -148,3 +148,36 @@ def test_the_criterion_is_the_one_step_bic_of_the_exact_cost(triangle_recording)
     assert found.rss == pytest.approx(fit.cost, rel=1e-9)
     assert found.bic == pytest.approx(n * np.log(fit.cost / n) + 9 * np.log(n), rel=1e-12)
     assert found.rms_mm == pytest.approx(fit.rms_mm, rel=1e-9)
+
+
+def _scored(masses, decided, tail, zero, per, per_zero, bonds):
+    from activebonds.identify.structure_choice import Scored, Variant
+
+    return Scored(Variant(masses, "springs", decided), tail, zero, per, per_zero, bonds)
+
+
+def test_a_tail_no_variant_predicts_better_than_zero_force_chooses_nothing():
+    from activebonds.identify.structure_choice import Variant, pick
+
+    # a body at rest on the tail: zero force predicts it best; every variant is worse
+    rest = [
+        _scored("scaffold", True, 0.2100, 0.1333, (0.2, 0.2), (0.1, 0.1), 9),
+        _scored("scaffold", False, 0.2038, 0.1333, (0.2, 0.2), (0.1, 0.1), 15),
+        _scored("acceleration", False, 0.2050, 0.1333, (0.2, 0.2), (0.1, 0.1), 15),
+    ]
+    chosen, why = pick(rest)
+    assert chosen == Variant()  # the BIC's decision, the scaffold's masses and anchors
+    assert why.startswith("no variant predicts the tail better than zero force (the lowest")
+    assert "0.2038 vs 0.1333 mm" in why
+    # one variant better than zero force overall (not at every marker): the tail chooses
+    moving = [
+        *rest[:2],
+        _scored("acceleration", False, 0.1300, 0.1333, (0.2, 0.05), (0.1, 0.1), 15),
+    ]
+    chosen, why = pick(moving)
+    assert chosen == Variant("acceleration", "springs", False) and why == ""
+    # better at every marker wins over a lower overall RMS; within TIE the fewest bonds
+    every = _scored("momentum", True, 0.1310, 0.1333, (0.12, 0.12), (0.13, 0.13), 9)
+    assert pick([*moving, every])[0] == Variant("momentum", "springs", True)
+    tie = _scored("scaffold", True, 0.1310 * 1.0005, 0.1333, (0.12, 0.12), (0.13, 0.13), 8)
+    assert pick([*moving, every, tie])[0] == Variant("scaffold", "springs", True)

@@ -106,7 +106,6 @@ def levenberg_marquardt(
     diagonal: Callable | None = None,
     damping: float = 1.0,
     stop: Callable[[], bool] | None = None,
-    stall: tuple[int, float] | None = None,
 ):
     """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y, r) -> (system,
     gradient J^T r)``, ``step(system, damping) -> d`` (``damping`` a number, times I, or a
@@ -117,9 +116,7 @@ def levenberg_marquardt(
     whose transform is flat at a bound); ``diagonal(system)``: J^T J's diagonal (a pytree like
     y), for Marquardt's scaling D (without it, D = I). ``stop()``: asked between two steps
     (default: :func:`activebonds.runtime.stop_requested`); True raises :class:`Interrupted`
-    with the last accepted point. ``stall = (n, fraction)``: also stop once the loss fell by
-    less than ``fraction`` of itself over the last n accepted steps (a warm start's rule: its
-    point need only be near the optimum)."""
+    with the last accepted point."""
     if stop is None:
         from ..runtime import stop_requested as stop
     y = y0
@@ -131,7 +128,6 @@ def levenberg_marquardt(
     scaling = None if diagonal is None else diagonal(system)
     nu = 2.0
     steps = 1
-    accepted = [loss]  # the loss after each accepted step (the stall rule)
     if on_step:
         on_step(steps, loss)
     while steps < max_steps:
@@ -160,16 +156,6 @@ def levenberg_marquardt(
         y, r, loss = y_new, r_new, loss_new
         if done:
             return y, steps, "converged"
-        accepted.append(loss)
-        if stall is not None and len(accepted) > stall[0]:
-            before = accepted[-1 - stall[0]]
-            if before - loss < stall[1] * before:
-                return (
-                    y,
-                    steps,
-                    f"converged: the cost fell by less than {stall[1]:.1%} over its last "
-                    f"{stall[0]} accepted steps",
-                )
         system, grad = linearize(y, r)
         if scaling is not None:  # MINPACK's rule: D never shrinks (More 1978)
             scaling = jax.tree.map(jnp.maximum, scaling, diagonal(system))

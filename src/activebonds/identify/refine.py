@@ -55,10 +55,6 @@ MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 # body on the bundled human walk at H = 10: 0.6 % of its loss in steps 60-100, 2.4 s a step),
 # and the shooting refines from wherever it got
 WARM_STEPS = 50
-# the warm start also ends once its cost fell by less than 1 % over 5 accepted steps: its
-# point is a start, and on a slow restart cost (contacts, Newton's start velocities) its
-# last steps crawl (a thrown MuJoCo body: 0.07515 -> 0.07474 m^2 in its last 30 of 50 steps)
-WARM_STALL = (5, 1e-2)
 # of J^T J's diagonal (Marquardt's scaling): a first step near Gauss-Newton's
 INITIAL_DAMPING = 1e-3
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
@@ -165,11 +161,11 @@ def _dense_step(system, damping):
     return jnp.linalg.solve(jtj + jnp.diag(damp), -grad)
 
 
-def _solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=None, stall=None):
+def _solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=None):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
     accepted step, each damping a solve of the parameters' size): as :func:`_solve_dense`.
     ``jacobian``: ``y -> J`` (default: forward mode through ``residual``); ``on_step(steps,
-    loss)`` after every evaluation; ``stall``: :func:`.lm.levenberg_marquardt`'s."""
+    loss)`` after every evaluation."""
     if jacobian is None:
         jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
 
@@ -194,7 +190,6 @@ def _solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=N
         diagonal=_dense_diagonal,
         damping=INITIAL_DAMPING,
         on_step=on_step,
-        stall=stall,
     )
 
 
@@ -377,7 +372,6 @@ class Refinement:
                         self.bounded.interior,
                         self._jacobian(horizon),
                         self._steps(part, max_steps),
-                        WARM_STALL if part == "warm start" else None,
                     )
             except Interrupted as stop:
                 stopped = stop

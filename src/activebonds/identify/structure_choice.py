@@ -29,8 +29,11 @@ variant and keeps them where the BIC of the fitted frames says they earn their p
 The chosen variant is the one with the lowest one-step RMS on the tail among those that beat
 zero force at every marker there (if none does, among all); variants within :data:`TIE` of
 that RMS are tied, and the one with the fewest bonds among them is chosen (a candidate whose
-value the tail cannot tell from zero is not kept). It is then decided and solved
-again on all the fitted frames (:func:`decide`).
+value the tail cannot tell from zero is not kept). Where no variant predicts the tail better
+than zero force overall (a body coasting or at rest there), the tail cannot choose and the
+default variant is kept: the BIC's decision with the scaffold's masses and anchors, as
+``structure`` decides (:func:`pick`). It is then decided and solved again on all the fitted
+frames (:func:`decide`).
 """
 
 from __future__ import annotations
@@ -104,12 +107,15 @@ class Choice:
     train: tuple[int, int]
     tail: tuple[int, int]
     markers: tuple[str, ...]
+    why: str = ""  # where the tail could not choose, why (the default variant kept)
 
     def record(self) -> dict:
         return {
+            "why": self.why,
             "rule": "lowest one-step RMS on the validation tail among the variants better than "
             f"zero force at every marker there (else among all); within {TIE:.1%} of it, the "
-            "fewest bonds",
+            "fewest bonds; where none is better than zero force there, the BIC's decision with "
+            "the scaffold's masses and anchors",
             "train_frames": list(self.train),
             "tail_frames": list(self.tail),
             "markers": list(self.markers),
@@ -119,8 +125,10 @@ class Choice:
         }
 
     def line(self) -> str:
-        best = next(s for s in self.scored if s.variant == self.chosen)
         a, b = self.tail
+        if self.why:
+            return f"on the validation tail {a}:{b} among {len(self.scored)} variants: {self.why}"
+        best = next(s for s in self.scored if s.variant == self.chosen)
         return (
             f"chosen on the validation tail {a}:{b} (fitted on {self.train[0]}:{self.train[1]}) "
             f"among {len(self.scored)} variants: {self.chosen.text()}, {best.tail_rms_mm:.4g} "
@@ -272,12 +280,33 @@ def choose(model: Model, recording, frames: tuple[int, int], say=None) -> Choice
         if say is not None:
             flag = "" if s.every_marker_better else " (a marker not better than zero force)"
             say(f"      {variant.text()}: {s.tail_rms_mm:.4g} mm on the tail{flag}")
-    better = [s for s in scored if s.every_marker_better and np.isfinite(s.tail_rms_mm)]
-    pool = better or [s for s in scored if np.isfinite(s.tail_rms_mm)] or scored
-    lowest = min(s.tail_rms_mm if np.isfinite(s.tail_rms_mm) else np.inf for s in pool)
+    chosen, why = pick(scored)
+    return Choice(chosen, tuple(scored), (a, split), (split, b), tuple(tail.markers), why)
+
+
+def pick(scored) -> tuple[Variant, str]:
+    """The variant the tail chooses among ``scored`` (the module's rule) and, where the tail
+    cannot choose, why: no variant predicts it better than zero force (a tail where the body
+    coasts or rests, which zero force predicts best), so their differences say nothing of the
+    structure; the default variant (the BIC's decision, as ``structure`` makes it) is kept."""
+    finite = [s for s in scored if np.isfinite(s.tail_rms_mm)]
+    if not any(s.tail_rms_mm < s.tail_zero_force_mm for s in finite):
+        lowest = min(finite, key=lambda s: s.tail_rms_mm) if finite else None
+        said = (
+            f" (the lowest {lowest.tail_rms_mm:.4g} vs {lowest.tail_zero_force_mm:.4g} mm)"
+            if lowest is not None
+            else ""
+        )
+        why = (
+            f"no variant predicts the tail better than zero force{said}: the tail cannot "
+            "choose; kept the BIC's decision with the scaffold's masses and anchors"
+        )
+        return Variant(), why
+    better = [s for s in finite if s.every_marker_better]
+    pool = better or finite
+    lowest = min(s.tail_rms_mm for s in pool)
     tied = [s for s in pool if s.tail_rms_mm <= (1.0 + TIE) * lowest] or pool
-    best = min(tied, key=lambda s: (s.bonds, s.tail_rms_mm))
-    return Choice(best.variant, tuple(scored), (a, split), (split, b), tuple(tail.markers))
+    return min(tied, key=lambda s: (s.bonds, s.tail_rms_mm)).variant, ""
 
 
 def _overall(predicted: np.ndarray, recorded: np.ndarray) -> float:
