@@ -396,6 +396,7 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     from .identify.problem import select_data
     from .identify.settings import FitSettings
     from .identify.structure import exact_optimum
+    from .identify.structure_choice import criterion
     from .model import build, save_model
 
     extra = [b for b in scaffolded.bond if bonds.get(b.kind).linear is None]
@@ -406,8 +407,11 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     spec = decided.model_copy(update={"gravity": scaffolded.gravity, "bond": decided.bond + extra})
     model = build(spec)
     data = select_data(model, recording, FitSettings(frames=split.fitted))
-    solved, rms = exact_optimum(model, make_windows(data.positions, data.mask, data.dt, 1))
+    solved, _ = exact_optimum(model, make_windows(data.positions, data.mask, data.dt, 1))
     save_model(solved, folder.ground)
+    # its one-step RMS as the fit and `evaluate` score it (the exact optimum's own residual
+    # holds the contacts at their start and is not the model's prediction)
+    rms = criterion(build(solved), recording, split.fitted).rms_mm
     return {"contacts": len(extra), "gravity": scaffolded.gravity is not None, "rms_mm": rms}
 
 
@@ -536,7 +540,9 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
             "exact optimum with the contacts held: the same cost, one step, by which the two "
             "are compared"
         )
-        _fit_into(folder.run_ground, folder.ground, recording_path, one_step, say, fit_progress)
+        ground_rms = _fit_into(
+            folder.run_ground, folder.ground, recording_path, one_step, say, fit_progress
+        )
         scores = {
             path: criterion(load_model(RunDir(path).best_model_path), recording, split.fitted)
             for path in (folder.run, folder.run_ground)
@@ -545,21 +551,28 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
         insisted = options.gravity is True or options.up is not None
         if ground.bic < plain.bic or insisted:
             kept = folder.run_ground
+        # the criterion's RMS is on the frames the structure was chosen on (smoothed where
+        # the noise dominates), the runs' own on the recording: said apart
+        on = f"with the positions smoothed over {noise.window} frames" if noise.window else ""
         why = (
-            f"; kept {kept.name}"
+            f"; {folder.run.name} {linear:.4g} mm, {folder.run_ground.name} {ground_rms:.4g} "
+            f"mm; kept {kept.name}"
             + (" (--up or --gravity insists on gravity)" if insisted else "")
-            + f": one-step BIC {ground.bic:.6g} with gravity and contacts ({ground.rms_mm:.4g} "
-            f"mm, {ground.k} parameters), {plain.bic:.6g} without ({plain.rms_mm:.4g} mm, "
-            f"{plain.k})"
+            + f": one-step BIC{' ' + on if on else ''} {ground.bic:.6g} with gravity and "
+            f"contacts ({ground.rms_mm:.4g} mm, {ground.k} parameters), {plain.bic:.6g} "
+            f"without ({plain.rms_mm:.4g} mm, {plain.k})"
         )
+        if kept == folder.run_ground:
+            linear = ground_rms
         state["parts"]["fit"] = {
             "criterion": {"run": plain.record(), "run-ground": ground.record()}
         }
+    headline = f"best one-step RMS {linear:.4g} mm on the fitted frames: {kept}"
     if noise.dominated:
         kept, shot = _shoot(folder, kept, recording_path, settings, say, fit_progress)
         why += shot
     state["parts"].setdefault("fit", {})["run"] = kept.name
-    return f"best one-step RMS {linear:.4g} mm on the fitted frames: {folder.run}{why}"
+    return f"{headline}{why}"
 
 
 def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> tuple[Path, str]:
