@@ -187,27 +187,13 @@ THROWN = """
 name = "thrown"
 dimension = 3
 gravity = [0.0, 0.0, -9.81]
-{particles}
-[[bond]]
-kind = "binary"
-particles = ["a", "b"]
-stiffness = 400.0
-damping = 0.5
-rest_length = 0.25
-[[bond]]
-kind = "binary"
-particles = ["b", "c"]
-stiffness = 250.0
-damping = 0.3
-rest_length = 0.2
-[[bond]]
-kind = "binary"
-particles = ["a", "c"]
-stiffness = 300.0
-damping = 0.4
-rest_length = 0.3
-{contacts}
-"""
+{particles}{springs}{contacts}"""
+# (a, b, stiffness N/m, damping N s/m, rest length m)
+THROWN_SPRINGS = (
+    ("a", "b", 400.0, 0.5, 0.25),
+    ("b", "c", 250.0, 0.3, 0.2),
+    ("a", "c", 300.0, 0.4, 0.3),
+)
 
 
 def _thrown_body():
@@ -227,9 +213,13 @@ def _thrown_body():
         "stiffness = 2e4\ndamping = 40.0\nfriction = 0.5\n"
         for n in start
     )
-    from activebonds.simulation import simulate
-
-    model = loads_model(THROWN.format(particles=particles, contacts=contacts), "thrown")
+    springs = "".join(
+        f'[[bond]]\nkind = "binary"\nparticles = ["{a}", "{b}"]\nstiffness = {k!r}\n'
+        f"damping = {c!r}\nrest_length = {rest!r}\n"
+        for a, b, k, c, rest in THROWN_SPRINGS
+    )
+    text = THROWN.format(particles=particles, springs=springs, contacts=contacts)
+    model = loads_model(text, "thrown")
     traj = simulate(model, n_frames=150, rate=100.0, substeps=10, integrator="verlet")
     return model, traj, np.array([masses[n] for n in start])
 
