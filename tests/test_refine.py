@@ -339,3 +339,32 @@ def test_a_stage_says_its_steps_and_the_lowest_cost_is_its_end(triangle):
     assert len(said) == stage.steps  # the warm start's and the shooting's evaluations
     shot = min(a[3] for a in said if a[0] == "shooting")
     assert shot == pytest.approx(stage.end_objective, rel=1e-9)  # the cost |r|^2, m^2
+
+
+@pytest.mark.slow  # three fits (12 s)
+def test_a_stop_asked_during_a_stage_ends_the_fit_before_the_next_and_resume_completes(
+    triangle, tmp_path
+):
+    import json
+
+    from activebonds import runtime
+    from activebonds.identify import resume
+
+    model, traj, truth = triangle
+    run = tmp_path / "run"
+    # the user's Ctrl-C arrives once the refinement has ended (its record written): the
+    # stages after it (baselines, uncertainty) cannot stop midway, so the fit stops before them
+    runtime.on_stop_request(lambda: (run / "refine.json").exists())
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            activebonds.fit(model, traj, out=run, refine="lm", **FAST)
+    finally:
+        runtime.on_stop_request(None)
+    assert json.loads((run / "status.json").read_text())["status"] == "interrupted"
+    assert (run / "refine.json").exists() and not (run / "baselines.json").exists()
+    resumed = resume(run)
+    assert json.loads((run / "status.json").read_text())["status"] == "completed"
+    assert (run / "baselines.json").exists()
+    whole = activebonds.fit(model, traj, out=tmp_path / "whole", refine="lm", **FAST)
+    np.testing.assert_allclose(resumed.genome, whole.genome, rtol=0, atol=0)
+    assert rel_error(model, resumed.genome, truth) < 1e-8

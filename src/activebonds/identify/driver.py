@@ -545,8 +545,15 @@ def _wall(clock) -> dict:
 def _run_stage(stage, fit: stages.Fit, records: dict, clock=None) -> np.ndarray | None:
     """Run one post-fit stage (continuing from what it saved), save its record, hand its
     product on, the run's wall time brought up to date; returns its genome if it changed the
-    best model."""
+    best model. A stop asked before it starts (Ctrl-C during a stage that cannot stop midway:
+    the baselines, the uncertainty, the substeps check) ends the fit there, resumable."""
+    from ..runtime import stop_requested
+
     run = fit.run
+    if stop_requested():  # a Ctrl-C during the last stage's uninterruptible work: stop here
+        if run is not None:
+            run.update_status(status="interrupted", **_wall(clock))
+        raise KeyboardInterrupt
     if run is not None and stage.state is not None:
         run.update_status(status=stage.state)
     if fit.say is not None:
