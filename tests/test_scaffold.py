@@ -282,3 +282,25 @@ def test_the_next_command_keeps_the_frames_and_markers(tmp_path):
     assert "--frames 0:40" in hint and "--markers M0,M1,M2" in hint
     plain = cli_in_process("scaffold", data, "--out", tmp_path / "b.toml", "--no-gravity")
     assert "--frames" not in (plain.stdout + plain.stderr).split("next: ")[1]
+
+
+def test_a_doubtful_ground_confirmed_by_the_flight_gets_gravity():
+    """A body thrown onto a floor in MuJoCo (scripts/mujoco_thrown.py): the ground guess alone
+    is doubtful (its flattest axis not clearly flatter), the acceleration in its 38 frames of
+    flight (-9.6 m/s^2 along +Z) confirms it: gravity and the ground contacts are scaffolded."""
+    import sys
+    from pathlib import Path
+
+    from activebonds.data.orientation import agree, guess_gravity, guess_ground
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import mujoco_thrown
+
+    x = mujoco_thrown.simulate()
+    traj = Trajectory(x, np.ones(x.shape[:2], bool), mujoco_thrown.NAMES, 100.0)
+    ground, fall = guess_ground(traj), guess_gravity(traj)
+    assert not ground.clear and agree(ground, fall) is True  # the flight decides
+    made = scaffold(traj, total_mass=2.6)
+    assert made.gravity == "-Z" and "gravity = [0.0, 0.0, -9.81]" in made.text
+    assert any("confirmed by the acceleration in flight" in n for n in made.notes)
+    assert made.text.count('kind = "contact"') == 5

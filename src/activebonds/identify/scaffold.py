@@ -205,9 +205,11 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
     ground = guess_ground(traj)
     fall = guess_gravity(traj)
     agrees = agree(ground, fall)
+    # the ground guess alone when it is clear; a doubtful one when the acceleration in flight
+    # (gravity itself, an independent cue) confirms it
     sure = (
         ground is not None
-        and ground.clear
+        and (ground.clear or agrees is True)
         and agrees is not False
         and not (ground.against and agrees is None)
     )
@@ -223,7 +225,12 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
             )
         notes.append(f"gravity: none (the vertical is uncertain: {said}; give --up AXIS)")
         return None
-    notes.append(f"gravity: the vertical guessed from the recording, {ground.describe()}")
+    confirmed = (
+        "" if ground.clear else f"; confirmed by the acceleration in flight: {fall.describe()}"
+    )
+    notes.append(
+        f"gravity: the vertical guessed from the recording, {ground.describe()}{confirmed}"
+    )
     return ground.axis, ground.up
 
 
