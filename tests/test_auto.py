@@ -173,3 +173,26 @@ def test_a_shot_model_is_kept_only_where_it_predicts_the_fitted_frames_better(
     assert f"{shot_mm:.4g} vs 50 mm" in note
     if kept_name == "run":
         assert any("no better than run's" in line for line in said)
+
+
+def test_the_last_verdict_says_when_one_step_scores_are_the_noise_s():
+    from types import SimpleNamespace
+
+    from activebonds.pipeline import NOISY_ONE_STEP, Outcome
+
+    def comparison(what, text):
+        return SimpleNamespace(what=what, overall=SimpleNamespace(text=lambda: text))
+
+    held = SimpleNamespace(
+        frames=(321, 401),
+        comparisons=(
+            comparison("one step", "better than zero force by 26.5 % (1.592 vs 2.166 mm)"),
+            comparison("10 frames ahead", "better than zero force by 58.1 % (5.649 vs 13.48 mm)"),
+        ),
+    )
+    for window, said in ((7, True), (0, False)):
+        state = {"noise": {"sigma": 0.54, "window": window}}
+        line = Outcome(None, state, held, None).verdict()
+        assert line.startswith("verdict, held-out frames 321:401: one step: better")
+        assert (NOISY_ONE_STEP in line) == said
+        assert line.index("10 frames ahead") > (line.index(NOISY_ONE_STEP) if said else 0)
