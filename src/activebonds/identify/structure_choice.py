@@ -33,10 +33,13 @@ that RMS are tied, and the one with the fewest bonds among them is chosen (a can
 value the tail cannot tell from zero is not kept). Where no variant predicts the tail better
 than zero force overall (a body coasting or at rest there), the tail cannot choose and the
 default variant is kept: the BIC's decision with the scaffold's masses and anchors, as
-``structure`` decides (:func:`pick`). (With the masses conserving momentum instead, tried on a
-thrown MuJoCo body whose tail cannot choose, the masses came within 2 % but the held-out
-predictions were worse: one step 0.3307 against 0.2745 mm, 10 ahead 3.092 against 2.2 mm.) It is then decided and solved again on all the fitted
-frames (:func:`decide`).
+``structure`` decides (:func:`pick`). The chosen variant is then decided and solved again on
+all the fitted frames (:func:`decide`).
+
+(Tried: the masses conserving momentum as the default instead, on the thrown MuJoCo body of
+``scripts/mujoco_thrown.py`` whose tail cannot choose: the masses came within 2 %, but the
+held-out predictions were worse, one step 0.3307 against 0.2745 mm and 10 ahead 3.092
+against 2.2 mm.)
 """
 
 from __future__ import annotations
