@@ -302,7 +302,7 @@ def test_ctrl_c_during_the_refinement_stops_within_one_step_and_resumes(tmp_path
 
     model, data = _noisy_triangle()
     options = dict(population=8, generations=2, cost="shooting", horizon=(10,))
-    flag = _Flag(after=3)
+    flag = _Flag(after=4)  # the driver's poll before the refinement stage, then its steps
     runtime.on_stop_request(flag)
     try:
         with pytest.raises(StageInterrupted) as stopped:
@@ -310,7 +310,7 @@ def test_ctrl_c_during_the_refinement_stops_within_one_step_and_resumes(tmp_path
     finally:
         runtime.on_stop_request(None)
     assert isinstance(stopped.value, KeyboardInterrupt)
-    assert flag.polls == 3  # no step after the poll that said stop
+    assert flag.polls == 4  # no step after the poll that said stop
     record = json.loads((tmp_path / "R" / "refine.json").read_text())
     assert record["stages"] == []
     partial = record["interrupted"]
@@ -340,7 +340,7 @@ def test_the_command_line_says_resume_after_a_ctrl_c_in_the_refinement(tmp_path)
     run = tmp_path / "R"
     argv = ["fit", str(model), str(tmp_path / "tri.csv"), "--out", str(run)]
     argv += ["--population", "8", "--generations", "2", "--cost", "shooting", "--horizon", "10"]
-    runtime.on_stop_request(_Flag(after=2))
+    runtime.on_stop_request(_Flag(after=3))  # the driver's poll before the stage, 2 steps
     try:
         res = CliRunner().invoke(app, argv)
     finally:

@@ -528,7 +528,8 @@ def test_the_report_and_evaluate_give_the_same_free_run_and_the_wall_time_is_the
         TRIANGLE.read_text(),
     )
     run = tmp_path / "run"
-    flag = iter([False] * 2 + [True] * 1000)  # a Ctrl-C in the refinement's third step
+    # a Ctrl-C in the refinement's third step (the first poll: the driver's, before the stage)
+    flag = iter([False] * 3 + [True] * 1000)
     runtime.on_stop_request(lambda: next(flag))
     started = time.time()
     try:
