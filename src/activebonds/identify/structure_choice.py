@@ -50,6 +50,8 @@ from itertools import product
 import numpy as np
 
 from .. import bonds
+from ..data.coverage import present_windows
+from ..data.orientation import MIN_PHASE
 from ..model import Model, build
 from ..model.schema import ModelSpec
 
@@ -178,7 +180,6 @@ def acceleration_masses(positions: np.ndarray, dt: float, total: float) -> np.nd
 
 
 FLIGHT_MARGIN = 0.01  # m: a frame is in flight where every contact is this far off its plane
-MIN_FLIGHT = 5  # frames: a shorter flight is not used (its own parabola takes 3 of them)
 
 
 def flight_frames(spec: ModelSpec, positions) -> np.ndarray | None:
@@ -214,13 +215,17 @@ def momentum_masses(
     to ``total``. Positions, not accelerations: their noise is not amplified by differences,
     and equal noise on every marker adds a multiple of the identity to the Gram matrix, which
     moves no singular vector. ``frames`` [F] (e.g. :func:`flight_frames`): only those, each
-    run of at least :data:`MIN_FLIGHT` of them with its own parabola (between two landings the
+    run of at least ``orientation.MIN_PHASE`` of them with its own parabola (between two landings the
     centre of mass flies on a new one). None where fewer frames are complete than that takes
     or the vector has a sign change or a zero (no set of masses moves so), [P] otherwise."""
     x = np.asarray(positions, np.float64)
     f, p, d = x.shape
     complete = np.isfinite(x).all(axis=(1, 2))
-    runs = [np.arange(f)] if frames is None else _runs(np.asarray(frames, bool), MIN_FLIGHT)
+    runs = (
+        [np.arange(f)]
+        if frames is None
+        else [np.arange(a, b) for a, b in present_windows(frames, MIN_PHASE)]
+    )
     rests = []
     for run in runs:
         kept = run[complete[run]]
@@ -238,14 +243,6 @@ def momentum_masses(
     if not np.all(m > 1e-6 * np.abs(m).max()):
         return None
     return total * m / m.sum()
-
-
-def _runs(mask: np.ndarray, shortest: int) -> list[np.ndarray]:
-    """The frame numbers of each run of True in ``mask`` at least ``shortest`` long."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-    return [
-        np.arange(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= shortest
-    ]
 
 
 def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> ModelSpec:
