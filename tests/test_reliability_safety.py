@@ -262,6 +262,7 @@ def test_overwrite_only_replaces_a_run_directory(tmp_path, kind):
     assert (target / "chapter1.tex" if kind == "folder" else target).read_text() == "precious"
 
 
+@pytest.mark.slow  # a fit in a fresh process (23 s); tests/test_output_dotdot.py fits in-process
 def test_fit_out_with_dotdot_is_written_where_the_system_follows_it(tmp_path, tmp_path_factory):
     ws = workspace(tmp_path_factory)
     (tmp_path / "sub").mkdir()
