@@ -7,12 +7,20 @@ joints, joined by nine spring-damper tendons (800-3000 N/m, 0.5-3 N s/m), each a
 on a floor with friction 0.08; thrown from 0.6 m (2.5, 0.4, 0.5 m/s, spinning): 39 frames in
 flight, then it lands, folds, slides and stops. MuJoCo at 1 ms (implicitfast), recorded at
 100 Hz for 4 s, written in mm (``# units: mm``). Prints the truth. Then, e.g.:
-``activebonds auto thrown.csv --total-mass 2.6 --out thrown``.
+``activebonds auto thrown.csv --total-mass 2.6 --out thrown``, and
+
+    python scripts/mujoco_thrown.py --compare thrown/run-ground
+
+sets a fitted run's springs beside the truth: each tendon's stiffness and damping, the
+run's 95 % interval (``uncertainty.csv``), its error and whether the interval holds the
+truth, then the uncertainty's warnings.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -89,11 +97,40 @@ def simulate() -> np.ndarray:
     return out
 
 
+def compare(run: Path) -> list[str]:
+    """A fitted run's tendons beside the truth, in lines (see the module's docstring)."""
+    rows = {r["label"]: r for r in csv.DictReader((run / "uncertainty.csv").open())}
+    out = ["tendon, parameter: fitted [95 % interval] vs truth: error, interval holds it"]
+    for a, b, k, c in TENDONS:
+        for what, truth in (("stiffness", k), ("damping", c)):
+            row = rows.get(f"spring {a}-{b} {what}") or rows.get(f"spring {b}-{a} {what}")
+            if row is None:
+                out.append(f"  {a}-{b} {what}: not in the fitted model (truth {truth})")
+                continue
+            value = float(row["value"])
+            if row["determined"] == "yes":
+                low, high = float(row["ci95_low"]), float(row["ci95_high"])
+                span, holds = f"[{low:.4g}, {high:.4g}]", "yes" if low <= truth <= high else "no"
+            else:
+                span, holds = "[not determined]", "-"
+            error = 100.0 * (value / truth - 1.0)
+            out.append(f"  {a}-{b} {what}: {value:.4g} {span} vs {truth}: {error:+.1f} %, {holds}")
+    record = json.loads((run / "uncertainty.json").read_text())
+    out += [f"warning: {w}" for w in record.get("warnings", [])]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--out", type=Path, help="the recording to write (CSV)")
     ap.add_argument("--noise-mm", type=float, default=0.0, help="marker noise (mm)")
+    ap.add_argument("--compare", type=Path, help="a fitted run directory to set beside the truth")
     args = ap.parse_args(argv)
+    if args.compare:
+        print("\n".join(compare(args.compare)))
+        return 0
+    if args.out is None:
+        ap.error("--out or --compare is required")
     x = simulate()
     x = x + np.random.default_rng(SEED).normal(0.0, args.noise_mm / 1000.0, x.shape)
     head = ["Frame#", "Time"] + [f"{n}{a}" for n in NAMES for a in "XYZ"]

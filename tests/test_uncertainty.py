@@ -350,3 +350,38 @@ def test_a_fit_that_rejected_shooting_is_not_told_to_refit_with_shooting(tmp_pat
     assert warnings("restart", 1, 4)[0].endswith(
         "refit with --cost shooting for intervals that hold"
     )
+
+
+def test_a_model_that_misses_forces_is_told_its_intervals_do_not_describe_the_misfit():
+    """The residuals a correct model leaves are the markers' noise through the cost (sqrt(6)
+    sigma a coordinate one step ahead): at the true stiffnesses the fit's residual is that,
+    within 6 %, and no misfit is said; at stiffnesses 10 % and 50 % off, on markers precise
+    to 0.01 mm, the residuals are 3-40 times it and the warning says so."""
+    from activebonds.identify.problem import identification
+    from activebonds.identify.settings import FitSettings
+    from activebonds.identify.stages.uncertainty import marker_noise
+    from activebonds.identify.uncertainty import MISFIT, estimate, misfit, noise_gain
+    from activebonds.model import loads_model
+    from activebonds.simulation import simulate
+    from test_gravity_masses import STIFFNESS, chain
+
+    assert noise_gain("restart", 1) == pytest.approx(np.sqrt(6.0))
+    assert noise_gain("shooting", 10) == 1.0
+    clean = simulate(loads_model(chain()), 40, 50.0)
+    free_k = "{ value = 50.0, min = 0.5, max = 5000.0 }"
+    model = loads_model(chain(stiffness=(free_k,) * 3))
+    for sd, scale, said in ((5e-4, 1.0, False), (1e-5, 1.0, False), (1e-5, 0.9, True)):
+        rng = np.random.default_rng(6)
+        noisy = clean.positions + rng.normal(0.0, sd, clean.positions.shape)
+        data = type(clean)(positions=noisy, mask=clean.mask, markers=clean.markers, rate=50.0)
+        ident = identification(model, data, FitSettings())
+        noise = marker_noise(ident.all_data)
+        assert noise == pytest.approx(sd * 1000.0, rel=0.1)  # the fourth differences' estimate
+        report = estimate(ident, FitSettings(), np.log(np.array(STIFFNESS) * scale))
+        ratio = report.sigma_mm / (noise_gain("restart", 1) * noise)
+        found = misfit(report.sigma_mm, noise, report.cost, 1)
+        if said:
+            assert ratio > MISFIT and "does not explain the recording" in found
+            assert f"{ratio:.3g} times" in found
+        else:
+            assert 0.9 < ratio < 1.1 and found is None

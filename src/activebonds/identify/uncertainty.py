@@ -321,6 +321,43 @@ def warnings(
     return out
 
 
+MISFIT = 3.0  # residuals this many times what the markers' noise alone leaves: a misfit
+
+
+def noise_gain(cost: str, horizon: int) -> float:
+    """The residual RMS a correct model leaves on ``cost`` at ``horizon``, per coordinate, in
+    units of the markers' white noise sigma. Shooting (output error, the states free): 1. The
+    restart cost predicts frame t + j from x_t and the backward difference x_t - x_t-1, so
+    noise n enters as n_t+j - (1 + j) n_t + j n_t-1, of variance (1 + (1 + j)^2 + j^2)
+    sigma^2 (6 sigma^2 one step ahead), averaged over j = 1..horizon."""
+    if cost == "shooting":
+        return 1.0
+    j = np.arange(1, max(1, int(horizon)) + 1, dtype=np.float64)
+    return float(np.sqrt(np.mean(1.0 + (1.0 + j) ** 2 + j**2)))
+
+
+def misfit(sigma_mm: float, noise_mm: float, cost: str, horizon: int) -> str | None:
+    """Where the fit's residuals (``sigma_mm`` a coordinate) are more than :data:`MISFIT`
+    times what the markers' noise (``noise_mm`` a coordinate, :func:`.smoothing.noise_of`)
+    leaves on its cost, the warning in words: the model misses forces of the recording, the
+    intervals describe the noise and not that misfit, and the parameters absorb it (on
+    MuJoCo's thrown body, stiffnesses 35 % low: docs/EXPERIMENTS.md); else None."""
+    if not (np.isfinite(sigma_mm) and np.isfinite(noise_mm)) or noise_mm <= 0:
+        return None
+    expected = noise_gain(cost, horizon) * noise_mm
+    ratio = sigma_mm / expected
+    if ratio <= MISFIT:
+        return None
+    return (
+        f"the model does not explain the recording to its noise: its residuals are "
+        f"{ratio:.3g} times what the markers' noise alone leaves on this cost ({sigma_mm:.3g} "
+        f"vs {expected:.3g} mm a coordinate; noise {noise_mm:.3g} mm from the fourth "
+        "differences), so it misses forces of this motion; the intervals describe the noise, "
+        "not this misfit, which the parameters absorb: they can be off by far more than their "
+        "intervals (a body simulated by MuJoCo: stiffnesses 35 % low, outside their intervals)"
+    )
+
+
 def _residual_function(
     ident: Identification, settings: FitSettings, horizon: int, cost: str, states
 ):

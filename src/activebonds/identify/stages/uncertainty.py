@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...data.smoothing import noise_of
 from ...document import Section, Table
 from ...model.names import labeller
 from .. import integrator_check, uncertainty
@@ -48,6 +49,11 @@ class UncertaintyStage:
         record["warnings"] = uncertainty.warnings(
             cost, horizon, fit.settings.substeps, uncertainty.shooting_rejected(stages), checked
         )
+        noise = marker_noise(fit.ident.all_data)
+        record["noise_mm"] = noise
+        found = uncertainty.misfit(report.sigma_mm, noise, report.cost, horizon)
+        if found:
+            record["warnings"].append(found)
         return Outcome(record, files={"csv": report.csv_text()})
 
     def lines(self, record: dict) -> list[str]:
@@ -70,6 +76,14 @@ class UncertaintyStage:
             return {}
         est = record.get("estimates", [])
         return {"determined_parameters": sum(bool(e["determined"]) for e in est)}
+
+
+def marker_noise(recordings) -> float:
+    """The markers' noise per coordinate (mm, fourth differences: :func:`.noise_of`), pooled
+    over the recordings by frames."""
+    frames = np.array([r.positions.shape[0] for r in recordings], np.float64)
+    sigma = np.array([noise_of(r.positions).sigma for r in recordings], np.float64)
+    return float(np.sqrt(np.sum(frames * sigma**2) / np.sum(frames)))
 
 
 def checked_line(check: dict | None) -> list[str]:
