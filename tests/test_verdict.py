@@ -243,8 +243,7 @@ friction = 0.8
 def test_a_model_with_contacts_that_diverges_is_not_told_to_add_contacts(recording):
     """The falling triangle with a ground contact too far below to catch it: the advice names
     what it lacks (anchors; a drive only where the recording repeats itself), stiffer contacts
-    and a shorter horizon, never contacts
-    to add."""
+    and a shorter horizon, never contacts to add."""
     from activebonds.identify.verdict import free_run_advice
     from activebonds.report.evaluate import evaluate
 
