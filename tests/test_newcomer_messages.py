@@ -91,6 +91,14 @@ def test_one_vector_of_the_wrong_length_is_still_named_itself(tmp_path):
         cli_in_process("evaluate", model, TRIANGLE_CSV), "gravity: expected 3 components, got 2"
     )
     assert "is dimension right" not in line
+    # a lone vector (no particle position given): it may be the mistake as well
+    from activebonds.errors import InputError
+    from activebonds.model.io import loads_model
+
+    lone = 'dimension = 3\ngravity = [0.0, -9.81]\n[[particle]]\nname = "A"\nmass = 1.0\n'
+    with pytest.raises(InputError) as info:
+        loads_model(lone, "lone.toml")
+    assert str(info.value) == "lone.toml: gravity: expected 3 components, got 2"
 
 
 # --------------------------------------------------------------- 3. MODEL and DATA swapped

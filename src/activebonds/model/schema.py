@@ -380,17 +380,16 @@ class ModelSpec(_Strict):
         the same other length: the mistake is then the dimension, not the vectors."""
         found = self._vector_lengths()
         lengths = {n for ns in found.values() for n in ns}
-        if len(lengths) != 1 or self.dimension in lengths:
-            return
+        if len(lengths) != 1 or self.dimension in lengths or sum(map(len, found.values())) < 2:
+            return  # (one vector alone: it may be the mistake as well as the dimension)
         (n,) = lengths
         names = [
             f"every {k}" if len(v) > 1 else k if k == "gravity" else f"the {k}"
             for k, v in found.items()
         ]
         listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
-        one = len(names) == 1 and len(next(iter(found.values()))) == 1
         raise ValueError(
-            f"dimension = {self.dimension} but {listed} {'has' if one else 'have'} {n} "
+            f"dimension = {self.dimension} but {listed} have {n} "
             f"components: is dimension right? (dimension = {n} would match them)"
         )
 
