@@ -190,7 +190,8 @@ def test_a_fit_says_its_verdict_on_fitted_and_held_out_frames(recording, tmp_pat
         result.records["baselines"]["fitted"]["zero_force"]["one_step_rms_mm"], rel=1e-12
     )
     # what holds the model, kept for the free run's advice (report and resume read it back)
-    held = {"gravity": False, "contacts": 0, "anchors": 0, "drive": False}
+    # (the triangle's damped ringing repeats no period: no drive is advised, test_newcomer_messages)
+    held = {"gravity": False, "contacts": 0, "anchors": 0, "drive": False, "repeats": False}
     assert result.records["baselines"]["holds"] == held
     from activebonds.sweep.summary import row
 
@@ -211,14 +212,15 @@ def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
     )
     found = evaluate(falling, recording)
     assert found.model.free_run_rms_mm > 1000.0
-    assert found.holds == {"gravity": True, "contacts": 0, "anchors": 0, "drive": False}
+    held = {"gravity": True, "contacts": 0, "anchors": 0, "drive": False, "repeats": False}
+    assert found.holds == held
     advice = [line for line in found.lines() if line.startswith("advice:")]
     far = f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS) from the recording"
     assert advice == [
         f"advice: the free run {far}: the model has gravity and no ground contacts, so the "
-        "body falls; add ground contacts (activebonds scaffold writes them), anchors (unary "
-        "springs) or a rhythmic drive ([drive] and neural bonds)"
-    ]
+        "body falls; add ground contacts (activebonds scaffold writes them) or anchors (unary "
+        "springs)"
+    ]  # no rhythmic drive: the recording repeats no period
     assert found.record()["holds"] == found.holds
     assert not any(
         line.startswith("advice:") for line in evaluate(load_model(TRIANGLE), recording).lines()
@@ -240,8 +242,8 @@ friction = 0.8
 
 def test_a_model_with_contacts_that_diverges_is_not_told_to_add_contacts(recording):
     """The falling triangle with a ground contact too far below to catch it: the advice names
-    what it lacks (anchors, a drive), stiffer contacts and a shorter horizon, never contacts
-    to add."""
+    what it lacks (anchors; a drive only where the recording repeats itself), stiffer contacts
+    and a shorter horizon, never contacts to add."""
     from activebonds.identify.verdict import free_run_advice
     from activebonds.report.evaluate import evaluate
 
@@ -249,15 +251,15 @@ def test_a_model_with_contacts_that_diverges_is_not_told_to_add_contacts(recordi
         "dimension = 3", "dimension = 3\ngravity = [0.0, 0.0, -9.81]"
     )
     found = evaluate(loads_model(text + CONTACT), recording)
-    assert found.holds == {"gravity": True, "contacts": 1, "anchors": 0, "drive": False}
+    held = {"gravity": True, "contacts": 1, "anchors": 0, "drive": False, "repeats": False}
+    assert found.holds == held
     advice = [line for line in found.lines() if line.startswith("advice:")]
     far = f"ends {found.model.free_run_rms_mm / 1000:.3g} m (RMS) from the recording"
     assert advice == [
         f"advice: the free run {far} although the model has 1 ground contact: they do not "
-        "hold it on the recording's path; add anchors (unary springs) or a rhythmic drive "
-        "([drive] and neural bonds), make the contacts stiffer (raise their stiffness and its "
-        "bounds), or judge it over a shorter horizon (evaluate --horizon, the frames-ahead "
-        "comparison) than a free run of the whole window"
+        "hold it on the recording's path; add anchors (unary springs), make the contacts "
+        "stiffer (raise their stiffness and its bounds), or judge it over a shorter horizon "
+        "(evaluate --horizon, the frames-ahead comparison) than a free run of the whole window"
     ]
     assert "add ground contacts" not in advice[0]
     # anchors and a drive present: only what it lacks is named

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .arguments import check_order
 
 
 @app.command()
@@ -37,6 +38,7 @@ def baselines(
     from .options import settings_from_options
 
     try:
+        check_order("baselines", model, [traj])
         settings = settings_from_options(
             markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),

@@ -12,6 +12,7 @@ from rich.text import Text
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .arguments import check_order
 
 
 @app.command()
@@ -104,6 +105,7 @@ def evaluate(
     from ..report.gait_runs import parse_up
 
     try:
+        check_order("evaluate", model, [traj])
         substeps, integrator = _integration(model, substeps, integrator)
         window = parse_option_frames(frames, parse_frames)
         chosen = parse_markers(markers)

@@ -9,6 +9,7 @@ import typer
 
 from ..errors import InputError
 from .app import app, fail, out
+from .arguments import check_order
 
 
 @app.command()
@@ -47,6 +48,7 @@ def export(
 
     notes: list[str] = []
     try:
+        check_order("export", model)
         if fmt not in FORMATS:
             raise InputError("--format", f"expected {' or '.join(FORMATS)}, got '{fmt}'")
         m = load_model(model)

@@ -10,6 +10,7 @@ import typer
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .arguments import check_order
 
 METHODS = ("model", "spline", "linear", "pca")
 MAX_STEPS = 200  # identify.fill.MAX_STEPS (not imported here: the command line starts fast)
@@ -136,6 +137,7 @@ def fill(
     from ..model import load_model
 
     try:
+        check_order("fill", model, [traj])
         if method not in METHODS:
             raise InputError("--method", f"expected {', '.join(METHODS)}, got '{method}'")
         if denoise and method != "model":

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, get_args
 
 from . import interrupts
 
@@ -28,6 +28,7 @@ from ..identify.settings import (  # noqa: E402
     parse_markers,
 )
 from .app import app, fail, out, parse_option_frames, say  # noqa: E402
+from .arguments import check_order  # noqa: E402
 from .progress_bar import run_progress as _progress  # noqa: E402
 
 
@@ -132,6 +133,7 @@ def simulate(
     from ..simulation import simulate_to_file
 
     try:
+        check_order("simulate", model)
         n = simulate_to_file(model, frames, rate, out_path, start, substeps, integrator)
     except InputError as e:
         fail(e)
@@ -142,6 +144,8 @@ def simulate(
 
 # the fit's defaults are the settings' own (one source for Python and the command line)
 DEFAULT = {name: f.default for name, f in FitSettings.model_fields.items()}
+# --cost: auto (the command line's choice between the settings' own) or one of them
+COSTS = ("auto", *get_args(FitSettings.model_fields["cost"].annotation))
 
 
 @app.command()
@@ -264,6 +268,11 @@ def fit(
 
     interrupts.expect_run(out_dir)
     try:
+        check_order("fit", model, traj)
+        if cost not in COSTS:
+            raise InputError(
+                "--cost", f"expected {', '.join(COSTS[:-1])} or {COSTS[-1]}, got '{cost}'"
+            )
         settings = settings_from_options(
             markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .arguments import check_order
 
 
 @app.command()
@@ -41,6 +42,7 @@ def structure(
     from .options import settings_from_options
 
     try:
+        check_order("structure", model, [traj])
         if out_file.exists() and not overwrite:
             raise InputError(out_file, "exists; pass --overwrite to replace it")
         if smooth:

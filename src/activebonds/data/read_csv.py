@@ -117,6 +117,35 @@ def _header_layout(
     return frame_col, time_col, names, len(axes)
 
 
+#: Separators other than the comma that a header may use, by how a message names them.
+OTHER_SEPARATORS = {";": "';'", "\t": "tabs", "|": "'|'"}
+
+
+def _check_separator(source: Path, header: str, line_no: int) -> None:
+    """Refuse a header row that has no comma but another separator (a semicolon-, tab- or
+    bar-separated export, or columns separated by spaces): it would read as one column."""
+    if "," in header:
+        return
+    if header.split("\t", 1)[0].strip() == "PathFileType":
+        raise InputError(
+            source,
+            "this is a TRC file (its header starts with PathFileType), not a comma-separated "
+            "CSV: give it the extension .trc",
+            where=f"line {line_no}",
+        )
+    found = [name for sep, name in OTHER_SEPARATORS.items() if sep in header]
+    if not found and len(header.split()) >= 3:
+        found = ["spaces"]
+    if found:
+        raise InputError(
+            source,
+            f"the file seems to use {found[0]} as its separator (the header has no comma); "
+            "expected comma-separated columns: Frame#,Time,<Name>X,<Name>Y,<Name>Z,... "
+            "(export or save it as CSV with commas)",
+            where=f"line {line_no}",
+        )
+
+
 def read_csv(
     path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
 ) -> Trajectory:
@@ -137,6 +166,7 @@ def read_csv(
             path,
             f"{'file is empty' if not lines else 'no header line'}; expected Frame#,Time,<Name>X,<Name>Y,<Name>Z,...",
         )
+    _check_separator(path, lines[i], i + 1)
     try:
         header_fields = split_csv_line(lines[i])
         columns = [c.strip() for c in header_fields]

@@ -207,21 +207,33 @@ def lines(label: str, comparisons: Sequence[Comparison]) -> list[str]:
     return [line for c in comparisons for line in c.lines(label)]
 
 
-def holds(model) -> dict:
+def holds(model, data=None) -> dict:
     """What holds or drives a model's body, for :func:`free_run_advice`: ``gravity`` (a
     nonzero gravity), ``contacts`` (its ground contacts), ``anchors`` (its unary springs) and
-    ``drive`` (a rhythmic drive). Plain JSON values, kept in the records."""
+    ``drive`` (a rhythmic drive); with the recorded window ``data`` (its ``positions`` [F, P,
+    D] and ``mask`` [F, P]), ``repeats``: whether it repeats itself
+    (:func:`~activebonds.data.period.recording_period`, of the heights along the model's
+    gravity, of every coordinate without one). Plain JSON values, kept in the records."""
     import numpy as np
 
     from .. import bonds
+    from ..data.period import recording_period
 
     counts = model.bond_counts()
-    return {
-        "gravity": bool(np.linalg.norm(np.asarray(model.params.gravity, float)) > 0),
+    gravity = np.asarray(model.params.gravity, float)
+    out = {
+        "gravity": bool(np.linalg.norm(gravity) > 0),
         "contacts": int(counts.get(bonds.contact.KIND.name, 0)),
         "anchors": int(counts.get(bonds.unary.KIND.name, 0)),
         "drive": model.spec.drive is not None,
     }
+    if data is not None:
+        up = -gravity if out["gravity"] else None
+        out["repeats"] = bool(np.isfinite(recording_period(data.positions, data.mask, up)))
+    return out
+
+
+DRIVE = "a rhythmic drive ([drive] and neural bonds)"
 
 
 def free_run_advice(free_run_rms_mm, held: dict | None = None) -> str | None:
@@ -229,11 +241,15 @@ def free_run_advice(free_run_rms_mm, held: dict | None = None) -> str | None:
     :data:`ADVICE_MM`, or non-finite), None otherwise. It depends on what holds the model
     (``held``, from :func:`holds`; None: not known, as in older records):
 
-    * with ground contacts: they did not keep it on the recording; anchors or a drive (what it
-      lacks of them), stiffer contacts, or judging it over a shorter horizon;
+    * with ground contacts: they did not keep it on the recording's path; anchors or a drive
+      (what it lacks of them), stiffer contacts, or judging it over a shorter horizon;
     * gravity and no contacts: the body falls; ground contacts (``scaffold`` writes them),
       anchors or a drive;
     * neither: nothing holds or drives it; anchors or a drive.
+
+    A rhythmic drive is advised only for a recording that repeats itself (``repeats``, or
+    not known): a thrown or passive body that does not is told of contacts, anchors and
+    gravity only.
     """
     x = _number(free_run_rms_mm)
     if math.isnan(x) or x <= ADVICE_MM:
@@ -245,13 +261,14 @@ def free_run_advice(free_run_rms_mm, held: dict | None = None) -> str | None:
             "contacts (gravity without support falls), anchors (unary springs) or a rhythmic "
             "drive"
         )
+    repeats = held.get("repeats") is not False  # unknown (an older record): as if it did
     lacks = [
         what
-        for what, has in (
-            ("anchors (unary springs)", held.get("anchors")),
-            ("a rhythmic drive ([drive] and neural bonds)", held.get("drive")),
+        for what, has, applies in (
+            ("anchors (unary springs)", held.get("anchors"), True),
+            (DRIVE, held.get("drive"), repeats),
         )
-        if not has
+        if applies and not has
     ]
     n = int(held.get("contacts") or 0)
     if n:
@@ -268,6 +285,17 @@ def free_run_advice(free_run_rms_mm, held: dict | None = None) -> str | None:
         return (
             f"advice: the free run {far}: the model has gravity and no ground contacts, so "
             f"the body falls; add {_either(options)}"
+        )
+    if not repeats:
+        ground = "gravity with ground contacts (activebonds scaffold writes them)"
+        if lacks:
+            return (
+                f"advice: the free run {far}: nothing holds the body (the recording does not "
+                f"repeat itself: no rhythmic drive); add {_either([*lacks, ground])}"
+            )
+        return (
+            f"advice: the free run {far} although the model has anchors: make them stiffer, "
+            f"add {ground}, or judge it over a shorter horizon (evaluate --horizon)"
         )
     if not lacks:
         return (

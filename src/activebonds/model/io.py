@@ -58,8 +58,44 @@ def _field_path(loc: tuple) -> str:
     return out
 
 
-def _explain(err: ValidationError, source: str) -> InputError:
-    """Every problem on one line, each as 'field.path: what is wrong'. The errors of the
+_TABLE_HEADER = re.compile(r"^[ \t]*\[\[[ \t]*(bond|particle)[ \t]*\]\][ \t]*(?:#.*)?$", re.M)
+_BLOCK = re.compile(r"^(bond|particle)\[(\d+)\]")
+
+
+def _ordinal(n: int) -> str:
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+def block_lines(text: str, data: dict) -> dict[str, list[int]]:
+    """The line (from 1) of each ``[[bond]]`` and ``[[particle]]`` header of a model file's
+    ``text``, per table name, where their count is the parsed ``data``'s (else not given)."""
+    found: dict[str, list[int]] = {}
+    for m in _TABLE_HEADER.finditer(text):
+        found.setdefault(m.group(1), []).append(text.count("\n", 0, m.start()) + 1)
+    return {
+        k: v for k, v in found.items() if isinstance(data.get(k), list) and len(data[k]) == len(v)
+    }
+
+
+def _placed(problem: str, lines: dict[str, list[int]] | None) -> str:
+    """``bond[6].stifness: ..`` led by where that block starts in the file, ``line 57 (the
+    7th [[bond]]): bond[6].stifness: ..`` (people count the blocks from 1, the path from 0)."""
+    m = _BLOCK.match(problem)
+    if not lines or m is None:
+        return problem
+    table, i = m.group(1), int(m.group(2))
+    at = lines.get(table, [])
+    if i >= len(at):
+        return problem
+    return f"line {at[i]} (the {_ordinal(i + 1)} [[{table}]]): {problem}"
+
+
+def _explain(
+    err: ValidationError, source: str, lines: dict[str, list[int]] | None = None
+) -> InputError:
+    """Every problem on one line, each as 'field.path: what is wrong' (led by the line of its
+    bond or particle block where ``lines``, :func:`block_lines`, has it). The errors of the
     alternatives a union did not take ('a number or a table') are dropped when a real
     problem was found at or below the same field."""
     found = []
@@ -84,21 +120,24 @@ def _explain(err: ValidationError, source: str) -> InputError:
             continue
         if noise:  # every alternative of a union failed: say what the field takes
             msg = _expected(where.rsplit(".", 1)[-1].split("[")[0], msg)
-        text = f"{where}: {msg}" if where else msg
+        text = _placed(f"{where}: {msg}", lines) if where else msg
         if text not in problems:
             problems.append(text)
     return InputError(source, "; ".join(problems[:4]))
 
 
-def parse_model(data: dict, source: str = "<model>") -> Model:
+def parse_model(data: dict, source: str = "<model>", text: str | None = None) -> Model:
+    """The model of a parsed model file (``text``: the file's text, for the line of a bond or
+    particle block a message names)."""
+    lines = block_lines(text, data) if text is not None else None
     try:
         spec = ModelSpec.model_validate(data)
     except ValidationError as err:
-        raise _explain(err, source) from None
+        raise _explain(err, source, lines) from None
     try:
         return build(spec)
     except ValueError as err:
-        raise InputError(source, str(err)) from None
+        raise InputError(source, _placed(str(err), lines)) from None
 
 
 def loads_model(text: str, source: str = "<model>") -> Model:
@@ -106,7 +145,7 @@ def loads_model(text: str, source: str = "<model>") -> Model:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise InputError(source, f"not valid TOML ({err})") from None
-    return parse_model(data, source)
+    return parse_model(data, source, text)
 
 
 def load_model(path: str | Path) -> Model:

@@ -278,6 +278,7 @@ class ModelSpec(_Strict):
     @model_validator(mode="after")
     def _check_references(self) -> ModelSpec:
         d = self.dimension
+        self._check_dimension()
         names = [p.name for p in self.particle]
         seen: set[str] = set()
         for i, n in enumerate(names):
@@ -350,6 +351,47 @@ class ModelSpec(_Strict):
                     )
                 types[b.type] = sig
         return self
+
+    def _vector_lengths(self) -> dict[str, list[int]]:
+        """The number of components of each vector the file gives (gravity, the particles'
+        positions and velocities, the bonds' vector parameters), by what a message calls it."""
+        found: dict[str, list[int]] = {}
+        gravity = self.gravity
+        if isinstance(gravity, GravityParam):
+            gravity = gravity.direction
+        if gravity is not None:
+            found["gravity"] = [len(gravity)]
+        for field in ("position", "velocity"):
+            for p in self.particle:
+                vec = getattr(p, field)
+                if vec is not None:
+                    found.setdefault(f"particle {field}", []).append(len(vec))
+        for b in self.bond:
+            for par in bonds.get(b.kind).parameters:
+                value = getattr(b, par.key, None)
+                if par.form not in ("vector", "constant") or value is None:
+                    continue
+                vals = value if isinstance(value, list) else value.value
+                found.setdefault(f"{b.kind} {par.key}", []).append(len(vals))
+        return found
+
+    def _check_dimension(self) -> None:
+        """Refuse a ``dimension`` that every vector of the file disagrees with, all having
+        the same other length: the mistake is then the dimension, not the vectors."""
+        found = self._vector_lengths()
+        lengths = {n for ns in found.values() for n in ns}
+        if len(lengths) != 1 or self.dimension in lengths or sum(map(len, found.values())) < 2:
+            return  # (one vector alone: it may be the mistake as well as the dimension)
+        (n,) = lengths
+        names = [
+            f"every {k}" if len(v) > 1 else k if k == "gravity" else f"the {k}"
+            for k, v in found.items()
+        ]
+        listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+        raise ValueError(
+            f"dimension = {self.dimension} but {listed} have {n} "
+            f"components: is dimension right? (dimension = {n} would match them)"
+        )
 
     def _check_coupling(self, names: set[str]) -> None:
         """An entrained drive's signals name particles, and some neural bond reads it."""

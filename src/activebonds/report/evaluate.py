@@ -244,7 +244,7 @@ def evaluate(
         )
         if gait
         else None,
-        holds=holds(model),
+        holds=holds(model, data),
         body_markers=tuple(model.particle_names[i] for i in picked),
         body=body_found,
     )

@@ -39,6 +39,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..data.period import MIN_PEAK, PEAK_SHARE, autocorrelation, dominant_period  # noqa: F401
+
 STRIDES = 5  # strides of each free run
 STARTS = 10  # free runs, from start frames spread over the window
 PHASE_BINS = 200  # phases per cycle: a shift resolution of 1/200 of a stride
@@ -46,8 +48,6 @@ PERIOD_TOLERANCE = 0.03  # (i) within 3 % of the recording's period
 EXCURSION_TOLERANCE = 0.25  # (ii) every foot within 25 % of its recorded excursion
 BODY_LIMIT_MM = 100.0  # (iii) body markers within 100 mm of their recorded mean positions
 CYCLE_RMS_LIMIT_MM = 50.0  # (iv) cycle average within 50 mm RMS of the mean gait
-PEAK_SHARE = 0.9  # the period's peak: the first reaching this share of the highest peak
-MIN_PEAK = 0.3  # a correlation below this at every peak: no period
 
 
 # ----------------------------------------------------------------------------- signals
@@ -65,60 +65,6 @@ def lowest_markers(positions: np.ndarray, up: Sequence[float], share: float = 0.
     h = np.nanmean(vertical(positions, up), axis=0)
     lo, hi = np.nanmin(h), np.nanmax(h)
     return [int(i) for i in np.flatnonzero(h <= lo + share * (hi - lo))]
-
-
-def autocorrelation(heights: np.ndarray, max_lag: int) -> np.ndarray:
-    """Per lag ``k = 0 .. max_lag``, the Pearson correlation of each column of ``heights``
-    [F, H] with itself ``k`` frames later, averaged over the columns that vary (NaN frames
-    left out), [max_lag + 1]; NaN where nothing is defined."""
-    h = np.asarray(heights, np.float64)
-    out = np.full(max_lag + 1, np.nan)
-    for k in range(max_lag + 1):
-        a, b = h[: h.shape[0] - k], h[k:]
-        r = []
-        for j in range(h.shape[1]):
-            ok = np.isfinite(a[:, j]) & np.isfinite(b[:, j])
-            if ok.sum() < 3:
-                continue
-            x = a[ok, j] - a[ok, j].mean()
-            y = b[ok, j] - b[ok, j].mean()
-            den = np.sqrt((x * x).sum() * (y * y).sum())
-            if den > 0:
-                r.append(float((x * y).sum() / den))
-        if r:
-            out[k] = float(np.mean(r))
-    return out
-
-
-def dominant_period(heights: np.ndarray, max_lag: int | None = None) -> float:
-    """The dominant period (frames) of ``heights`` [F, H] (one column per foot): the first
-    peak of :func:`autocorrelation` after its first zero crossing that reaches
-    :data:`PEAK_SHARE` of the highest peak, refined by a parabola through it and its
-    neighbours. ``max_lag``: the longest lag looked at (default half the frames, so that
-    every lag has half the signal to correlate). NaN when there is no such peak, or the
-    highest is below :data:`MIN_PEAK`, or the heights are not finite."""
-    h = np.asarray(heights, np.float64)
-    if h.ndim == 1:
-        h = h[:, None]
-    if np.isinf(h).any() or not np.isfinite(h).any():
-        return float("nan")
-    n = h.shape[0]
-    lag = n // 2 if max_lag is None else min(int(max_lag), n - 3)
-    if lag < 3:
-        return float("nan")
-    r = autocorrelation(h, lag)
-    below = np.flatnonzero(r < 0)
-    if below.size == 0:
-        return float("nan")
-    k = np.arange(int(below[0]) + 1, lag)
-    peaks = k[(r[k] >= r[k - 1]) & (r[k] > r[k + 1])]
-    if peaks.size == 0 or np.nanmax(r[peaks]) < MIN_PEAK:
-        return float("nan")
-    p = int(peaks[np.flatnonzero(r[peaks] >= PEAK_SHARE * np.nanmax(r[peaks]))[0]])
-    a, b, c = r[p - 1], r[p], r[p + 1]
-    curve = a - 2.0 * b + c
-    shift = 0.5 * (a - c) / curve if curve < 0 else 0.0
-    return float(p + np.clip(shift, -0.5, 0.5))
 
 
 def excursions(heights: np.ndarray, stride: float) -> np.ndarray:

@@ -50,7 +50,7 @@ class BaselinesStage:
         record["fitted"] = {k: m.to_dict() for k, m in found.items()}
         judged = comparisons(model, data, DEFAULT_AHEAD, substeps=s.substeps, method=s.integrator)
         record["judged"] = [c.to_dict() for c in judged]
-        record["holds"] = holds(model)
+        record["holds"] = holds(model, data)
         return Outcome(record)
 
     def lines(self, record: dict) -> list[str]:
