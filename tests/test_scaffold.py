@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory
+from activebonds.data.orientation import guess_ground
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
 from activebonds.identify.scaffold import scaffold
@@ -304,3 +305,74 @@ def test_a_doubtful_ground_confirmed_by_the_flight_gets_gravity():
     assert made.gravity == "-Z" and "gravity = [0.0, 0.0, -9.81]" in made.text
     assert any("confirmed by the acceleration in flight" in n for n in made.notes)
     assert made.text.count('kind = "contact"') == 5
+
+
+HANGING = """
+name = "hanging"
+dimension = 3
+gravity = [0.0, 0.0, -9.81]
+
+[[particle]]
+name = "M1"
+mass = 0.4
+position = [0.0, 0.0, 0.989]
+velocity = [0.1, 0.1, 0.0]
+
+[[particle]]
+name = "M2"
+mass = 0.3
+position = [0.0, 0.0, 0.76]
+velocity = [0.3, 0.4, 0.0]
+
+[[particle]]
+name = "M3"
+mass = 0.2
+position = [0.0, 0.0, 0.535]
+velocity = [0.5, 0.8, 0.0]
+
+[[bond]]
+kind = "unary"
+particles = ["M1"]
+stiffness = 800.0
+damping = 0.3
+anchor = [0.0, 0.0, 1.0]
+
+[[bond]]
+kind = "binary"
+particles = ["M1", "M2"]
+stiffness = 600.0
+rest_length = 0.22
+damping = 0.3
+
+[[bond]]
+kind = "binary"
+particles = ["M2", "M3"]
+stiffness = 400.0
+rest_length = 0.22
+damping = 0.2
+"""
+
+
+def test_a_body_hanging_from_a_marker_is_not_stood_on_it_upside_down():
+    """A chain hanging from a pivot that is not recorded, swinging gently (our simulator): its
+    top marker is the flattest "ground" upside down, and no other cue disagrees. The vertical is
+    then uncertain and no gravity is scaffolded; given --up, the bottom mass swinging through
+    its lowest point gets no treadmill belt (its velocity there is no single one)."""
+    from activebonds.data.orientation import guess_gravity, vertical_doubts
+    from activebonds.model import loads_model
+    from activebonds.simulation import simulate
+
+    data = simulate(loads_model(HANGING), 300, 100.0)
+    ground = guess_ground(data)
+    assert (ground.axis, ground.up, ground.feet) == (2, -1.0, ("M1",))  # the cue upside down
+    doubts = vertical_doubts(ground, guess_gravity(data))
+    assert any("rests on M1 alone" in d and "hanging" in d for d in doubts)
+    found = scaffold(data, total_mass=0.9)
+    assert found.gravity == "none" and found.contacts == 0
+    assert "gravity: none (the vertical is uncertain" in "\n".join(found.notes)
+    told = scaffold(data, total_mass=0.9, up="Z")
+    assert told.gravity == "-Z"
+    model = tomllib.loads(told.text)
+    contacts = [b for b in model["bond"] if b["kind"] == "contact"]
+    assert contacts and all("surface_velocity" not in b for b in contacts)
+    assert "treadmill" not in "\n".join(told.notes)

@@ -206,7 +206,9 @@ def _guess_ground(traj: Trajectory) -> Ground | None:
 
 
 def _against(traj: Trajectory, x: np.ndarray, axis: int, up: float, on: np.ndarray) -> str:
-    """The feet cue's disagreement with the flattest direction, or "" (see the module)."""
+    """The feet cue's doubt about the flattest direction, or "" (see the module): the ground
+    rests on one marker alone while another direction has several feet, or has none with
+    more (one marker "on the ground" in every frame may be the top of a hanging body)."""
     if len(on) != 1:
         return ""
     best = None
@@ -217,8 +219,11 @@ def _against(traj: Trajectory, x: np.ndarray, axis: int, up: float, on: np.ndarr
             other = feet(sign * x[:, :, a])
             if len(other) >= 2 and (best is None or len(other) > len(best[2])):
                 best = (a, sign, other)
-    if best is None:
-        return ""
+    if best is None:  # one foot, and no other direction with more: a body hanging from it
+        return (  # (a pendulum, an arm, a chain from a pivot) looks the same upside down
+            f"the ground rests on {traj.markers[on[0]]} alone: a body hanging from it would "
+            "look the same upside down"
+        )
     a, sign, other = best
     names = ", ".join(traj.markers[i] for i in other)
     return (

@@ -60,8 +60,10 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   bounds a factor 100 either way; damping 10 % of critical for a mass ``M / n``, bounds a
   factor 100 either way; friction 0.8 in ``[0, 2]``. On a treadmill (the contact markers
   move along the ground at a median velocity over :data:`BELT_SPEED` while on it, and that
-  much faster than the markers' mean: a body sliding with its feet rides no belt) the belt's
-  velocity, that median, is the contacts' fixed ``surface_velocity``.
+  much faster than the markers' mean: a body sliding with its feet rides no belt; all at about
+  that velocity, the interquartile range of their velocities within :data:`BELT_SPREAD` of it:
+  a low point swinging through, as a pendulum's, rides none) the belt's velocity, that median,
+  is the contacts' fixed ``surface_velocity``.
 """
 
 from __future__ import annotations
@@ -91,6 +93,7 @@ CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at leas
 HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
 PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
 BELT_SPEED = 0.1  # m/s: contact markers sliding faster than this ride a treadmill belt
+BELT_SPREAD = 0.5  # a belt's velocity: the contacts' (interquartile range) within this share
 FRICTION = (0.8, 0.0, 2.0)  # Coulomb coefficient: value, min, max
 AXES = "XYZ"
 
@@ -542,8 +545,15 @@ def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
         med[axis] = 0.0
         along = np.median(with_body, axis=0)
         along[axis] = 0.0
-        # a belt carries the feet, not the body: a body sliding with its feet rides none
-        if np.linalg.norm(med) > BELT_SPEED and np.linalg.norm(med - along) > BELT_SPEED:
+        # a belt carries the feet, not the body: a body sliding with its feet rides none;
+        # and at one velocity: a low point swinging through (a pendulum's) rides none
+        spread = np.subtract(*np.percentile(tangential, [75, 25], axis=0))
+        spread[axis] = 0.0
+        if (
+            np.linalg.norm(med) > BELT_SPEED
+            and np.linalg.norm(med - along) > BELT_SPEED
+            and np.linalg.norm(spread) <= BELT_SPREAD * np.linalg.norm(med)
+        ):
             belt = med
     n = len(touching)
     k = total * G / (n * PENETRATION)
