@@ -277,7 +277,12 @@ def shooting_rejected(stages) -> list[str]:
 
 
 def warnings(
-    cost: str, horizon: int, substeps: int, rejected: Sequence[str] = (), checked=None
+    cost: str,
+    horizon: int,
+    substeps: int,
+    rejected: Sequence[str] = (),
+    checked=None,
+    modes: str | None | bool = False,
 ) -> list[str]:
     """Where the intervals of a fit on cost ``cost`` at ``horizon`` with ``substeps`` cannot
     be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle). ``rejected``: why
@@ -285,7 +290,10 @@ def warnings(
     warning says so, instead of sending the user to a shooting fit that was already tried.
     ``checked``: the fit moved to finer substeps (:func:`.integrator_check.check`: its result,
     or why it was not made); where it was made, its numbers replace the warning in words (and
-    a fit that does not move gets none)."""
+    a fit that does not move gets none). ``modes``: where no such check was made, the
+    fitted springs' fastest oscillation against the step (:func:`.modes.warning`: its
+    sentence, or None where the step resolves it); False: not computed, the warning stays in
+    words."""
     out = []
     if cost == "restart" and int(horizon) == 1:
         head = (
@@ -311,6 +319,9 @@ def warnings(
     if hasattr(checked, "warning"):
         if checked.warning():
             out.append(checked.warning())
+    elif modes is not False:
+        if modes:
+            out.append(modes)
     elif int(substeps) == 1:
         out.append(
             "the integrator takes one step per frame: if the motion is finer than the frames, "

@@ -10,7 +10,7 @@ import numpy as np
 from ...data.smoothing import noise_of
 from ...document import Section, Table
 from ...model.names import labeller
-from .. import integrator_check, uncertainty
+from .. import integrator_check, modes, uncertainty
 from .base import Fit, Outcome
 
 NAME = "uncertainty"
@@ -46,8 +46,18 @@ class UncertaintyStage:
             record["substeps_check"] = (
                 checked.record() if hasattr(checked, "record") else {"not_made": checked}
             )
+        fastest = None
+        if not hasattr(checked, "warning"):  # no finer-substeps check: the springs' modes
+            fastest = fastest_mode(fit)
+            if fastest is not None:
+                record["fastest_mode"] = {"omega": fastest[0], "dt": fastest[1]}
         record["warnings"] = uncertainty.warnings(
-            cost, horizon, fit.settings.substeps, uncertainty.shooting_rejected(stages), checked
+            cost,
+            horizon,
+            fit.settings.substeps,
+            uncertainty.shooting_rejected(stages),
+            checked,
+            None if fastest is None else modes.warning(*fastest, fit.settings.substeps),
         )
         noise = marker_noise(fit.ident.all_data)
         record["noise_mm"] = noise
@@ -76,6 +86,22 @@ class UncertaintyStage:
             return {}
         est = record.get("estimates", [])
         return {"determined_parameters": sum(bool(e["determined"]) for e in est)}
+
+
+MODE_FRAMES = 20  # recorded configurations the fitted forces are linearised at, at most
+
+
+def fastest_mode(fit: Fit) -> tuple[float, float] | None:
+    """(the fitted forces' fastest angular frequency, the frame interval) over up to
+    :data:`MODE_FRAMES` frames with every marker, spread over the fitted window
+    (:func:`.modes.fastest`), or None where no frame has them all."""
+    data = fit.ident.data
+    whole = np.flatnonzero(np.asarray(data.mask, bool).all(axis=1))
+    if whole.size == 0:
+        return None
+    frames = whole[np.unique(np.linspace(0, whole.size - 1, MODE_FRAMES).round().astype(int))]
+    model = fit.ident.model.with_genome(np.asarray(fit.genome, np.float64))
+    return modes.fastest(model, np.asarray(data.positions)[frames]), float(data.dt)
 
 
 def marker_noise(recordings) -> float:
