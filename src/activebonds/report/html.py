@@ -596,6 +596,8 @@ def run_sections(
         [plots.Series(record.label, [record.history])], fig_dir / "convergence", references=refs
     )
     traj = plots.trajectories(pred, fig_dir / "trajectories", **frame_at)
+    zero_one, _ = zero_force_predictions(pred.recorded, 1)
+    errors = plots.one_step_errors(pred, zero_one, fig_dir / "one_step_errors", **frame_at)
     searched = searched_model(record)
     params = plots.parameters(model, fig_dir / "parameters", bounds=searched)
     variants = plots.variant_success(record.history, fig_dir / "variants")
@@ -648,6 +650,13 @@ def run_sections(
                     traj[0],
                     "Positions against the recording's frame number (time on top): recorded, "
                     "one-step predictions, free run.",
+                ),
+                Figure(
+                    errors[0],
+                    "Each frame's one-step error (RMS over the markers), the model's beside "
+                    "zero force's, on a log scale; red where the model is worse. Where it "
+                    "rises far above the markers' noise in some frames only, the model misses "
+                    "forces there (a contact, an impact).",
                 ),
                 *(
                     [Figure(media.mp4, f"The animation as a video ({media.mp4.name}).")]

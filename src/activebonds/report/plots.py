@@ -437,6 +437,68 @@ def trajectories_figure(
     return fig
 
 
+ZERO_FORCE = "0.55"  # grey: the zero-force predictor
+
+
+def frame_errors_mm(predicted: np.ndarray, recorded: np.ndarray) -> np.ndarray:
+    """The one-step error of each frame (mm): the RMS over the markers of the 3-D distance
+    between ``predicted`` and ``recorded`` [F, P, D]; NaN where no marker is scored."""
+    err2 = np.sum((np.asarray(predicted) - np.asarray(recorded)) ** 2, axis=-1)  # [F, P]
+    seen = np.isfinite(err2)
+    count = seen.sum(axis=1)
+    total = np.where(seen, err2, 0.0).sum(axis=1)
+    return np.where(count > 0, 1000.0 * np.sqrt(total / np.maximum(count, 1)), np.nan)
+
+
+def one_step_errors(
+    pred: Prediction,
+    zero_force: np.ndarray,
+    stem: str | Path,
+    *,
+    first_frame: int = 0,
+    start_time: float = 0.0,
+) -> list[Path]:
+    """Each frame's one-step error, the model's beside the zero-force predictor's
+    (``zero_force`` [F, P, D] its predictions), on a log scale: where the model's curve is
+    above, it explains that part of the motion worse than doing nothing."""
+    fig = one_step_errors_figure(pred, zero_force, first_frame=first_frame, start_time=start_time)
+    return save(fig, stem)
+
+
+def one_step_errors_figure(
+    pred: Prediction, zero_force: np.ndarray, *, first_frame: int = 0, start_time: float = 0.0
+):
+    """The figure of :func:`one_step_errors` (unsaved)."""
+    fig, ax = _subplots(figsize=(8.0, 2.8), layout="constrained")
+    t = frame_numbers(pred, first_frame)
+    model = frame_errors_mm(pred.one_step, pred.recorded)
+    zero = frame_errors_mm(zero_force, pred.recorded)
+    ax.plot(t, zero, color=ZERO_FORCE, lw=1.0, label="zero force")
+    ax.plot(t, model, color=ONE_STEP, lw=1.2, label="model")
+    worse = np.isfinite(model) & np.isfinite(zero) & (model > zero)
+    ax.plot(
+        t[worse],
+        model[worse],
+        ls="none",
+        marker="o",
+        ms=2.5,
+        color="tab:red",
+        label="model worse than zero force",
+    )
+    if np.isfinite(model).any() and np.nanmax(model) > 0:
+        ax.set_yscale("log")
+    if pred.extended:
+        ax.axvline(t[pred.fit_frames - 1], color="0.5", lw=0.8, ls=":")
+    ax.set_ylabel("one-step error (mm)", fontsize=8)
+    ax.set_xlabel("frame (of the recording)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    _time_axis(ax, pred, first_frame, start_time, fontsize=7)
+    ax.legend(fontsize=7, loc="best")
+    note = "  (dotted line: end of the fitted window)" if pred.extended else ""
+    ax.set_title("One-step error of each frame, RMS over the markers" + note, fontsize=9)
+    return fig
+
+
 def activations(
     pred: Prediction,
     labels: Sequence[str],
