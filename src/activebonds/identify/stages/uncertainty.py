@@ -48,7 +48,10 @@ class UncertaintyStage:
             )
         fastest = None
         if not hasattr(checked, "warning"):  # no finer-substeps check: the springs' modes
-            fastest = fastest_mode(fit)
+            try:  # a diagnostic: whatever it meets, the fit's uncertainty stands
+                fastest = fastest_mode(fit)
+            except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as err:
+                record["fastest_mode"] = {"not_computed": str(err)}
             if fastest is not None:
                 record["fastest_mode"] = {"omega": fastest[0], "dt": fastest[1]}
         record["warnings"] = uncertainty.warnings(
