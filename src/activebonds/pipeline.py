@@ -214,8 +214,12 @@ class Outcome:
     fitted: object
 
     def verdict_lines(self) -> list[str]:
-        """The held-out verdicts, overall and per marker, one step and K frames ahead."""
-        return self.held_out.lines()
+        """The held-out verdicts, overall and per marker, one step and K frames ahead, then
+        what limits them: held-out frames that hardly move (:func:`still_note`), masses the
+        fit did not identify (the fit step's note)."""
+        notes = [still_note(self.held_out, self.fitted)]
+        notes.append((self.state.get("parts", {}).get("fit") or {}).get("masses"))
+        return self.held_out.lines() + [n for n in notes if n]
 
     def verdict(self) -> str:
         """The last line: the held-out one-step and K-ahead verdicts, overall."""
@@ -229,6 +233,50 @@ class Outcome:
             for c in self.held_out.comparisons
         ]
         return f"verdict, held-out frames {a}:{b}: " + "; ".join(parts)
+
+
+STILL = 0.1  # held-out frames whose zero-force error is below this share of the fitted ones'
+
+
+def still_note(held_out, fitted) -> str | None:
+    """Where the held-out frames hardly move (zero force's one-step error there below
+    :data:`STILL` of its error on the fitted frames), a note that they can hardly judge the
+    model's dynamics: doing nothing predicts a body at rest, whatever the model; else None."""
+    if held_out.verdict is None or fitted is None or fitted.verdict is None:
+        return None
+    still, moving = held_out.verdict.zero_force_mm, fitted.verdict.zero_force_mm
+    if not (math.isfinite(still) and math.isfinite(moving)) or not still < STILL * moving:
+        return None
+    a, b = held_out.frames
+    return (
+        f"note: frames {a}:{b} hardly move (zero force's one-step error {still:.4g} mm there, "
+        f"{moving:.4g} mm on the fitted frames): a body nearly at rest is predicted by doing "
+        "nothing, so they can hardly judge the model's dynamics; hold out frames that move "
+        "(--frames, --held-out)"
+    )
+
+
+def fixed_masses_note(run: Path) -> str | None:
+    """Where the kept run's model has no free mass, a note that its stiffnesses and dampings
+    are relative to masses it did not identify; else None."""
+    from .identify.rundir import RunDir
+    from .model import load_model
+
+    spec = load_model(RunDir(run).best_model_path).spec
+    if any(spec.free_masses()):
+        return None
+    kg = {p.name: float(getattr(p.mass, "value", p.mass)) for p in spec.particle}
+    if len({round(m, 6) for m in kg.values()}) == 1:
+        each = f"{next(iter(kg.values())):.4g} kg each"
+    else:
+        each = ", ".join(f"{n} {m:.4g}" for n, m in list(kg.items())[:8]) + " kg"
+        each += " ..." if len(kg) > 8 else ""
+    return (
+        f"masses: not identified ({each}): every stiffness and damping is relative to them, "
+        "off by as much as a mass is; to identify them, free the masses under total_mass "
+        "(mass = { value, min, max }) and refit the kept model, on frames in flight where "
+        "there are some (docs/howto/auto.md)"
+    )
 
 
 def run(
@@ -585,6 +633,10 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
         kept, shot = _shoot(folder, kept, recording_path, settings, say, fit_progress)
         why += shot
     state["parts"].setdefault("fit", {})["run"] = kept.name
+    masses = fixed_masses_note(kept)
+    if masses:
+        say(f"      {masses}")
+        state["parts"]["fit"]["masses"] = masses
     return f"{headline}{why}"
 
 

@@ -177,6 +177,11 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
     flat = _flat_axes(x)
     source = traj.source or "the recording"
     asked = gravity is True or up is not None
+    if gravity is False and up is not None:
+        raise InputError(
+            "--up",
+            f"--up {up} names gravity's vertical and --no-gravity leaves gravity out: give one",
+        )
     if gravity is False:
         notes.append("gravity: none (--no-gravity)")
         return None

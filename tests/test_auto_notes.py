@@ -1,0 +1,64 @@
+"""What limits `auto`'s verdict, said after it: held-out frames that hardly move, masses the
+fit did not identify; and contradictory options refused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from activebonds.errors import InputError
+from activebonds.identify.scaffold import scaffold
+from activebonds.identify.verdict import Verdict
+from activebonds.model import load_model
+from activebonds.pipeline import STILL, fixed_masses_note, still_note
+from activebonds.simulation import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIANGLE = ROOT / "examples" / "triangle.toml"
+
+
+def _scored(frames, model_mm, zero_mm):
+    return SimpleNamespace(frames=frames, verdict=Verdict(model_mm, zero_mm))
+
+
+def test_held_out_frames_at_rest_are_said_to_judge_little():
+    """A held-out tail whose zero-force error is under a tenth of the fitted frames' (a body
+    come to rest: 0.01147 vs 2.8 mm) gets the note, with both figures; one that moves does
+    not, nor does a tail exactly at the threshold."""
+    fitted = _scored((0, 640), 1.9, 2.8)
+    note = still_note(_scored((640, 801), 0.1183, 0.01147), fitted)
+    assert note.startswith("note: frames 640:801 hardly move")
+    assert "0.01147 mm there" in note and "2.8 mm on the fitted frames" in note
+    assert still_note(_scored((640, 801), 3.0, 2.5), fitted) is None
+    assert still_note(_scored((640, 801), 1.0, STILL * 2.8), fitted) is None
+    assert still_note(SimpleNamespace(frames=(0, 1), verdict=None), fitted) is None
+
+
+def test_fixed_masses_are_said_to_scale_every_stiffness(tmp_path):
+    """The triangle's masses are fixed (1, 1.5, 2 kg): the note names them (equal ones once);
+    the same model with its masses free under total_mass gets none."""
+    run = tmp_path / "run"
+    run.mkdir()
+    text = TRIANGLE.read_text()
+    (run / "best_model.toml").write_text(text)
+    note = fixed_masses_note(run)
+    assert note.startswith("masses: not identified (")
+    assert "(A 1, B 1.5, C 2 kg)" in note
+    assert "every stiffness and damping is relative to them" in note
+    equal = text.replace("mass = 1.5", "mass = 1.0").replace("mass = 2.0", "mass = 1.0")
+    (run / "best_model.toml").write_text(equal)
+    assert "(1 kg each)" in fixed_masses_note(run)
+    free = text.replace("mass = 1.0", "mass = { value = 1.0, min = 0.1, max = 10.0 }")
+    free = free.replace("mass = 1.5", "mass = { value = 1.5, min = 0.1, max = 10.0 }")
+    free = free.replace("mass = 2.0", "mass = { value = 2.0, min = 0.1, max = 10.0 }")
+    (run / "best_model.toml").write_text(f"total_mass = 4.5\n{free}")
+    assert any(load_model(run / "best_model.toml").spec.free_masses())
+    assert fixed_masses_note(run) is None
+
+
+def test_up_and_no_gravity_together_are_refused():
+    data = simulate(load_model(TRIANGLE), 20, 100.0)
+    with pytest.raises(InputError, match="--up Z names gravity's vertical and --no-gravity"):
+        scaffold(data, up="Z", gravity=False)
