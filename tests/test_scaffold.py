@@ -376,3 +376,26 @@ def test_a_body_hanging_from_a_marker_is_not_stood_on_it_upside_down():
     contacts = [b for b in model["bond"] if b["kind"] == "contact"]
     assert contacts and all("surface_velocity" not in b for b in contacts)
     assert "treadmill" not in "\n".join(told.notes)
+
+
+def test_a_body_at_rest_most_of_the_time_takes_its_vertical_from_its_flight():
+    """Four markers dropped 0.18 m and then at rest (200 Hz, 46 frames falling of 400): every
+    coordinate of the lowest marker is flat at rest, and along X it is flat throughout, so the
+    ground cue names +X; the 35 flight frames accelerating at -9.81 m/s^2 along Z name the
+    vertical, and the scaffold's gravity and contacts follow them."""
+    rate, frames, falling = 200.0, 400, 46
+    shape = np.array([[0, 0, 0.02], [0.3, 0.05, 0.02], [0.15, 0.2, 0.25], [0.1, -0.1, 0.4]])
+    t = np.arange(frames) / rate
+    height = np.where(np.arange(frames) < falling, 0.18 - 0.5 * 9.81 * t**2, 0.0)
+    x = np.repeat(shape[None], frames, axis=0)
+    x[:, :, 2] += np.maximum(height, 0.0)[:, None]
+    markers = ("HeelL", "ToeL", "Hip", "Torso")
+    data = Trajectory(positions=x, mask=np.ones((frames, 4), bool), markers=markers, rate=rate)
+    assert guess_ground(data).up_text == "+X"  # the ground cue alone is wrong here
+    found = scaffold(data, total_mass=4.0)
+    assert found.gravity == "-Z"
+    assert "the vertical from the acceleration in flight, up = +Z" in "\n".join(found.notes)
+    model = tomllib.loads(found.text)
+    assert model["gravity"] == [0.0, 0.0, -9.81]
+    feet = {b["particles"][0] for b in model["bond"] if b["kind"] == "contact"}
+    assert feet == {"HeelL", "ToeL"}

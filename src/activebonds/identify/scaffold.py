@@ -50,7 +50,9 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   ground guess is clear, the acceleration guess does not contradict it, and, without a flight
   phase to confirm it, the feet do not (a ground resting on one marker while along another
   direction several markers reach the lowest height often)
-  (:mod:`activebonds.data.orientation`); otherwise none, and the summary says so (``--up``
+  (:mod:`activebonds.data.orientation`); where it is not but the markers fall at about g in
+  flight along a direction (:func:`~activebonds.data.orientation.guess_gravity`: gravity
+  itself, measured), that direction; otherwise none, and the summary says so (``--up``
   names the vertical, ``--no-gravity`` leaves it out). A flat recording (2D, or with no
   extent along an axis) has no vertical to guess.
 * **Ground contacts** (with gravity): one per marker within :data:`CONTACT_REACH` of the
@@ -221,6 +223,15 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
         and agrees is not False
         and not (ground.against and agrees is None)
     )
+    if not sure and fall.found and agrees is not True:
+        # gravity itself, measured in flight, names the vertical where the ground cue cannot
+        # (a body at rest most of the time keeps every coordinate of its lowest marker flat)
+        other = "no ground guess" if ground is None else f"the ground guess {ground.describe()}"
+        notes.append(
+            f"gravity: the vertical from the acceleration in flight, {fall.describe()}; "
+            f"{other} is not used"
+        )
+        return fall.axis, fall.up
     if not sure:
         said = "no guess" if ground is None else ground.describe()
         if ground is not None and agrees is False:
