@@ -324,7 +324,9 @@ def test_the_restart_cost_at_the_truth_with_other_integrators(method, substeps, 
     data = simulate(model, 90, 60.0, substeps=substeps, integrator=method)
     windows = make_windows(data.positions, data.mask, data.dt, 3)
     with jax.enable_x64(True):
-        cost, _ = make_cost(model, windows, substeps, method)(jnp.asarray(model.layout.initial()))
+        cost, _ = jax.jit(make_cost(model, windows, substeps, method))(
+            jnp.asarray(model.layout.initial())
+        )
     assert 1000 * math.sqrt(float(cost) / windows.n_terms) < tolerance_mm
 
 
