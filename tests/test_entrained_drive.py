@@ -380,7 +380,7 @@ def test_the_shooting_residuals_vanish_at_the_truth(simulated):
         x = np.concatenate([np.asarray(x0)[None], np.asarray(xs)])
         v = np.concatenate([np.asarray(v0)[None], np.asarray(vs)])
         states = tuple(jnp.asarray(a) for a in window_starts(windows, [(x, v)]))
-        out = residuals(jnp.asarray(model.layout.initial()), states)
+        out = jax.jit(residuals)(jnp.asarray(model.layout.initial()), states)
     assert max(float(jnp.abs(r).max()) for r in out) < 1e-10
     assert np.abs(trajectory(jnp.asarray(model.layout.initial()), states)[0][0] - x).max() < 1e-10
     assert frame_states(data.positions, data.mask, data.dt)[0].shape == x.shape

@@ -265,7 +265,7 @@ def test_the_costs_vanish_at_the_truth(simulated):
         x = np.concatenate([np.asarray(x0)[None], np.asarray(xs)])
         v = np.concatenate([np.asarray(v0)[None], np.asarray(vs)])
         states = tuple(jnp.asarray(a) for a in window_starts(shot, [(x, v)]))
-        out = residuals(genome, states)
+        out = jax.jit(residuals)(genome, states)
     assert model.layout.genes[2].name == "drive.coupling.quadrature.gain"
     assert float(cost) < 1e-24 and float(worse) > 1e-8
     assert max(float(jnp.abs(r).max()) for r in out) < 1e-10
