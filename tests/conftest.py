@@ -15,6 +15,11 @@ import tempfile
 # every program is kept (JAX's default keeps those that took 1 s to compile), as the command
 # line and ``fit`` do; set before JAX is imported, so the command lines the tests start read it
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+# one BLAS thread per process: the workers (one per core) already fill the cores, and the
+# small LAPACK calls the tests make (the fill's 18 x 18 blocks) took 10 times longer with
+# OpenBLAS's threads waking on a busy machine; the xdist workers and the command lines the
+# tests start inherit it (read when NumPy loads OpenBLAS)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import jax  # noqa: E402
 

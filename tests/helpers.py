@@ -15,8 +15,34 @@ HORSE_TROT = (
     ROOT / "src" / "activebonds" / "datasets" / "horse_vhdc" / "Horse1_M1_trot1_kinematics.csv"
 )
 
+# Headless Debian Chromium for the report's browser tests (through Playwright)
+CHROMIUM = Path("/usr/bin/chromium")
+BROWSER_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+
 # The command installed next to the interpreter running the tests (the venv's console script).
 ACTIVEBONDS = Path(sys.executable).with_name("activebonds")
+
+
+def browser_or_skip():
+    """(Playwright's ``sync_playwright``, the Chromium executable), or the test skipped."""
+    import shutil
+
+    import pytest
+
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("playwright is not installed (pip install '.[test]')")
+    if not CHROMIUM.is_file() and shutil.which("chromium") is None:
+        pytest.skip("Debian's chromium is not installed (apt-get install chromium)")
+    return sync_playwright, str(CHROMIUM if CHROMIUM.is_file() else shutil.which("chromium"))
 
 
 def cli(*args, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:

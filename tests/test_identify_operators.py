@@ -646,7 +646,8 @@ def test_planned_numbers_expand_to_each_childs_variant_and_needs():
     n, g = 12, 5
     variant = ops.plan(n, (0.25, 0.25, 0.25, 0.25))
     key = jax.random.PRNGKey(4)
-    nz = ops.draw_planned(key, variant, 6, g, (2, 2))
+    # compiled, as the ES draws them (op by op this test compiled some 240 small programs)
+    nz = jax.jit(lambda k: ops.draw_planned(k, variant, 6, g, (2, 2)))(key)
     # the frozen variant (2) adapts nothing, the jump (3) takes no normal step
     assert nz.zi.shape == (9, g) and nz.step.shape == (9, g) and nz.cauchy.shape == (3,)
     assert ops.planned_bytes(variant, 6, g, (2, 2)) == sum(a.size * 4 for a in nz)
@@ -662,6 +663,7 @@ def test_planned_numbers_expand_to_each_childs_variant_and_needs():
     # and unequal rates still choose the planned variants
     probs = (0.4, 0.3, 0.2, 0.1)
     uneven = ops.plan(n, probs)
-    full = ops.expand(ops.draw_planned(key, uneven, 6, g, (2, 2)), uneven, probs)
+    drawn = jax.jit(lambda k: ops.draw_planned(k, uneven, 6, g, (2, 2)))(key)
+    full = ops.expand(drawn, uneven, probs)
     chosen = ops.choose(full.variant, jnp.broadcast_to(jnp.asarray(probs), (n, 4)))
     np.testing.assert_array_equal(np.asarray(chosen), uneven)

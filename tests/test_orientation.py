@@ -13,6 +13,7 @@ import pytest
 
 from activebonds.data import Trajectory, read_trajectory
 from activebonds.data.orientation import guess_ground
+from helpers import cli_in_process
 
 HORSE = Path(__file__).resolve().parents[1] / "src" / "activebonds" / "datasets" / "horse_vhdc"
 
@@ -51,7 +52,9 @@ def test_info_shows_the_guess(tmp_path):
     ground = json.loads(proc.stdout)["ground"]
     assert ground["up"] == "+Z" and ground["normal"] == [0.0, 0.0, 1.0]
     assert ground["height"] == pytest.approx(guess_ground(read_trajectory(csv)).height)
-    table = subprocess.run([str(exe), "info", str(csv)], capture_output=True, text=True)
+    # the table in this process (the fresh process's own output is the JSON's above)
+    table = cli_in_process("info", csv)
+    assert table.returncode == 0, table.stderr
     assert "up = +Z, ground at -0.0105 m" in table.stdout
 
 

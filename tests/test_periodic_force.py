@@ -249,7 +249,7 @@ def test_the_population_cost_is_the_cost_with_a_clock():
     search = lo + (hi - lo) * rng.random((4, clock.layout.n_genes))
     with jax.enable_x64(True):
         population, _ = make_population_cost(clock, windows, dtype=jnp.float64)(jnp.asarray(search))
-        one = make_cost(clock, windows)
+        one = jax.jit(make_cost(clock, windows))  # compiled once for the 4 individuals
         each = [float(one(jnp.asarray(s))[0]) for s in search]
     np.testing.assert_allclose(np.asarray(population), each, rtol=1e-9)
 

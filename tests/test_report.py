@@ -1,5 +1,7 @@
 """Reports: prediction numbers, saturation and weight shares, figures, the self-contained HTML,
-the comparison report and the ``report`` command."""
+the comparison report, the ``report`` command, and the HTML report in a real browser (headless
+Debian Chromium through Playwright: no console or page error, every figure loads, the slider
+redraws the canvas and play advances frames)."""
 
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ from activebonds.report import (
 )
 from activebonds.report.predict import near_zero_share, saturation_share
 from activebonds.simulation import simulate
-from helpers import figure_size_px, figure_texts
+from helpers import BROWSER_ARGS, browser_or_skip, figure_size_px, figure_texts
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE = ROOT / "examples" / "triangle.toml"
@@ -64,8 +66,8 @@ def report_app() -> typer.Typer:
 
 def tiny_run(base: Path):
     """One tiny neural fit of the horse limb (population 20, 30 generations) and its report
-    written by the ``report`` command; made once per session, shared with the browser test.
-    Returns (FitResult, report path, the command's result)."""
+    written by the ``report`` command; made once per session, shared with the browser tests
+    at the end of this file. Returns (FitResult, report path, the command's result)."""
     if "neural" not in _RUNS:
         run = base / "run"
         result = fit(
@@ -579,3 +581,83 @@ def html_free_run_rows(record):
     from activebonds.report.html import free_run_table
 
     return free_run_table(record).rows
+
+
+# ----------------------------------------------------------------------------- in a browser
+
+
+@pytest.fixture(scope="module")
+def page(neural_run):
+    """The tiny run's report open in headless Chromium (the run this file's tests share)."""
+    sync_playwright, executable = browser_or_skip()
+    report = neural_run[1]
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=executable, args=BROWSER_ARGS)
+        try:
+            pg = browser.new_page(viewport={"width": 1200, "height": 900})
+            errors: list[str] = []
+            pg.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            pg.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+            requests: list[str] = []
+            pg.on("request", lambda r: requests.append(r.url))
+            pg.goto(report.resolve().as_uri(), wait_until="load")
+            pg.errors, pg.requests = errors, requests  # type: ignore[attr-defined]
+            yield pg
+        finally:
+            browser.close()
+
+
+def _canvas(pg) -> str:
+    return pg.evaluate("document.getElementById('canvas').toDataURL('image/png')")
+
+
+def test_page_loads_without_errors_and_offline(page):
+    assert page.title().startswith("activebonds report")
+    page.wait_for_timeout(200)
+    assert page.errors == []
+    # nothing but the file itself (and its data: URIs) was requested
+    assert all(u.startswith(("file://", "data:")) for u in page.requests), page.requests
+
+
+def test_every_figure_is_loaded(page):
+    sizes = page.evaluate(
+        "Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.naturalHeight])"
+    )
+    assert len(sizes) >= 6
+    assert all(done and w > 0 and h > 0 for done, w, h in sizes), sizes
+
+
+def test_slider_redraws_the_canvas(page):
+    label = page.locator("#frame-label")
+    first_label, first = label.inner_text(), _canvas(page)
+    page.focus("#frame")
+    page.keyboard.press("End")  # as a user would move the slider to the last frame
+    assert page.input_value("#frame") == page.get_attribute("#frame", "max") == "19"
+    assert _canvas(page) != first
+    assert label.inner_text() != first_label and "beyond the fit" in label.inner_text()
+    page.select_option("#mode", "free")
+    free_only = _canvas(page)
+    page.select_option("#mode", "one")
+    assert _canvas(page) != free_only
+    page.select_option("#zoom", "0")  # around the first particle
+    assert _canvas(page) != free_only
+    page.select_option("#mode", "both")
+    page.select_option("#zoom", "all")
+    assert page.errors == []
+
+
+def test_play_advances_frames_and_pause_stops(page):
+    page.focus("#frame")
+    page.keyboard.press("Home")
+    assert page.input_value("#frame") == "0"
+    before = _canvas(page)
+    page.click("#play")
+    page.wait_for_function("document.getElementById('frame').value !== '0'", timeout=5000)
+    assert page.get_attribute("#play", "aria-pressed") == "true"
+    page.click("#play")
+    assert page.get_attribute("#play", "aria-pressed") == "false"
+    stopped = page.input_value("#frame")
+    page.wait_for_timeout(300)
+    assert page.input_value("#frame") == stopped
+    assert _canvas(page) != before
+    assert page.errors == []

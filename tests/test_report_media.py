@@ -22,6 +22,7 @@ from activebonds.model import load_model
 from activebonds.report import animation, load_run, plots, predict, write_report
 from activebonds.report.html import Section, write_comparison_report
 from activebonds.simulation import simulate
+from helpers import BROWSER_ARGS, browser_or_skip
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE = ROOT / "examples" / "triangle.toml"
@@ -119,12 +120,10 @@ def test_frames_are_numbered_as_in_the_recording(run):
 
 
 def test_the_player_labels_the_recordings_frame_numbers(run):
-    from test_report_browser import ARGS, _browser_or_skip
-
-    sync_playwright, executable = _browser_or_skip()
+    sync_playwright, executable = browser_or_skip()
     _, report = run
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=executable, args=ARGS)
+        browser = p.chromium.launch(executable_path=executable, args=BROWSER_ARGS)
         try:
             pg = browser.new_page(viewport={"width": 1200, "height": 900})
             errors: list[str] = []
@@ -161,14 +160,12 @@ def test_the_gif_legend_lies_within_the_figure(triangle):
 
 
 def test_the_player_legend_lies_within_the_canvas(triangle, tmp_path):
-    from test_report_browser import ARGS, _browser_or_skip
-
-    sync_playwright, executable = _browser_or_skip()
+    sync_playwright, executable = browser_or_skip()
     preds = [(label, triangle) for label in LONG]
     page = tmp_path / "long.html"
     write_comparison_report(page, "long labels", [Section("a", animation=animation.payload(preds))])
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=executable, args=ARGS)
+        browser = p.chromium.launch(executable_path=executable, args=BROWSER_ARGS)
         try:
             pg = browser.new_page(viewport={"width": 1200, "height": 900})
             pg.goto(page.resolve().as_uri(), wait_until="load")

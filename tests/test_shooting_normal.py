@@ -68,8 +68,8 @@ def problem():
 
     s = jnp.concatenate([jnp.asarray(x0).reshape(k, -1), jnp.asarray(v0).reshape(k, -1)], 1)
     z = jnp.concatenate([u, s.ravel()])
-    jac = np.asarray(jax.jacfwd(flat)(z))
-    r = np.asarray(flat(z))
+    jac = np.asarray(jax.jit(jax.jacfwd(flat))(z))  # compiled, not op by op
+    r = np.asarray(jax.jit(flat)(z))
     normal = make_normal(model, windows, 2, "verlet", bounded.to_genome)(u, s)
     return {
         "jac": jac,
