@@ -754,6 +754,11 @@ class _Scored:
             record["model"].get("free_run_rms_mm", math.nan), record.get("holds")
         )
 
+    @property
+    def verdict(self):
+        """The one-step verdict, overall (None without a comparison), as an Evaluation's."""
+        return self.comparisons[0].overall if self.comparisons else None
+
     def lines(self) -> list[str]:
         a, b = self.frames
         out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
