@@ -238,7 +238,8 @@ def test_loaded_models_have_finite_search_bounds(fuzzed):
     huge = text.replace(
         "stiffness = { value = 40.0, min = 1.0, max = 1000.0 }", "stiffness = { value = 1e308 }"
     )
-    with pytest.raises(InputError, match=r"huge.toml: bond\[0\]\.stiffness.*finite search bounds"):
+    where = r"huge.toml: line \d+ \(the 1st \[\[bond\]\]\): bond\[0\]\.stiffness"
+    with pytest.raises(InputError, match=where + r".*finite search bounds"):
         loads_model(huge, "huge.toml")
     models = []
     for path in fuzzed:
