@@ -219,8 +219,9 @@ def _against(traj: Trajectory, x: np.ndarray, axis: int, up: float, on: np.ndarr
             other = feet(sign * x[:, :, a])
             if len(other) >= 2 and (best is None or len(other) > len(best[2])):
                 best = (a, sign, other)
-    if best is None:  # one foot, and no other direction with more: a body hanging from it
-        return (  # (a pendulum, an arm, a chain from a pivot) looks the same upside down
+    if best is None:  # one foot and no direction with more: a body hanging from it (a
+        # pendulum, an arm, a chain from a pivot) looks the same upside down
+        return (
             f"the ground rests on {traj.markers[on[0]]} alone: a body hanging from it would "
             "look the same upside down"
         )

@@ -23,23 +23,23 @@ MIN_PEAK = 0.3  # a correlation below this at every peak: no period
 def autocorrelation(heights: np.ndarray, max_lag: int) -> np.ndarray:
     """Per lag ``k = 0 .. max_lag``, the Pearson correlation of each column of ``heights``
     [F, H] with itself ``k`` frames later, averaged over the columns that vary (NaN frames
-    left out), [max_lag + 1]; NaN where nothing is defined."""
+    left out), [max_lag + 1]; NaN where nothing is defined. The columns of a lag at once."""
     h = np.asarray(heights, np.float64)
     out = np.full(max_lag + 1, np.nan)
     for k in range(max_lag + 1):
         a, b = h[: h.shape[0] - k], h[k:]
-        r = []
-        for j in range(h.shape[1]):
-            ok = np.isfinite(a[:, j]) & np.isfinite(b[:, j])
-            if ok.sum() < 3:
-                continue
-            x = a[ok, j] - a[ok, j].mean()
-            y = b[ok, j] - b[ok, j].mean()
-            den = np.sqrt((x * x).sum() * (y * y).sum())
-            if den > 0:
-                r.append(float((x * y).sum() / den))
-        if r:
-            out[k] = float(np.mean(r))
+        ok = np.isfinite(a) & np.isfinite(b)  # [F - k, H]
+        n = ok.sum(axis=0)
+        use = n >= 3
+        if not use.any():
+            continue
+        count = np.maximum(n, 1)
+        x = np.where(ok, a - np.where(ok, a, 0.0).sum(axis=0) / count, 0.0)
+        y = np.where(ok, b - np.where(ok, b, 0.0).sum(axis=0) / count, 0.0)
+        den = np.sqrt((x * x).sum(axis=0) * (y * y).sum(axis=0))
+        use &= den > 0
+        if use.any():
+            out[k] = float(np.mean((x * y).sum(axis=0)[use] / den[use]))
     return out
 
 

@@ -223,7 +223,7 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
         and agrees is not False
         and not (ground.against and agrees is None)
     )
-    if not sure and fall.found and agrees is not True:
+    if not sure and fall.found:  # (a flight that agreed would have made it sure)
         # gravity itself, measured in flight, names the vertical where the ground cue cannot
         # (a body at rest most of the time keeps every coordinate of its lowest marker flat)
         other = "no ground guess" if ground is None else f"the ground guess {ground.describe()}"

@@ -39,7 +39,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..data.period import MIN_PEAK, PEAK_SHARE, autocorrelation, dominant_period  # noqa: F401
+from ..data.period import dominant_period
 
 STRIDES = 5  # strides of each free run
 STARTS = 10  # free runs, from start frames spread over the window
