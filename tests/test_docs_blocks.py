@@ -54,6 +54,13 @@ UNRUNNABLE = {
         "a new virtual environment, an install, and the whole test suite"
     ),
     "pip install 'activebonds[ray]'": "installs a package from the network",
+    (
+        "activebonds fit DIR/run-ground/best_model.toml DATA --frames START:STOP --init model "
+        "--cost shooting --horizon 10 --substeps 4 --integrator verlet --out masses"
+    ): (
+        "a recipe with placeholders: a model the reader has edited by hand (its masses freed) "
+        "and the frames in flight of the reader's recording"
+    ),
     "activebonds sweep examples/sweep.toml --out sweeps --address auto": (
         "joins a running Ray cluster (tests/test_sweep.py runs sweeps on a local one)"
     ),
