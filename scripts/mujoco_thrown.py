@@ -11,9 +11,9 @@ flight, then it lands, folds, slides and stops. MuJoCo at 1 ms (implicitfast), r
 
     python scripts/mujoco_thrown.py --compare thrown/run-ground
 
-sets a fitted run's springs beside the truth: each tendon's stiffness and damping, the
-run's 95 % interval (``uncertainty.csv``), its error and whether the interval holds the
-truth, then the uncertainty's warnings.
+sets a fitted run's masses and springs beside the truth: each mass, each tendon's stiffness
+and damping, the run's 95 % interval (``uncertainty.csv``; a parameter the run held has
+none), its error and whether the interval holds the truth, then the uncertainty's warnings.
 """
 
 from __future__ import annotations
@@ -97,13 +97,48 @@ def simulate() -> np.ndarray:
     return out
 
 
+def _held(run: Path) -> tuple[dict[str, float], dict[tuple[str, str, str], float]]:
+    """The run's best model: its masses (kg) by particle, and each spring's stiffness and
+    damping by (a, b, parameter), fitted or held."""
+    from activebonds.model import load_model
+
+    model = load_model(run / "best_model.toml")
+    names = [p.name for p in model.spec.particle]
+    masses = dict(zip(names, map(float, model.params.mass), strict=True))
+    springs = {}
+    for b in model.spec.bond:
+        if b.kind == "binary":
+            for what in ("stiffness", "damping"):
+                v = getattr(b, what)
+                springs[(*b.particles, what)] = float(getattr(v, "value", v))
+    return masses, springs
+
+
 def compare(run: Path) -> list[str]:
-    """A fitted run's tendons beside the truth, in lines (see the module's docstring)."""
-    rows = {r["label"]: r for r in csv.DictReader((run / "uncertainty.csv").open())}
-    out = ["tendon, parameter: fitted [95 % interval] vs truth: error, interval holds it"]
+    """A fitted run's masses and tendons beside the truth, in lines (see the module's
+    docstring)."""
+    with (run / "uncertainty.csv").open(encoding="utf-8") as f:
+        rows = {r["label"]: r for r in csv.DictReader(f)}
+    masses, springs = _held(run)
+    out = ["particle mass: fitted [95 % interval] vs truth: error"]
+    for name, truth in MASS.items():
+        row = rows.get(f"particle {name} mass")
+        span = f" [{float(row['ci95_low']):.4g}, {float(row['ci95_high']):.4g}]" if row else ""
+        how = "" if row else " (not fitted in this run)"
+        error = 100.0 * (masses[name] / truth - 1.0)
+        out.append(f"  {name}: {masses[name]:.4g}{span} vs {truth}: {error:+.1f} %{how}")
+    out.append("tendon, parameter: fitted [95 % interval] vs truth: error, interval holds it")
     for a, b, k, c in TENDONS:
         for what, truth in (("stiffness", k), ("damping", c)):
             row = rows.get(f"spring {a}-{b} {what}") or rows.get(f"spring {b}-{a} {what}")
+            held = springs.get((a, b, what), springs.get((b, a, what)))
+            if row is None and held is not None:
+                error = 100.0 * (held / truth - 1.0)
+                out.append(
+                    f"  {a}-{b} {what}: {held:.4g} (held: not fitted in this run) vs {truth}: "
+                    f"{error:+.1f} %, -"
+                )
+                continue
             if row is None:
                 out.append(f"  {a}-{b} {what}: not in the fitted model (truth {truth})")
                 continue

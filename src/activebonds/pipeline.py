@@ -32,6 +32,10 @@ The steps, each one's output in the output folder ``OUT``:
    fitted frames is lower than the structure's (its contacts and gravity earn their
    parameters) or ``--up`` / ``--gravity`` insists on gravity, else the structure's fit is
    (:func:`~.structure_choice.criterion`).
+   Where the kept model has gravity and contacts and the fitted frames hold a flight
+   (:func:`~.identify.flight_masses.longest_flight`), its masses are identified there with its
+   bonds by multiple shooting, then its contacts fitted with them held (``OUT/run-flight/``,
+   ``OUT/run-masses/``: :func:`_masses`), which is kept.
    Where marker noise dominates, the kept model is refined by multiple shooting
    (``OUT/run-shot/``, :func:`_shoot`), up to :data:`MAX_SHOT` parameters.
    ``auto.json`` names the kept run (``steps.fit.run``). Elsewhere, for parameters unbiased by
@@ -148,6 +152,10 @@ class Folder:
     run = property(lambda self: self.path / "run")
     run_ground = property(lambda self: self.path / "run-ground")
     run_shot = property(lambda self: self.path / "run-shot")
+    flight = property(lambda self: self.path / "flight.toml")
+    run_flight = property(lambda self: self.path / "run-flight")
+    masses = property(lambda self: self.path / "masses.toml")
+    run_masses = property(lambda self: self.path / "run-masses")
     evaluation = property(lambda self: self.path / "evaluation.json")
     report = property(lambda self: self.path / "report.html")
     state = property(lambda self: self.path / STATE)
@@ -629,15 +637,94 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
             "criterion": {"run": plain.record(), "run-ground": ground.record()}
         }
     headline = f"best one-step RMS {linear:.4g} mm on the fitted frames: {kept}"
+    kept, weighed = _masses(
+        folder, kept, recording_path, recording, split, settings, say, fit_progress
+    )
+    why += weighed
     if noise.dominated:
         kept, shot = _shoot(folder, kept, recording_path, settings, say, fit_progress)
         why += shot
     state["parts"].setdefault("fit", {})["run"] = kept.name
-    masses = fixed_masses_note(kept)
+    masses = fixed_masses_note(kept) if kept != folder.run_masses else None
     if masses:
         say(f"      {masses}")
         state["parts"]["fit"]["masses"] = masses
     return f"{headline}{why}"
+
+
+def _masses(
+    folder, kept: Path, recording_path, recording, split, settings, say, fit_progress
+) -> tuple[Path, str]:
+    """Where the kept run's masses are fixed and its model has gravity and contacts, and the
+    fitted frames hold a flight (:func:`~.identify.flight_masses.longest_flight`): its masses
+    freed under ``total_mass`` and identified with its bonds by multiple shooting on the
+    flight (:data:`SHOOTING`, OUT/run-flight), then its contacts fitted on every fitted
+    frame with the masses held and the bond parameters the flight determined well
+    (:func:`~.identify.flight_masses.determined`; the one-step cost at the shooting's
+    substeps, OUT/run-masses), which is kept. Up to :data:`MAX_SHOT` parameters. (kept run,
+    note)."""
+    import csv
+
+    import numpy as np
+
+    from .identify.flight_masses import HOLD, anchors, determined, freed, held, longest_flight
+    from .identify.problem import select_data
+    from .identify.rundir import RunDir
+    from .identify.settings import FitSettings
+    from .model import load_model, save_model
+
+    model = load_model(RunDir(kept).best_model_path)
+    if any(model.spec.free_masses()):
+        return kept, ""
+    data = select_data(model, recording, FitSettings(frames=split.fitted))
+    flight = longest_flight(model.spec, data.positions, split.fitted[0])
+    if flight is None:
+        return kept, ""
+    a, b = flight
+    genes = model.layout.n_genes + len(model.spec.particle)
+    if genes > MAX_SHOT:
+        say(
+            f"      masses: frames {a}:{b} are in flight, but identifying the masses there by "
+            f"multiple shooting is left to fit --cost shooting above {MAX_SHOT} parameters "
+            f"({genes} here)"
+        )
+        return kept, f"; masses not identified ({genes} parameters)"
+    dropped = anchors(model.spec)
+    say(
+        f"      masses: frames {a}:{b} are in flight (every contact off its plane: gravity "
+        f"and the bonds alone act): {kept.name}'s masses freed under total_mass and "
+        f"identified there with its bonds by multiple shooting (horizon "
+        f"{SHOOTING['horizon'][0]}, {SHOOTING['substeps']} Verlet substeps)"
+        + (
+            f"; its {dropped} anchor(s) dropped: nothing in the room holds a body in flight"
+            if dropped
+            else ""
+        )
+    )
+    save_model(freed(model.spec), folder.flight)
+    shooting = settings.model_copy(
+        update={**SHOOTING, "frames": (a, b), "population": 4, "generations": 1}
+    )
+    _fit_into(folder.run_flight, folder.flight, recording_path, shooting, say, fit_progress)
+    weighed = load_model(RunDir(folder.run_flight).best_model_path)
+    masses = np.asarray(weighed.params.mass, np.float64)
+    bond_genes = sum(g.name.startswith("bond[") for g in weighed.layout.genes)
+    with (folder.run_flight / "uncertainty.csv").open(encoding="utf-8") as f:
+        hold = determined(csv.DictReader(f))
+    each = ", ".join(f"{p.name} {m:.4g}" for p, m in zip(model.spec.particle, masses, strict=True))
+    say(
+        f"      masses: {each} kg (run-flight: their intervals in its uncertainty.csv); the "
+        f"contacts fitted on every fitted frame with these masses held, and the "
+        f"{len(hold)} bond parameter(s) the flight determined within {HOLD:.0%} (of "
+        f"{bond_genes}), the rest fitted again (one step, as {kept.name} was)"
+    )
+    save_model(held(weighed.spec, masses, hold), folder.masses)
+    one_step = settings.model_copy(update={"cost": "restart", "horizon": (1,)})
+    rms = _fit_into(folder.run_masses, folder.masses, recording_path, one_step, say, fit_progress)
+    return folder.run_masses, (
+        f"; masses identified on the flight {a}:{b} ({folder.run_flight.name}), the contacts "
+        f"fitted with them held: {folder.run_masses} ({rms:.4g} mm)"
+    )
 
 
 def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> tuple[Path, str]:
