@@ -81,6 +81,12 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
             assert line in report, line
     state = json.loads((out / "auto.json").read_text())
     assert set(state["steps"]) == set(pipeline.STEPS)
+    # ... and how the model was made: the noise's line and the first three steps' notes
+    made = report.split('<section id="made"><h2>How this model was made</h2>')[1]
+    made = made.split("</section>")[0]
+    for name in ("scaffold", "structure", "fit"):
+        assert f"{name}: {state['steps'][name]['note']}" in made, name
+    assert "marker noise about" in made
     assert state["fitted_frames"] == [0, 240] and state["held_out_frames"] == [240, 300]
 
     # the same command again: every step kept, the same verdict

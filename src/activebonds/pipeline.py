@@ -405,7 +405,7 @@ def run(
         5,
         "report",
         "the HTML report of the run over the fitted and held-out frames",
-        lambda: _report(kept, folder.report, b - a, folder.evaluation),
+        lambda: _report(kept, folder.report, b - a, folder.evaluation, _made(state)),
     )
     state["total_seconds"] = round(sum(v["seconds"] for v in steps.values()), 1)
     folder.write_state(state)
@@ -882,10 +882,25 @@ def _write_evaluation(folder: Folder, held, fitted) -> str:
     )
 
 
-def _report(run: Path, report: Path, frames: int, evaluation: Path) -> str:
-    """The run's report, its held-out verdicts (one step and K ahead) the evaluation's."""
+def _made(state: dict) -> list[str]:
+    """How the kept model was made, for the report: the noise's line and the first three
+    steps' notes (every run tried, kept or not, and why), the masses' note."""
+    from .data.smoothing import Noise
+
+    steps = state["steps"]
+    out = [noise_line(Noise(**state["noise"]))] if "noise" in state else []
+    out += [f"{name}: {steps[name]['note']}" for name in STEPS[:3] if name in steps]
+    if steps.get("fit", {}).get("masses"):
+        out.append(steps["fit"]["masses"])
+    return out
+
+
+def _report(run: Path, report: Path, frames: int, evaluation: Path, made=()) -> str:
+    """The run's report, its held-out verdicts (one step and K ahead) the evaluation's,
+    ``made`` (:func:`_made`) a section of its own."""
     from .report import write_report
     from .report.html import Beyond
 
     held = json.loads(evaluation.read_text(encoding="utf-8"))["held_out"]
-    return str(write_report(run, report, frames=frames, beyond=Beyond.from_record(held)))
+    beyond = Beyond.from_record(held)
+    return str(write_report(run, report, frames=frames, beyond=beyond, made=made))

@@ -544,6 +544,7 @@ def write_report(
     frames: int | None = None,
     status=None,
     beyond: Beyond | None = None,
+    made: Sequence[str] = (),
 ) -> Path:
     """Write the report of one run: ``RUN/report.html`` (or ``out``) and its figures
     (``RUN/figures/*.png|svg``, ``animation.gif`` and, with ffmpeg, ``animation.mp4``;
@@ -555,6 +556,7 @@ def write_report(
     output are checked (the command line shows it). ``beyond``: the frames beyond the fit
     already scored (``auto``'s held-out evaluation, so that its report says what its
     terminal said); by default they are scored here as ``evaluate --horizon 10`` scores them.
+    ``made``: lines saying how the model was made (``auto``'s steps), a section of their own.
     Raises :class:`InputError` for a missing
     or invalid run."""
     run = Path(run_dir)
@@ -570,6 +572,8 @@ def write_report(
     pred, _ = predict_run(record, frames if frames is not None else default_frames(record))
     with staged_directory(fig_dir) as tmp:
         sections = run_sections(record, pred, tmp, beyond)
+        if made:
+            sections.insert(1, Section("How this model was made", text=list(made), anchor="made"))
         title = f"activebonds report: {run.resolve().name}"
         subtitle = f"{record.model.name}, {record.settings.bonds} bonds — {record.status.get('status', 'unknown')}"
         write_comparison_report(html_path, title, sections, subtitle=subtitle)

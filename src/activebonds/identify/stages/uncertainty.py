@@ -65,8 +65,8 @@ class UncertaintyStage:
         noise = marker_noise(fit.ident.all_data)
         record["noise_mm"] = noise
         found = uncertainty.misfit(report.sigma_mm, noise, report.cost, horizon)
-        if found:
-            record["warnings"].append(found)
+        if found:  # first: a misfit outweighs every other caveat of the intervals
+            record["warnings"].insert(0, found)
         return Outcome(record, files={"csv": report.csv_text()})
 
     def lines(self, record: dict) -> list[str]:
