@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from activebonds.model import loads_model
-from activebonds.physics import start_velocity, total_force
-from activebonds.physics.integrate import kick
+from activebonds.physics import start_velocity
 from activebonds.physics.linsolve import solve
 
 CONTACTS = """
@@ -94,9 +93,7 @@ def test_the_integrators_programs_call_no_lapack():
     def newton_start(params, a, b):  # the implicitly differentiated Newton (no contacts)
         free = model.without({"contact"})
         return jax.vmap(
-            lambda p, q: start_velocity(
-                params, free.topology, p, q, 0.01, 3, "verlet", newton=True
-            )
+            lambda p, q: start_velocity(params, free.topology, p, q, 0.01, 3, "verlet", newton=True)
         )(a, b)
 
     for fn in (stiff_start, newton_start):
