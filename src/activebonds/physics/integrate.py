@@ -17,7 +17,7 @@ import jax.numpy as jnp
 
 from .. import bonds
 from ..model.params import Params, Topology
-from . import phase
+from . import linsolve, phase
 from .forces import total_force
 
 Integrator = Literal["euler", "verlet"]
@@ -67,7 +67,7 @@ def kick(params: Params, topo: Topology, x, v, h, force, t=0.0, implicit: bool =
     dim = x.shape[1]
     jac = _stiff_jacobian(params, topo, x, v, t)
     system = m[..., None] * jnp.eye(dim, dtype=x.dtype) - h * jac  # [P, D, D]
-    return jnp.linalg.solve(system, h * force[..., None])[..., 0]
+    return jax.vmap(linsolve.solve)(system, h * force)  # not LAPACK: see linsolve
 
 
 def euler_step(params: Params, topo: Topology, x, v, h, t=0.0, implicit: bool = False, psi=None):
@@ -204,7 +204,7 @@ def _landing_velocity(topo, substeps, method, params, x_prev, x, dt, t_prev, psi
         args = (params, x_prev, x, dt, t_prev, psi)
 
         def round_(_, v):
-            step = jnp.linalg.solve(jacobian(v, *args), miss(v, *args).ravel())
+            step = linsolve.solve(jacobian(v, *args), miss(v, *args).ravel())
             return v - step.reshape(v.shape)
 
         return jax.lax.fori_loop(0, NEWTON_ITERATIONS, round_, v0)
@@ -214,7 +214,7 @@ def _landing_velocity(topo, substeps, method, params, x_prev, x, dt, t_prev, psi
         v = solve(*primals)
         args, d_args = primals[:-1], tangents[:-1]
         _, d_miss = jax.jvp(lambda *a: miss(v, *a), args, d_args)
-        d_v = -jnp.linalg.solve(jacobian(v, *args), d_miss.ravel())
+        d_v = -linsolve.solve(jacobian(v, *args), d_miss.ravel())
         return v, d_v.reshape(v.shape)
 
     return solve(params, x_prev, x, dt, t_prev, psi, v0)
@@ -317,7 +317,7 @@ def start_velocity(
 
         def newton(_, v):
             j, x_end = jac(v.ravel())
-            return v + jnp.linalg.solve(j, (x - x_end).ravel()).reshape(x.shape)
+            return v + linsolve.solve(j, (x - x_end).ravel()).reshape(x.shape)
 
         v = jax.lax.fori_loop(0, min(iterations, NEWTON_ITERATIONS), newton, v)
     else:  # a loop, not unrolled: compile time independent of the rounds

@@ -1,0 +1,68 @@
+"""Small dense linear solves written in array operations, for the solves inside the
+integrator's loops (the implicit kick's D x D systems, the start velocity's P D x P D Newton
+steps).
+
+``jnp.linalg.solve`` calls LAPACK on the CPU (``getrf``, ``trsm``), and jaxlib 0.10's LAPACK
+kernels split a batch over XLA's intra-op thread pool and block their pool thread until the
+pieces are done. Where the program runs two or more such calls at once (a vmapped solve
+inside a loop, e.g. a Jacobian of the one-step cost with substeps and contacts), every pool
+thread can be waiting so, the pieces never run, and the process hangs at 0 % CPU (seen on a
+2-core machine; one core, or jaxlib 0.11, where that parallel path is gone, does not hang).
+Solving here, in XLA's own operations, involves no library call and no thread pool.
+
+:func:`solve` is Gauss elimination with partial pivoting (LAPACK's ``getrf`` algorithm, the
+size written out in the program: for the few unknowns of these systems), with its derivative
+by the same factors (``d x = A^-1 (d b - d A x)``), so a forward-mode Jacobian over many
+directions costs one factorisation and a pair of triangular solves per direction.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def _lu(a):
+    """(LU [n, n], row order [n]) of ``a`` [n, n] with partial pivoting: ``a[order] = L U``,
+    L unit lower triangular (below the diagonal of LU), U upper triangular."""
+    n = a.shape[-1]
+    rows = jnp.arange(n)
+    order = rows
+    lu = a
+    for k in range(n):
+        p = k + jnp.argmax(jnp.abs(lu[k:, k]))
+        swap = rows.at[k].set(p).at[p].set(k)
+        lu, order = lu[swap], order[swap]
+        factor = jnp.where(rows > k, lu[:, k] / lu[k, k], 0.0)
+        lu = lu - factor[:, None] * jnp.where(rows > k, lu[k], 0.0)[None, :]
+        lu = lu.at[:, k].set(jnp.where(rows > k, factor, lu[:, k]))
+    return lu, order
+
+
+def _lu_solve(lu, order, b):
+    """x with ``a x = b`` from :func:`_lu`'s factors of ``a``; b [n]."""
+    n = lu.shape[-1]
+    lower, upper = jnp.tril(lu, -1), jnp.triu(lu, 1)
+    y = b[order]
+    for k in range(n - 1):  # L y = b[order], column by column
+        y = y - lower[:, k] * y[k]
+    for k in reversed(range(n)):  # U x = y
+        y = y.at[k].set(y[k] / lu[k, k])
+        y = y - upper[:, k] * y[k]
+    return y
+
+
+@jax.custom_jvp
+def solve(a, b):
+    """x with ``a x = b``: a [n, n], b [n] (vmap for batches). NaN or inf where ``a`` is
+    singular, as LAPACK's."""
+    return _lu_solve(*_lu(a), b)
+
+
+@solve.defjvp
+def _solve_jvp(primals, tangents):
+    a, b = primals
+    da, db = tangents
+    lu, order = _lu(a)
+    x = _lu_solve(lu, order, b)
+    return x, _lu_solve(lu, order, db - da @ x)
