@@ -49,7 +49,7 @@ friction = 0.6
 """
 
 
-@pytest.mark.parametrize("n", [2, 3, 15])
+@pytest.mark.parametrize("n", [2, 3, 15, 40])
 def test_solve_matches_lapack_and_its_derivatives(n):
     rng = np.random.default_rng(n)
     a = rng.standard_normal((20, n, n))
