@@ -660,8 +660,9 @@ def _masses(
     freed under ``total_mass`` and identified with its bonds by multiple shooting on the
     flight (:data:`SHOOTING`, OUT/run-flight), then its contacts fitted on every fitted
     frame with the masses held and the bond parameters the flight determined well
-    (:func:`~.identify.flight_masses.determined`; the one-step cost at the shooting's
-    substeps, OUT/run-masses), which is kept. Up to :data:`MAX_SHOT` parameters. (kept run,
+    (:func:`~.identify.flight_masses.determined`; the one-step cost, OUT/run-masses), which
+    is kept where it predicts the fitted frames :data:`SHOOTING`'s horizon ahead better than
+    the kept run (as :func:`_shoot` judges). Up to :data:`MAX_SHOT` parameters. (kept run,
     note)."""
     import csv
 
@@ -721,9 +722,23 @@ def _masses(
     save_model(held(weighed.spec, masses, hold), folder.masses)
     one_step = settings.model_copy(update={"cost": "restart", "horizon": (1,)})
     rms = _fit_into(folder.run_masses, folder.masses, recording_path, one_step, say, fit_progress)
+    before, after = _ahead_mm(kept), _ahead_mm(folder.run_masses)
+    h = SHOOTING["horizon"][0]
+    if not after < before:  # a flight fit gone wrong (short of its optimum, a misfit) shows here
+        say(
+            f"      masses: the model with the flight's masses predicts the fitted frames {h} "
+            f"ahead no better than {kept.name}'s ({after:.4g} vs {before:.4g} mm): the flight "
+            f"did not identify them well enough (see {folder.run_flight.name}'s refinement and "
+            f"uncertainty); {kept.name} kept"
+        )
+        return (
+            kept,
+            f"; masses from the flight {a}:{b} not kept ({h} ahead {after:.4g} vs {before:.4g} mm)",
+        )
     return folder.run_masses, (
         f"; masses identified on the flight {a}:{b} ({folder.run_flight.name}), the contacts "
-        f"fitted with them held: {folder.run_masses} ({rms:.4g} mm)"
+        f"fitted with them held: {folder.run_masses} ({rms:.4g} mm; {h} ahead on the fitted "
+        f"frames {after:.4g} vs {before:.4g} mm)"
     )
 
 
