@@ -716,7 +716,7 @@ def _masses(
     say(
         f"      masses: {each} kg (run-flight: their intervals in its uncertainty.csv); the "
         f"contacts fitted on every fitted frame with these masses held, and the "
-        f"{len(hold)} bond parameter(s) the flight determined within {HOLD:.0%} (of "
+        f"{len(hold)} bond parameter(s) the flight determined within {100 * HOLD:g} % (of "
         f"{bond_genes}), the rest fitted again (one step, as {kept.name} was)"
     )
     save_model(held(weighed.spec, masses, hold), folder.masses)
