@@ -50,6 +50,10 @@ def test_fixed_masses_are_said_to_scale_every_stiffness(tmp_path):
     equal = text.replace("mass = 1.5", "mass = 1.0").replace("mass = 2.0", "mass = 1.0")
     (run / "best_model.toml").write_text(equal)
     assert "(1 kg each)" in fixed_masses_note(run)
+    # after a flight's fit that was not kept: what happened, not how to try
+    tried = fixed_masses_note(run, tmp_path / "run-flight")
+    assert "the flight's fit (run-flight) did not identify them well enough" in tried
+    assert "free the masses" not in tried and "free the masses" in fixed_masses_note(run)
     free = text.replace("mass = 1.0", "mass = { value = 1.0, min = 0.1, max = 10.0 }")
     free = free.replace("mass = 1.5", "mass = { value = 1.5, min = 0.1, max = 10.0 }")
     free = free.replace("mass = 2.0", "mass = { value = 2.0, min = 0.1, max = 10.0 }")

@@ -264,9 +264,10 @@ def still_note(held_out, fitted) -> str | None:
     )
 
 
-def fixed_masses_note(run: Path) -> str | None:
+def fixed_masses_note(run: Path, flight: Path | None = None) -> str | None:
     """Where the kept run's model has no free mass, a note that its stiffnesses and dampings
-    are relative to masses it did not identify; else None."""
+    are relative to masses it did not identify; else None. ``flight``: the run that tried
+    to identify them on a flight and was not kept (the note then says so, not how to try)."""
     from .identify.rundir import RunDir
     from .model import load_model
 
@@ -279,11 +280,18 @@ def fixed_masses_note(run: Path) -> str | None:
     else:
         each = ", ".join(f"{n} {m:.4g}" for n, m in list(kg.items())[:8]) + " kg"
         each += " ..." if len(kg) > 8 else ""
-    return (
+    head = (
         f"masses: not identified ({each}): every stiffness and damping is relative to them, "
-        "off by as much as a mass is; to identify them, free the masses under total_mass "
-        "(mass = { value, min, max }) and refit the kept model, on frames in flight where "
-        "there are some (docs/howto/auto.md)"
+        "off by as much as a mass is; "
+    )
+    if flight is not None:
+        return head + (
+            f"the flight's fit ({flight.name}) did not identify them well enough to keep; "
+            "its refinement and uncertainty say how far it got (docs/howto/auto.md)"
+        )
+    return head + (
+        "to identify them, free the masses under total_mass (mass = { value, min, max }) and "
+        "refit the kept model, on frames in flight where there are some (docs/howto/auto.md)"
     )
 
 
@@ -645,7 +653,8 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
         kept, shot = _shoot(folder, kept, recording_path, settings, say, fit_progress)
         why += shot
     state["parts"].setdefault("fit", {})["run"] = kept.name
-    masses = fixed_masses_note(kept) if kept != folder.run_masses else None
+    tried = folder.run_flight if folder.run_flight.exists() else None
+    masses = fixed_masses_note(kept, tried) if kept != folder.run_masses else None
     if masses:
         say(f"      {masses}")
         state["parts"]["fit"]["masses"] = masses
