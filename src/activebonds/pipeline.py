@@ -269,12 +269,13 @@ def fixed_masses_note(run: Path, flight: Path | None = None) -> str | None:
     are relative to masses it did not identify; else None. ``flight``: the run that tried
     to identify them on a flight and was not kept (the note then says so, not how to try)."""
     from .identify.rundir import RunDir
+    from .identify.structure_choice import mass_of
     from .model import load_model
 
     spec = load_model(RunDir(run).best_model_path).spec
     if any(spec.free_masses()):
         return None
-    kg = {p.name: float(getattr(p.mass, "value", p.mass)) for p in spec.particle}
+    kg = {p.name: mass_of(p) for p in spec.particle}
     if len({round(m, 6) for m in kg.values()}) == 1:
         each = f"{next(iter(kg.values())):.4g} kg each"
     else:

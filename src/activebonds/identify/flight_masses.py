@@ -38,23 +38,15 @@ MIN_FLIGHT = 20
 HOLD = 0.25
 
 
-def has_gravity(spec: ModelSpec) -> bool:
-    g = spec.gravity
-    if g is None:
-        return False
-    if hasattr(g, "value"):
-        return float(g.value) != 0.0
-    return bool(np.any(np.asarray(g, np.float64) != 0.0))
-
-
 def longest_flight(spec: ModelSpec, positions, first: int = 0) -> tuple[int, int] | None:
     """The longest run of consecutive frames of ``positions`` [F, P, D] in which every contact
     of ``spec`` is off its plane, as absolute frames ``(start, stop)`` (``first``: the frame
     of ``positions[0]``); None without contacts or gravity, or where the longest run is
     shorter than :data:`MIN_FLIGHT`."""
+    from ..model import build
     from .structure_choice import flight_frames
 
-    if not has_gravity(spec):
+    if not np.any(np.asarray(build(spec).params.gravity) != 0.0):  # the model's own field
         return None
     flight = flight_frames(spec, positions)
     if flight is None:
@@ -72,10 +64,6 @@ def longest_flight(spec: ModelSpec, positions, first: int = 0) -> tuple[int, int
     return first + best[0], first + best[1]
 
 
-def _mass(p) -> float:
-    return float(p.mass.value if isinstance(p.mass, Param) else p.mass)
-
-
 def anchors(spec: ModelSpec) -> int:
     """The number of ``spec``'s anchors (springs to a fixed point of the room)."""
     return sum(b.kind == bonds.unary.KIND.name for b in spec.bond)
@@ -86,8 +74,10 @@ def freed(spec: ModelSpec) -> ModelSpec:
     ``total_mass`` (the masses' sum where it has none), and without anchors: a body in flight
     is held by nothing in the room, and an anchor there would stand for a force it does not
     feel."""
-    particles = [p.model_copy(update={"mass": Param(value=_mass(p))}) for p in spec.particle]
-    total = spec.total_mass if spec.total_mass is not None else sum(map(_mass, spec.particle))
+    from .structure_choice import mass_of
+
+    particles = [p.model_copy(update={"mass": Param(value=mass_of(p))}) for p in spec.particle]
+    total = spec.total_mass if spec.total_mass is not None else sum(map(mass_of, spec.particle))
     kept = [b for b in spec.bond if b.kind != bonds.unary.KIND.name]
     return spec.model_copy(update={"particle": particles, "total_mass": float(total), "bond": kept})
 

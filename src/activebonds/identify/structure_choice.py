@@ -262,7 +262,7 @@ def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> Mode
         kept.append(b)
     particles = list(spec.particle)
     if variant.masses != "scaffold":
-        total = sum(_mass(p) for p in particles)
+        total = sum(mass_of(p) for p in particles)
         if variant.masses == "momentum":
             masses = momentum_masses(positions, dt, total, flight_frames(spec, positions))
             if masses is None:  # not on these frames: equal, as scaffolded
@@ -275,7 +275,8 @@ def linear_spec(spec: ModelSpec, variant: Variant, positions, dt: float) -> Mode
     return spec.model_copy(update={"bond": kept, "gravity": None, "particle": particles})
 
 
-def _mass(p) -> float:
+def mass_of(p) -> float:
+    """A particle's mass (kg), fixed or free (its value)."""
     return float(p.mass.value if hasattr(p.mass, "value") else p.mass)
 
 

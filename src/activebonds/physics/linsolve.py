@@ -7,13 +7,13 @@ kernels split a batch over XLA's intra-op thread pool and block their pool threa
 pieces are done. Where the program runs two or more such calls at once (a vmapped solve
 inside a loop, e.g. a Jacobian of the one-step cost with substeps and contacts), every pool
 thread can be waiting so, the pieces never run, and the process hangs at 0 % CPU (seen on a
-2-core machine; one core, or jaxlib 0.11, where that parallel path is gone, does not hang).
-Solving here, in XLA's own operations, involves no library call and no thread pool.
+2-core machine; pinned to one core it does not hang). Solving here, in XLA's own
+operations, involves no library call and no thread pool.
 
 :func:`solve` is Gauss elimination with partial pivoting (LAPACK's ``getrf`` algorithm, a
-loop over the columns), with its derivative
-by the same factors (``d x = A^-1 (d b - d A x)``), so a forward-mode Jacobian over many
-directions costs one factorisation and a pair of triangular solves per direction.
+loop over the columns), with its derivative by the same factors (``d x = A^-1 (d b - d A
+x)``), so a forward-mode Jacobian over many directions costs one factorisation and a pair of
+triangular solves per direction.
 """
 
 from __future__ import annotations
