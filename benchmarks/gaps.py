@@ -88,9 +88,9 @@ def auto_half(traj, frames: tuple[int, int]):
     (``identify.scaffold``, no gravity), the variant (masses, anchors, BIC-decided or not)
     chosen on the frames' validation tail and solved by the exact least squares on all of
     them (``identify.structure_choice``); (model, its one-step RMS mm on ``frames``)."""
-    from activebonds.identify.predictions import one_step, rms_mm
-    from activebonds.identify.scaffold import scaffold
-    from activebonds.identify.structure_choice import Variant, choose, decide
+    from activebonds.identify.discover.scaffold import scaffold
+    from activebonds.identify.discover.structure_choice import Variant, choose, decide
+    from activebonds.identify.judge.predictions import one_step, rms_mm
     from activebonds.model import build, loads_model
 
     text = scaffold(traj, frames=frames, complete=True, gravity=False).text
@@ -123,7 +123,7 @@ def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"
     sys.path.insert(0, str(ROOT.parent / "scripts"))
     from horse_gait import build_and_solve
 
-    from activebonds.identify.predictions import one_step, rms_mm
+    from activebonds.identify.judge.predictions import one_step, rms_mm
 
     signal, harmonics, gain, decay = GAIT_VARIANTS[name]
     model = build_and_solve(traj, harmonics, gain, springs, frames, signal, decay)
@@ -134,8 +134,8 @@ def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"
 
 def fit_half(model, traj, frames: tuple[int, int]):
     """The model's linear genes by exact least squares on ``frames`` (one step, horizon 1)."""
-    from activebonds.identify.cost import make_windows
-    from activebonds.identify.lsq import least_squares
+    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.solvers.lsq import least_squares
 
     part = traj.select(list(model.markers)).window(*frames)
     fit = least_squares(model, make_windows(part.positions, part.mask, part.dt, 1))
@@ -184,7 +184,7 @@ def fill_one(method, model, traj, marker: int, start: int, length: int, context,
     plan = dataclasses.replace(plan, gaps=(gap, *others))
     extra = {}
     if method in MODEL_METHODS:
-        from activebonds.identify.fill import model_fill
+        from activebonds.identify.gaps.fill import model_fill
 
         prior = "pca" if method == "model+pca" else None
         found = model_fill(model, plan, context=context, horizon=horizon, prior=prior)

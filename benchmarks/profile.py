@@ -41,7 +41,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
-from activebonds.identify import es  # noqa: E402
+from activebonds.identify.search import es  # noqa: E402
 from run import F64, Ours, _cast  # noqa: E402
 
 now = time.perf_counter

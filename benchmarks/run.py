@@ -44,8 +44,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
-from activebonds.identify import es, evolve  # noqa: E402
-from activebonds.identify.cost import Display  # noqa: E402
+from activebonds.identify.costs.restart import Display  # noqa: E402
+from activebonds.identify.search import es, evolve  # noqa: E402
 from numpy_es import NumpyES  # noqa: E402
 
 F64 = jnp.float64
@@ -81,7 +81,7 @@ def _cast(evaluate, dtype=F64):
 
 
 class Ours:
-    """The package's ES as driver.py runs it: the one evolve loop (identify/evolve.py) with
+    """The package's ES as driver.py runs it: the one evolve loop (identify/search/evolve.py) with
     the paper's strategy, its jitted start and a jitted chunk of generations (one lax.scan,
     the length the loop picks), called repeatedly with the state carried over."""
 
@@ -120,7 +120,7 @@ class Ours:
 
 class LeastSquares:
     """``fit --init lsq``'s start on its own: the exact linear least squares of the one-step
-    cost (identify/lsq.py: NumPy, the fixed part's forces by JAX op by op, nothing compiled
+    cost (identify/solvers/lsq.py: NumPy, the fixed part's forces by JAX op by op, nothing compiled
     ahead). On the triangle every parameter enters linearly, so this is the one-step optimum."""
 
     label = "ours: exact least squares (--init lsq)"
@@ -132,7 +132,7 @@ class LeastSquares:
         self.genome = bench.model.layout.initial()
 
     def call(self) -> float:
-        from activebonds.identify.lsq import least_squares
+        from activebonds.identify.solvers.lsq import least_squares
 
         t = now()
         self.genome = least_squares(self.ident.model, self.ident.windows).genome

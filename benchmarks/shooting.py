@@ -100,7 +100,7 @@ def _traced(timeline: list) -> None:
     """Record the stage's parts (warm start, checks, the one-step stage instead) and every
     Levenberg-Marquardt solve (steps, message, seconds) in ``timeline``, each also printed to
     stderr as it ends, every 10th step's loss too (``--trace``: where a long stage goes)."""
-    from activebonds.identify import refine
+    from activebonds.identify.solvers import refine
 
     t0 = time.perf_counter()
 
@@ -148,11 +148,11 @@ def child(name: str, path: str) -> dict:
 
     compilation_cache()  # the parent's choice: off, or a folder of its own (--warm)
 
-    from activebonds.identify.cost import make_windows
-    from activebonds.identify.lsq import least_squares
+    from activebonds.identify.costs.restart import make_windows
     from activebonds.identify.problem import identification
-    from activebonds.identify.refine import Refinement
     from activebonds.identify.settings import FitSettings
+    from activebonds.identify.solvers.lsq import least_squares
+    from activebonds.identify.solvers.refine import Refinement
 
     jax.config.update("jax_enable_x64", True)
     timeline: list = []
@@ -171,7 +171,7 @@ def child(name: str, path: str) -> dict:
     natural = ident.model.layout.natural(np.asarray(stage.genome))
     errors = None
     if path == "structured" and stage.cost == "shooting" and stage.accepted:
-        from activebonds.identify.uncertainty import estimate
+        from activebonds.identify.judge.uncertainty import estimate
 
         report = estimate(ident, settings, stage.genome, horizon, "shooting", refinement.states)
         errors = [e.std_error for e in report.estimates]

@@ -56,18 +56,18 @@ def programs(name: str):
     import numpy as np
     from jax.flatten_util import ravel_pytree
 
-    from activebonds.identify.cost import make_cost, make_residuals, make_windows
-    from activebonds.identify.lsq import least_squares
-    from activebonds.identify.problem import identification
-    from activebonds.identify.refine import Bounded
-    from activebonds.identify.settings import FitSettings
-    from activebonds.identify.shooting import (
+    from activebonds.identify.costs.restart import make_cost, make_residuals, make_windows
+    from activebonds.identify.costs.shooting import (
         frame_states,
         make_shooting,
         shooting_windows,
         start_states,
     )
-    from activebonds.identify.shooting_normal import make_normal
+    from activebonds.identify.problem import identification
+    from activebonds.identify.settings import FitSettings
+    from activebonds.identify.solvers.lsq import least_squares
+    from activebonds.identify.solvers.refine import Bounded
+    from activebonds.identify.solvers.shooting_normal import make_normal
     from shooting import case
 
     model, traj, horizon, substeps, method = case(name)

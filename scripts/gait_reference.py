@@ -79,7 +79,7 @@ def template_runs(rec, starts, n, gait, period) -> tuple[np.ndarray, np.ndarray,
 
 
 def frames_within_median(runs, rec, starts) -> dict:
-    from activebonds.identify.metrics import censored_median, frames_within
+    from activebonds.identify.judge.metrics import censored_median, frames_within
 
     values, cens = [], []
     for run, s in zip(runs, starts, strict=True):

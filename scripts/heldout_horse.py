@@ -10,7 +10,7 @@ the zero-force predictor's):
 
 1. ``exact``: every pair of markers (21 binary spring-dampers) and an anchor per marker (7
    unary spring-dampers), rest lengths and anchors free, by exact one-step least squares
-   (identify/lsq.py), masses as examples/horse_trot_ground.toml's, with the issue's bounds
+   (identify/solvers/lsq.py), masses as examples/horse_trot_ground.toml's, with the issue's bounds
    (the 4.53 mm: stiffness and damping from 0, rest lengths to 3 times the largest distance,
    anchors 5 m about their means, gravity) and with the scaffold's (rest lengths to twice the
    largest distance, anchors two extents about their medians), and with the scaffold's
@@ -20,7 +20,7 @@ the zero-force predictor's):
    before this change (k nearest, near-rigid, Delaunay: no anchor), every candidate or the
    BIC's; the complete graph without anchors; with rest lengths and anchors fixed at their
    means over the fitted frames; BIC-pruned;
-3. ``variants``: the 12 variants ``auto`` chooses among (identify/structure_choice.py), each
+3. ``variants``: the 12 variants ``auto`` chooses among (identify/discover/structure_choice.py), each
    scored on the validation tail 240-299 after a fit on 0-239 (what the choice sees) and,
    for the record, refitted on 0-299 and judged on 300-599 (what the choice never sees);
 4. with ``--auto DIR``: ``activebonds auto DATA --held-out 0.5 --out DIR/GAIT`` (run unless
@@ -50,7 +50,7 @@ BODY = ("Head", "Withers", "Sacrum")
 
 def per_marker(model, traj) -> tuple[float, list[float]]:
     """One-step RMS (mm) of ``model`` along ``traj``, overall and per marker."""
-    from activebonds.identify.predictions import one_step
+    from activebonds.identify.judge.predictions import one_step
 
     rec = np.asarray(traj.positions, np.float64)
     err2 = np.sum((one_step(model, rec, traj.dt) - rec) ** 2, axis=-1)
@@ -60,7 +60,7 @@ def per_marker(model, traj) -> tuple[float, list[float]]:
 
 
 def zero_force(traj) -> tuple[float, list[float]]:
-    from activebonds.identify.baselines import zero_force_predictions
+    from activebonds.identify.judge.baselines import zero_force_predictions
 
     rec = np.asarray(traj.positions, np.float64)
     err2 = np.sum((zero_force_predictions(rec, 1)[0] - rec) ** 2, axis=-1)
@@ -86,8 +86,8 @@ def scored(model, fitted, held, zero_each) -> dict:
 
 def solved(spec, traj, frames, eliminate: bool):
     """The spec decided (``eliminate``: BIC) and solved on ``frames``: a Model."""
+    from activebonds.identify.discover.structure import structure_of
     from activebonds.identify.settings import FitSettings
-    from activebonds.identify.structure import structure_of
     from activebonds.model import build
 
     found = structure_of(build(spec), traj, FitSettings(frames=frames), 0, eliminate)
@@ -169,8 +169,8 @@ def fixed_at_means(spec, traj):
 def run_gait(gait: str) -> dict:
     from activebonds.data import read_trajectory
     from activebonds.data.bundled import dataset
-    from activebonds.identify.scaffold import scaffold
-    from activebonds.identify.structure_choice import Variant, choose, decide, linear_spec
+    from activebonds.identify.discover.scaffold import scaffold
+    from activebonds.identify.discover.structure_choice import Variant, choose, decide, linear_spec
     from activebonds.model import build, loads_model
 
     traj = read_trajectory(dataset(GAITS[gait]).path)

@@ -35,7 +35,7 @@ STRIDE_FRAMES = 60.0 / 1.445
 
 
 def judged(model, traj) -> dict:
-    from activebonds.identify.metrics import free_run_metrics
+    from activebonds.identify.judge.metrics import free_run_metrics
 
     held = traj.window(*TEST)
     free = free_run_metrics(model, held, offset=TEST[0] - FIT[0])
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
     horizons = tuple(int(h) for h in args.horizon.split(","))
 
     from activebonds import fit, read_trajectory
-    from activebonds.identify.metrics import zero_force_metrics
+    from activebonds.identify.judge.metrics import zero_force_metrics
     from activebonds.model import load_model
 
     traj = read_trajectory(DATA)

@@ -18,7 +18,7 @@ frames 0-299 and judged on frames 300-599:
    scaffold's (1 kg a marker: without springs between markers each marker's equation scales
    with its mass);
 2. the fit: the exact one-step least squares of every stiffness, damping and coefficient
-   (identify/lsq.py through ``structure``'s solver, every bond kept; psi tracked along the
+   (identify/solvers/lsq.py through ``structure``'s solver, every bond kept; psi tracked along the
    record at the fixed f, sigma, psi0 = 0);
 3. the choice of the signal (height, length), H in (4, 6), sigma in (0: a clock, 25, 50, 100,
    200, 400) rad/s per m and the anchors' damping floor (0, 1 or 4 e-folds per stride of an
@@ -213,7 +213,7 @@ def model_text(
     """The scaffold's complete graph and anchors, no gravity, a periodic force per marker and
     the entrained drive; every number from ``frames`` (the fit range). ``quadrature``
     (signal, gain): a second signal, its gain None for :func:`balanced_gain`'s."""
-    from activebonds.identify.scaffold import scaffold
+    from activebonds.identify.discover.scaffold import scaffold
 
     base = scaffold(traj, frames=frames, gravity=False).text
     x = np.asarray(traj.positions, np.float64)[frames[0] : frames[1]]
@@ -265,8 +265,8 @@ def variant_spec(text: str, traj, springs: str, frames=FIT, floor: float = 0.0):
 
 def solved(spec, traj, frames):
     """Every candidate kept, solved by the exact least squares on ``frames``: a Model."""
+    from activebonds.identify.discover.structure import structure_of
     from activebonds.identify.settings import FitSettings
-    from activebonds.identify.structure import structure_of
     from activebonds.model import build
 
     found = structure_of(build(spec), traj, FitSettings(frames=frames), 0, False)
@@ -416,7 +416,7 @@ def coupling_strength(traj, gain: float, signal: str, frames=FIT) -> float:
 def phase_rate(model, traj, frames=FIT) -> dict:
     """The entrained phase tracked along the recording over ``frames``: its rate's 5th and
     95th percentiles and mean as shares of 2 pi f (1 for a clock)."""
-    from activebonds.identify.predictions import tracked_phases
+    from activebonds.identify.judge.predictions import tracked_phases
 
     x = np.asarray(traj.positions, np.float64)
     psi = tracked_phases(model, x, 1.0 / traj.rate)
@@ -523,7 +523,7 @@ def phase_slip(model, traj, frames=TEST, horizon: int = 60, every: int = 10) -> 
     model's time from frame 0, as ``--origin 0``): from starts every ``every`` frames of
     ``frames``, after ``horizon`` frames, psi_run - psi_tracked in frames of a stride
     (median, median of the absolute value, largest absolute value)."""
-    from activebonds.identify.predictions import free_run, tracked_phases
+    from activebonds.identify.judge.predictions import free_run, tracked_phases
 
     x = np.asarray(traj.positions, np.float64)
     dt = 1.0 / traj.rate

@@ -71,7 +71,7 @@ def models(belt: float):
 
 
 def per_marker_rms(model, traj) -> tuple[float, np.ndarray]:
-    from activebonds.identify.predictions import one_step
+    from activebonds.identify.judge.predictions import one_step
 
     pred = one_step(model, traj.positions, traj.dt, 1, "euler")
     err2 = np.sum((pred - traj.positions) ** 2, axis=-1)  # [F, P], NaN where not predicted
@@ -96,7 +96,7 @@ def internal_floor(traj) -> tuple[float, list[float]]:
     over log10 ratios to the first marker, each within +-DECADES (a tanh map), from equal
     masses, from the model file's masses and from each marker made 1000x heavier, then once
     more from the best point. A local search: an upper bound of the infimum over masses."""
-    from activebonds.identify.baselines import momentum_floor_rms_mm
+    from activebonds.identify.judge.baselines import momentum_floor_rms_mm
 
     def masses(z):
         return 10.0 ** np.concatenate([[0.0], DECADES * np.tanh(z)])
@@ -123,7 +123,7 @@ def internal_floor(traj) -> tuple[float, list[float]]:
 
 def run_gait(gait: str, args) -> dict:
     from activebonds import fit, read_trajectory
-    from activebonds.identify.metrics import free_run_metrics, zero_force_metrics
+    from activebonds.identify.judge.metrics import free_run_metrics, zero_force_metrics
 
     traj = read_trajectory(DATA / GAITS[gait])
     belt = belt_velocity(traj)

@@ -19,7 +19,7 @@ fit frames 0-299 and the held-out frames 300-599:
   and anchors fixed at their means, stiffness and damping free from 0), so that the
   comparison with the pruned model is one of structure only;
 * ``pruned``: the candidates after structure identification (backward elimination under the
-  BIC on the exact one-step least squares, activebonds.identify.structure).
+  BIC on the exact one-step least squares, activebonds.identify.discover.structure).
 
 Each is fitted by exact least squares on the fit frames and judged by its one-step RMS error
 on the held-out frames (all markers and per marker), beside the zero-force predictor.
@@ -110,7 +110,7 @@ def candidate_text(fit) -> str:
 
 
 def exact_fit(model, windows):
-    from activebonds.identify.lsq import least_squares
+    from activebonds.identify.solvers.lsq import least_squares
 
     return model.with_genome(least_squares(model, windows).genome)
 
@@ -119,8 +119,8 @@ def run_gait(gait: str) -> dict:
     from horse_ground import per_marker_rms, zero_force_per_marker
 
     from activebonds import read_trajectory
-    from activebonds.identify.cost import make_windows
-    from activebonds.identify.structure import identify_structure
+    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.discover.structure import identify_structure
     from activebonds.model import dumps_model, loads_model
 
     traj = read_trajectory(DATA / GAITS[gait])

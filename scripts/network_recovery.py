@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import activebonds  # noqa: E402
 import mujoco_truth  # noqa: E402
 from activebonds.data import Trajectory  # noqa: E402
-from activebonds.identify.baselines import zero_force_rms_mm  # noqa: E402
+from activebonds.identify.judge.baselines import zero_force_rms_mm  # noqa: E402
 from activebonds.model import loads_model  # noqa: E402
 
 KINDS = ("stiffness", "rest_length", "damping")

@@ -209,7 +209,7 @@ def rational_floor(x0: np.ndarray, resid: np.ndarray, mass) -> float:
 def package_ranks(x0: np.ndarray, mass) -> list[int]:
     """The constraint ranks the package's rank test finds over the frames (its current code:
     rows normalised, singular values above PACKAGE_RANK_RTOL times the largest)."""
-    from activebonds.identify.baselines import _constraints
+    from activebonds.identify.judge.baselines import _constraints
 
     ranks = set()
     for t in range(x0.shape[0]):
@@ -270,7 +270,7 @@ def minimise_exact_floor(x0, resid, start_masses, bound: float = 6.0) -> tuple[f
 
 
 def floors(gait: str, held, markers) -> dict:
-    from activebonds.identify.baselines import momentum_floor_rms_mm
+    from activebonds.identify.judge.baselines import momentum_floor_rms_mm
 
     x = held.positions
     s = starts_of((0, held.n_frames))
@@ -588,7 +588,7 @@ def ridge_entry(kind, degree, p_tr, p_te, pi_tr, pi_val, y_tr, inner, score) -> 
 
 def run_gait(gait: str) -> dict:
     from activebonds.data import read_trajectory
-    from activebonds.identify.baselines import zero_force_rms_mm
+    from activebonds.identify.judge.baselines import zero_force_rms_mm
 
     traj = read_trajectory(DATA / GAITS[gait])
     markers = list(traj.markers)
@@ -629,7 +629,7 @@ def run_gait(gait: str) -> dict:
 
 
 def floors_equal(fit) -> float:
-    from activebonds.identify.baselines import momentum_floor_rms_mm
+    from activebonds.identify.judge.baselines import momentum_floor_rms_mm
 
     return momentum_floor_rms_mm(fit.positions, fit.mask, fit.dt, np.ones(fit.n_markers))
 

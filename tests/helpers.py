@@ -178,7 +178,7 @@ def bowl_problem(n_genes: int = 3):
     import jax.numpy as jnp
     import numpy as np
 
-    from activebonds.identify.strategy import Problem
+    from activebonds.identify.search.strategy import Problem
 
     target = jnp.linspace(0.2, 0.8, n_genes)
 

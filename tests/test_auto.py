@@ -10,7 +10,7 @@ import pytest
 
 from activebonds import pipeline
 from activebonds.data.bundled import dataset
-from activebonds.identify.verdict import comparisons_from
+from activebonds.identify.judge.verdict import comparisons_from
 from activebonds.model import load_model
 from activebonds.simulation import simulate_to_file
 from helpers import cli_in_process

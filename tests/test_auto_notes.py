@@ -9,8 +9,8 @@ from types import SimpleNamespace
 import pytest
 
 from activebonds.errors import InputError
-from activebonds.identify.scaffold import scaffold
-from activebonds.identify.verdict import Verdict
+from activebonds.identify.discover.scaffold import scaffold
+from activebonds.identify.judge.verdict import Verdict
 from activebonds.model import load_model
 from activebonds.pipeline import STILL, fixed_masses_note, still_note
 from activebonds.simulation import simulate

@@ -7,11 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify import evolve, strategies
-from activebonds.identify.cost import Display
+from activebonds.identify.costs.restart import Display
 from activebonds.identify.driver import fit
-from activebonds.identify.evolve import Chunking
 from activebonds.identify.problem import identification
+from activebonds.identify.search import evolve, strategies
+from activebonds.identify.search.evolve import Chunking
 from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model
 from activebonds.simulation import simulate

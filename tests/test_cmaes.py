@@ -17,10 +17,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify import evolve, fit, resume, rundir
-from activebonds.identify.cmaes import CMAES
-from activebonds.identify.cost import Display
-from activebonds.identify.strategy import Problem
+from activebonds.identify import fit, resume, rundir
+from activebonds.identify.costs.restart import Display
+from activebonds.identify.search import evolve
+from activebonds.identify.search.cmaes import CMAES
+from activebonds.identify.search.strategy import Problem
 from helpers import bowl_problem
 from reliability_runner import EXAMPLES
 

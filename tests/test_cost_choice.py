@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import activebonds
-from activebonds.identify.cost import constant_velocity_cost, make_windows, rms_mm
-from activebonds.identify.cost_choice import AFFORDABLE_UNKNOWNS, choose_cost
+from activebonds.identify.costs.choice import AFFORDABLE_UNKNOWNS, choose_cost
+from activebonds.identify.costs.restart import constant_velocity_cost, make_windows, rms_mm
 from activebonds.identify.problem import identification
-from activebonds.identify.refine import Refinement
 from activebonds.identify.settings import FitSettings
+from activebonds.identify.solvers.refine import Refinement
 from activebonds.model import load_model, loads_model
 from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, cli
 

@@ -147,7 +147,7 @@ def _python_files() -> dict[str, list]:
 
 
 def test_the_pages_name_python_files_and_folders_that_exist():
-    """A module or script a page names (``identify/lsq.py``, ``tests/test_x.py``, a bare
+    """A module or script a page names (``identify/solvers/lsq.py``, ``tests/test_x.py``, a bare
     ``springs.py`` in the architecture's tree) exists: under the repository, ``src/`` or
     ``src/activebonds/``, or, without a folder, somewhere in it; the package folders the
     architecture's tree names exist."""

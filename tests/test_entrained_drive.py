@@ -21,18 +21,18 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.ahead import model_ahead
-from activebonds.identify.cost import join_windows, make_cost, make_windows, start_phases
-from activebonds.identify.population_cost import make_population_cost
-from activebonds.identify.predictions import free_run, one_step, tracked_phases
-from activebonds.identify.shooting import (
+from activebonds.identify.costs.restart import join_windows, make_cost, make_windows, start_phases
+from activebonds.identify.costs.shooting import (
     frame_states,
     join_shooting,
     make_shooting,
     shooting_windows,
     window_phases,
 )
-from activebonds.identify.shooting import start_states as window_starts
+from activebonds.identify.costs.shooting import start_states as window_starts
+from activebonds.identify.judge.ahead import model_ahead
+from activebonds.identify.judge.predictions import free_run, one_step, tracked_phases
+from activebonds.identify.search.population_cost import make_population_cost
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import phase, rollout, rollout_states
 from activebonds.report.predict import activations

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from activebonds.cli.main import app
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
 from activebonds.errors import InputError
-from activebonds.identify.metrics import free_run_from, window_metrics
+from activebonds.identify.judge.metrics import free_run_from, window_metrics
 from activebonds.model import load_model, loads_model
 from activebonds.report.evaluate import evaluate
 from activebonds.report.predict import predict

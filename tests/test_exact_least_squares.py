@@ -16,14 +16,14 @@ from scipy.optimize import minimize
 from activebonds.data import read_trajectory
 from activebonds.errors import InputError
 from activebonds.identify import fit
-from activebonds.identify.baselines import (
+from activebonds.identify.costs.restart import make_cost, make_windows
+from activebonds.identify.judge.baselines import (
     model_floor_rms_mm,
     momentum_floor_rms_mm,
     zero_force_rms_mm,
 )
-from activebonds.identify.cost import make_cost, make_windows
-from activebonds.identify.lsq import equation_error_fit, least_squares, linear_problem
-from activebonds.identify.predictions import one_step
+from activebonds.identify.judge.predictions import one_step
+from activebonds.identify.solvers.lsq import equation_error_fit, least_squares, linear_problem
 from activebonds.model import as_standard, load_model, loads_model
 from activebonds.simulation import simulate
 from helpers import EXAMPLES, HORSE_LIMB, HORSE_TROT, ROOT, both_ways_fresh_in_slow, cli
@@ -333,7 +333,7 @@ def test_a_switched_off_linear_kind_exerts_no_force(path):
     driven or not; unary springs with fixed or moving anchors) exerts no force at any state
     or time, whatever its fixed parameters."""
     from activebonds import bonds
-    from activebonds.identify.lsq import _switched_off
+    from activebonds.identify.solvers.lsq import _switched_off
 
     model = load_model(path)
     try:

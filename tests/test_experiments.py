@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from activebonds.cli.main import app
 from activebonds.data import Trajectory
 from activebonds.experiments.paper import EXPERIMENTS
-from activebonds.identify.baselines import momentum_floor_rms_mm
+from activebonds.identify.judge.baselines import momentum_floor_rms_mm
 from activebonds.model import load_model
 from activebonds.report import plots
 from activebonds.report.predict import neural_weights

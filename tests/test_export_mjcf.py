@@ -369,7 +369,7 @@ def test_a_scaffold_on_the_ground_exports_with_its_contacts(tmp_path):
     """``scaffold`` adds ground contacts for a body standing on the ground; ``export`` now
     writes them (it refused every contact): one pair per foot, and MuJoCo loads the file."""
     from activebonds.data import Trajectory
-    from activebonds.identify.scaffold import scaffold
+    from activebonds.identify.discover.scaffold import scaffold
 
     rng = np.random.default_rng(0)
     frames = 200

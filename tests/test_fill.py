@@ -155,7 +155,7 @@ def triangle():
 
 
 def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly(triangle):
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
 
     model = triangle
     truth = _truth()
@@ -168,7 +168,7 @@ def test_model_fills_a_30_frame_gap_of_its_own_recording_exactly(triangle):
 
 
 def test_model_fill_with_half_millimetre_noise_is_within_the_noise(triangle):
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
 
     model = triangle
     truth = _truth()
@@ -196,7 +196,7 @@ def test_the_pca_prior_does_not_pull_the_true_model_off_its_fill(triangle):
     off (over 50 mm), its cross-validated error says so, and as a prior it weighs almost
     nothing against the true model's fit: the fused fill stays within the noise of the truth
     and of the pure fill (measured 0.47 and 0.39 mm off the truth; the prior's weight 0.0065)."""
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
 
     model = triangle
     truth = _truth()
@@ -230,7 +230,7 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
     lengths the mean distances) fills a 40-frame gap far off. Its cross-validated error near
     zero, the PCA fill weighs as a recorded sample: the fused fill is within 1 mm of the
     truth, the pure fill far off (measured 0.04 and 264 mm)."""
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
     from activebonds.model import loads_model
 
     x = _low_rank_motion()
@@ -258,8 +258,8 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
 
 
 def test_the_lapack_step_solves_the_block_tridiagonal_system_as_the_jax_one():
-    from activebonds.identify.fill import block_tridiagonal_lapack
-    from activebonds.identify.shooting_normal import block_tridiagonal_solve
+    from activebonds.identify.gaps.fill import block_tridiagonal_lapack
+    from activebonds.identify.solvers.shooting_normal import block_tridiagonal_solve
 
     rng = np.random.default_rng(1)
     k, n = 7, 5
@@ -287,8 +287,8 @@ def test_the_step_prior_adds_its_exact_gauss_newton_terms():
     import jax
     import jax.numpy as jnp
 
-    from activebonds.identify.fill import _step_residuals, _with_steps
-    from activebonds.identify.shooting_normal import Normal
+    from activebonds.identify.gaps.fill import _step_residuals, _with_steps
+    from activebonds.identify.solvers.shooting_normal import Normal
 
     rng = np.random.default_rng(2)
     k, m, d = 6, 3, 3
@@ -322,7 +322,7 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
     present steer the trajectory through a 60-frame gap: closer to the truth than the same model
     held to its dynamics (measured 2.9 vs 4.5 mm at 0.7, 2.7 vs 7.2 mm at 1.5) and far closer
     than the spline (18 mm)."""
-    from activebonds.identify.fill import model_fill, one_step_ratio
+    from activebonds.identify.gaps.fill import model_fill, one_step_ratio
 
     model = load_model(TRIANGLE)
     truth = _truth(240)
@@ -352,7 +352,7 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
 def gap_of_240(triangle):
     """240 frames of the triangle, B missing in frames 100:160, and the true model's fill of
     it (the same for every wrong model compared with it: made once)."""
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
 
     model = triangle
     truth = _truth(240)
@@ -368,7 +368,7 @@ def test_a_wrong_model_reports_an_uncertainty_of_the_order_of_its_error(stiffnes
     continuity defects that repeat frame after frame (tau about 10: a right model's are white).
     Scaled by the residuals around the gap (sqrt(tau), the noise floor), the reported
     uncertainty is of the error's order: measured 1.04 and 0.98 times it."""
-    from activebonds.identify.fill import model_fill
+    from activebonds.identify.gaps.fill import model_fill
 
     truth, t, right = gap_of_240
     model = load_model(TRIANGLE)
@@ -455,7 +455,7 @@ def test_fill_takes_a_step_limit_and_says_when_a_stretch_stops_there(tmp_path):
     """--max-steps bounds the Levenberg-Marquardt steps of each fitted stretch; a stretch that
     stops at it is counted as not converged, and the line names the option."""
     from activebonds.cli.fill_cmd import MAX_STEPS
-    from activebonds.identify import fill
+    from activebonds.identify.gaps import fill
 
     assert MAX_STEPS == fill.MAX_STEPS
     src, _ = _gappy(tmp_path)
@@ -529,7 +529,7 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
     tracked along the record from the start phase; a gap in C, the signal itself, too: the
     phase is tracked along the model's own fill of C, refitted until it stops moving."""
-    from activebonds.identify.fill import fill_phases, model_fill
+    from activebonds.identify.gaps.fill import fill_phases, model_fill
     from activebonds.model import loads_model
     from activebonds.physics import phase
     from test_entrained_drive import entrained

@@ -1,4 +1,4 @@
-"""Masses from a flight (:mod:`activebonds.identify.flight_masses`, ``auto``'s fit step).
+"""Masses from a flight (:mod:`activebonds.identify.discover.flight_masses`, ``auto``'s fit step).
 
 The flight's frames and the models it fits are checked on small cases; the recovery on a body
 simulated by MuJoCo (``scripts/mujoco_thrown.py``: five unequal masses, nine tendons, thrown
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from activebonds.identify.flight_masses import (
+from activebonds.identify.discover.flight_masses import (
     MIN_FLIGHT,
     anchors,
     determined,

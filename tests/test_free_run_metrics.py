@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, read_trajectory, write_trajectory
-from activebonds.identify.baselines import zero_force_rms_mm
-from activebonds.identify.metrics import (
+from activebonds.identify.judge.baselines import zero_force_rms_mm
+from activebonds.identify.judge.metrics import (
     THRESHOLD_MM,
     censored_median,
     frames_within,
@@ -21,7 +21,7 @@ from activebonds.identify.metrics import (
     validation_record,
     zero_force_metrics,
 )
-from activebonds.identify.predictions import free_run
+from activebonds.identify.judge.predictions import free_run
 from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model, loads_model
 from activebonds.report import predict, write_report

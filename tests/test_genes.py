@@ -12,7 +12,7 @@ import pytest
 
 import activebonds
 from activebonds import bonds
-from activebonds.identify.lsq import nonlinear_genes
+from activebonds.identify.solvers.lsq import nonlinear_genes
 from activebonds.model import Gene, loads_model
 from activebonds.model.forms import FORMS, form_of
 from activebonds.model.model import spec_with_params, with_values
@@ -279,8 +279,8 @@ NAME_READERS = [
     "model/model.py",
     "model/layout.py",
     "model/names.py",
-    "identify/lsq.py",
-    "identify/uncertainty.py",
+    "identify/solvers/lsq.py",
+    "identify/judge/uncertainty.py",
     "report/html.py",
     "report/plots.py",
 ]

@@ -24,8 +24,9 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory, write_trajectory
-from activebonds.identify import es, evolve, fit
-from activebonds.identify.cost import make_cost, make_windows, rms_mm
+from activebonds.identify import fit
+from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.search import es, evolve
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
 from helpers import (

@@ -14,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify import operators as ops
-from activebonds.identify.cost import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.search import operators as ops
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
 from helpers import TRIANGLE
@@ -375,7 +375,7 @@ BOUNDS = ops.Bounds(jnp.zeros(6), jnp.full(6, 10.0))
 
 def noise(seed, n=N_CHILD, n_genes=6):
     """The random numbers ``mutate`` reads, drawn here with jax.random (fields of
-    :class:`~activebonds.identify.operators.Noise` it does not read are left empty)."""
+    :class:`~activebonds.identify.search.operators.Noise` it does not read are left empty)."""
     k = jax.random.split(jax.random.PRNGKey(seed), 6)
     f64 = jnp.float64
     fields = {
@@ -578,7 +578,7 @@ def test_crossover_children_refer_to_their_own_parents():
     """Individual 0 wins every global tournament (the copy parent) but loses every local one,
     so the crossover children are made from individuals 1 and 2 only. Their success count and
     variant-2 bias must use those parents, not the unrelated tournament winner."""
-    from activebonds.identify import es, evolve
+    from activebonds.identify.search import es, evolve
 
     n, g = 4, 2
     # adapt_variants: each child draws its variant from the noise below (with fixed rates the

@@ -130,10 +130,12 @@ def test_the_graph_is_read_from_every_kind_of_import():
     graph = import_graph()
     assert "activebonds.report.html" in graph["activebonds.report"]  # from .html import
     assert "activebonds.identify.rundir" in graph["activebonds.identify.driver"]  # from . import
-    assert "activebonds.bonds" in graph["activebonds.identify.population_cost"]  # from .. import
+    assert (
+        "activebonds.bonds" in graph["activebonds.identify.search.population_cost"]
+    )  # from .. import
     assert "activebonds.errors" in graph["activebonds.data.readers"]  # from ..errors import X
     assert "activebonds.runtime" in graph["activebonds.sweep.run"]  # inside a function
-    assert "activebonds.identify.metrics" in graph["activebonds.sweep.summary"]
+    assert "activebonds.identify.judge.metrics" in graph["activebonds.sweep.summary"]
     cycle = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert find_cycle(cycle) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set(), "c": {"a", "b"}}) is None
@@ -158,9 +160,13 @@ def test_no_module_imports_a_module_of_a_higher_layer():
 
 
 def test_the_layering_check_sees_an_arrow_up():
-    graph = {"activebonds.bonds.binary": {"activebonds.identify.cost"}}
-    assert upward_arrows(graph) == {("activebonds.bonds.binary", "activebonds.identify.cost")}
-    assert upward_arrows({"activebonds.identify.cost": {"activebonds.bonds.binary"}}) == set()
+    graph = {"activebonds.bonds.binary": {"activebonds.identify.costs.restart"}}
+    assert upward_arrows(graph) == {
+        ("activebonds.bonds.binary", "activebonds.identify.costs.restart")
+    }
+    assert (
+        upward_arrows({"activebonds.identify.costs.restart": {"activebonds.bonds.binary"}}) == set()
+    )
 
 
 # ----------------------------------------------------------------------------- bond kinds
@@ -208,7 +214,7 @@ def test_every_module_outside_bonds_is_checked_for_kind_names():
     assert {"model/names.py", "model/variants.py", "export/mjcf.py"} <= checked
     assert {
         "experiments/springs.py",
-        "identify/cost.py",
+        "identify/costs/restart.py",
         "cli/__init__.py",
         "__init__.py",
     } <= checked

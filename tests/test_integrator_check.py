@@ -1,4 +1,4 @@
-"""The substeps check (identify/integrator_check.py): a fit at one step per frame of a motion
+"""The substeps check (identify/judge/integrator_check.py): a fit at one step per frame of a motion
 finer than the frames is flagged with the parameters' move, toward the truth; a fit the
 frames resolve is not."""
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory
-from activebonds.identify import integrator_check, uncertainty
-from activebonds.identify.cost import make_windows
-from activebonds.identify.lsq import least_squares
+from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.judge import integrator_check, uncertainty
 from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings
+from activebonds.identify.solvers.lsq import least_squares
 from activebonds.model import load_model
 from activebonds.runtime import float64
 from activebonds.simulation import simulate
@@ -189,7 +189,7 @@ def test_a_stiffness_fitted_at_one_step_a_frame_is_as_far_off_as_the_modes_say(s
     bias of the integrator's dispersion at the fitted frequency (-2.2 % at 0.51 rad a step,
     -16.6 % at 1.33), which :func:`modes.stiffness_bias` predicts to 0.01 %; the warning
     names the substeps that bring it within 1 %."""
-    from activebonds.identify import modes
+    from activebonds.identify.judge import modes
     from activebonds.model import loads_model
     from activebonds.simulation import simulate
 

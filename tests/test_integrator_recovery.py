@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from activebonds.identify import fit
-from activebonds.identify.cost import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
 from activebonds.model import load_model
 from activebonds.physics import advance, start_velocity
 from activebonds.simulation import simulate
@@ -191,7 +191,7 @@ def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(tru
     """Data the damped tetrahedron above generated (2 Euler substeps at 50 Hz): the
     population's cost (fixed-point starts) is +inf at the truth, and so are the residuals
     by default; with Newton's starts (``newton=True``) they vanish there."""
-    from activebonds.identify.cost import make_residuals
+    from activebonds.identify.costs.restart import make_residuals
 
     p = _stiff_damped(truth, damping=20.0)
     model, layout = truth, truth.layout
@@ -235,8 +235,8 @@ def test_a_refinement_whose_start_the_fixed_point_cannot_solve_takes_newtons_sta
     start cannot be computed with the fixed point's start velocities (every one diverges),
     so its residuals are rebuilt with Newton's, and it recovers every parameter to 1e-6."""
     from activebonds.identify.problem import identification
-    from activebonds.identify.refine import Refinement
     from activebonds.identify.settings import FitSettings
+    from activebonds.identify.solvers.refine import Refinement
     from activebonds.model import loads_model
 
     model = loads_model(TETRA.read_text().replace("max = 10.0", "max = 100.0"), "tetra")
@@ -260,7 +260,7 @@ def test_predictions_from_a_recording_take_newtons_starts_where_the_fixed_point_
     """The damped tetrahedron's own recording (2 Euler substeps): its one-step predictions
     and a free run from its first frames reproduce it (the fixed point's starts are NaN
     there: the predictions are run again with Newton's)."""
-    from activebonds.identify.predictions import free_run, one_step
+    from activebonds.identify.judge.predictions import free_run, one_step
     from activebonds.model import loads_model
 
     model = loads_model(TETRA.read_text().replace("max = 10.0", "max = 100.0"), "tetra")

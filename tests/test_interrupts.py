@@ -298,7 +298,7 @@ def test_ctrl_c_during_the_refinement_stops_within_one_step_and_resumes(tmp_path
     (multiple shooting, converged: the same genome)."""
     from activebonds import runtime
     from activebonds.identify import fit, resume
-    from activebonds.identify.refine import StageInterrupted
+    from activebonds.identify.solvers.refine import StageInterrupted
 
     model, data = _noisy_triangle()
     options = dict(population=8, generations=2, cost="shooting", horizon=(10,))

@@ -10,9 +10,15 @@ import numpy as np
 import pytest
 from scipy.optimize import LinearConstraint, lsq_linear, minimize
 
-from activebonds.identify import structure as st
-from activebonds.identify.cost import make_windows
-from activebonds.identify.lsq import LinearProblem, compress, least_squares, linear_problem, solve
+from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.discover import structure as st
+from activebonds.identify.solvers.lsq import (
+    LinearProblem,
+    compress,
+    least_squares,
+    linear_problem,
+    solve,
+)
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate
 from helpers import ROOT

@@ -299,7 +299,7 @@ def test_the_free_run_advice_names_a_drive_only_for_a_recording_that_repeats(
 
 
 def test_the_advice_without_gravity_for_a_body_that_repeats_nothing():
-    from activebonds.identify.verdict import free_run_advice
+    from activebonds.identify.judge.verdict import free_run_advice
 
     bare = {"gravity": False, "contacts": 0, "anchors": 0, "drive": False, "repeats": False}
     assert free_run_advice(2000.0, bare) == (

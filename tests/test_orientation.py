@@ -173,7 +173,7 @@ def test_a_torso_marker_that_dips_lowest_in_a_few_frames_is_not_the_ground():
     feet (2 cm up), which are the four foot markers; the scaffold's contacts are the feet, not
     the Belly. (The 5th percentile of every frame's lowest marker put the ground at the
     Belly's dip, -3 cm, and the Belly alone within reach of it.)"""
-    from activebonds.identify.scaffold import scaffold
+    from activebonds.identify.discover.scaffold import scaffold
 
     traj = _quadruped(dip=-0.03)
     g = guess_ground(traj)
@@ -198,7 +198,7 @@ def test_a_ground_on_one_marker_against_several_feet_is_uncertain():
     +Z four markers reach the lowest height often. The vertical is uncertain, and the
     scaffold adds no gravity (it pointed sideways, along +Y, before)."""
     from activebonds.data.orientation import confident, guess_gravity, vertical_doubts
-    from activebonds.identify.scaffold import scaffold
+    from activebonds.identify.discover.scaffold import scaffold
 
     traj = _quadruped(roll=0.03, level_top=True)
     g, gravity = guess_ground(traj), guess_gravity(traj)

@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 from activebonds.cli.main import app
 from activebonds.data import write_trajectory
+from activebonds.identify.judge.uncertainty import describe, from_jacobian
 from activebonds.identify.stages import uncertainty as uncertainty_stage
-from activebonds.identify.uncertainty import describe, from_jacobian
 from activebonds.model import Gene, loads_model
 from activebonds.model.names import (
     LISTED,

@@ -17,9 +17,9 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.cost import make_cost, make_windows
-from activebonds.identify.lsq import least_squares
-from activebonds.identify.population_cost import make_population_cost
+from activebonds.identify.costs.restart import make_cost, make_windows
+from activebonds.identify.search.population_cost import make_population_cost
+from activebonds.identify.solvers.lsq import least_squares
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force
 from activebonds.physics.phase import at_phase

@@ -11,10 +11,10 @@ import pytest
 
 from activebonds.bonds.accumulate import accumulate
 from activebonds.data import Trajectory, read_trajectory
-from activebonds.identify import population_cost
-from activebonds.identify.cost import join_windows, make_cost, make_windows
-from activebonds.identify.population_cost import applies, make_population_cost
+from activebonds.identify.costs.restart import join_windows, make_cost, make_windows
 from activebonds.identify.problem import identification
+from activebonds.identify.search import population_cost
+from activebonds.identify.search.population_cost import applies, make_population_cost
 from activebonds.identify.settings import FitSettings
 from activebonds.model import as_neural, load_model
 from activebonds.simulation import simulate
@@ -145,7 +145,7 @@ def test_a_mixed_precision_fit_recovers_the_triangle():
     alone gets within 5 % of every parameter, and its float64 refinement within 0.1 %; the
     fit is far below the zero-force baseline."""
     from activebonds.identify import fit
-    from activebonds.identify.baselines import zero_force_rms_mm
+    from activebonds.identify.judge.baselines import zero_force_rms_mm
 
     model = load_model(TRIANGLE)
     data = simulate(model, 60, 60.0)

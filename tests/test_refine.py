@@ -9,10 +9,10 @@ from typer.testing import CliRunner
 
 import activebonds
 from activebonds.data import Trajectory
-from activebonds.identify import refine as refine_mod
 from activebonds.identify import rundir
-from activebonds.identify.refine import Bounded
-from activebonds.identify.shooting import shooting_windows
+from activebonds.identify.costs.shooting import shooting_windows
+from activebonds.identify.solvers import refine as refine_mod
+from activebonds.identify.solvers.refine import Bounded
 from activebonds.model import load_model, loads_model
 from helpers import EXAMPLES, each_case_both_ways
 
@@ -249,8 +249,8 @@ def test_a_shooting_fit_from_the_exact_start_searches_on_the_one_step_cost(trian
     (whatever --substeps the shooting uses), whose optimum the least squares is: the search's
     best is that optimum exactly, its RMS the least squares' own, and the shooting at 4 Verlet
     substeps then recovers the truth, the fit saying which cost each stage used."""
-    from activebonds.identify.cost import make_windows
-    from activebonds.identify.lsq import least_squares
+    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.solvers.lsq import least_squares
 
     model, _, truth = triangle
     traj = activebonds.simulate(model, 60, 60.0, substeps=4, integrator="verlet")

@@ -29,7 +29,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from activebonds.identify import es, evolve
+from activebonds.identify.search import es, evolve
 from reliability_runner import EXAMPLES, cli, cli_many, one_line_error, workspace
 
 pytestmark = pytest.mark.timeout(300)

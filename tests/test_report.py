@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 from activebonds.data import Trajectory
 from activebonds.errors import InputError
 from activebonds.identify import fit
-from activebonds.identify.predictions import rms_mm
+from activebonds.identify.judge.predictions import rms_mm
 from activebonds.model import as_standard, load_model, loads_model
 from activebonds.report import (
     Figure,
@@ -277,7 +277,7 @@ def test_report_writes_every_figure_and_leaves_no_staging_folder(neural_run):
 def test_report_figures_show_the_runs_numbers(neural_run):
     """The figures' texts read back from their SVGs: the final error, every parameter's
     value, every weight, the saturation share and the labels of the panels."""
-    from activebonds.identify.operators import VARIANTS
+    from activebonds.identify.search.operators import VARIANTS
     from activebonds.model.names import parameter_rows
     from activebonds.report.predict import neural_weights
     from activebonds.report.runs import history_rms_mm
@@ -483,7 +483,7 @@ def test_comparison_report(neural_run, tmp_path):
 def test_report_shows_the_fit_beside_its_baselines(neural_run):
     """The zero-force predictor and the momentum floor on the same frames, with their
     numbers recomputed independently here (the fit window is the horse's frames 0-9)."""
-    from activebonds.identify.baselines import momentum_floor_rms_mm, zero_force_rms_mm
+    from activebonds.identify.judge.baselines import momentum_floor_rms_mm, zero_force_rms_mm
     from activebonds.identify.stages import baselines
 
     result, report, _ = neural_run

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from activebonds.identify.baselines import zero_force_predictions
+from activebonds.identify.judge.baselines import zero_force_predictions
 from activebonds.report import plots
 
 

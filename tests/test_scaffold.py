@@ -13,7 +13,7 @@ from activebonds.data import read_trajectory
 from activebonds.data.orientation import guess_ground
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
-from activebonds.identify.scaffold import scaffold
+from activebonds.identify.discover.scaffold import scaffold
 from activebonds.model import load_model, loads_model
 from helpers import EXAMPLES, HORSE_TROT, cli_in_process
 

@@ -1,4 +1,4 @@
-"""The structured shooting solver (identify/shooting_normal.py, identify/lm.py) against the
+"""The structured shooting solver (identify/solvers/shooting_normal.py, identify/solvers/lm.py) against the
 dense reference: the normal equations by block equal J^T J and J^T r of the whole Jacobian,
 the block-tridiagonal recursion equals a dense solve, the Schur complement is the parameters'
 marginal information, and the structured Levenberg-Marquardt ends where optimistix's does."""
@@ -13,16 +13,17 @@ from jax.flatten_util import ravel_pytree
 
 import activebonds
 from activebonds.data import Trajectory
-from activebonds.identify.problem import identification
-from activebonds.identify.refine import Bounded, Refinement
-from activebonds.identify.settings import FitSettings
-from activebonds.identify.shooting import (
+from activebonds.identify.costs.shooting import (
     frame_states,
     make_shooting,
     shooting_windows,
     start_states,
 )
-from activebonds.identify.shooting_normal import (
+from activebonds.identify.judge.uncertainty import estimate
+from activebonds.identify.problem import identification
+from activebonds.identify.settings import FitSettings
+from activebonds.identify.solvers.refine import Bounded, Refinement
+from activebonds.identify.solvers.shooting_normal import (
     FLOOR,
     block_tridiagonal_solve,
     damped_step,
@@ -30,7 +31,6 @@ from activebonds.identify.shooting_normal import (
     marginal_information,
     marquardt_diagonal,
 )
-from activebonds.identify.uncertainty import estimate
 from activebonds.model import load_model
 from helpers import EXAMPLES
 
@@ -111,7 +111,7 @@ def test_the_blocks_are_the_dense_normal_equations(problem):
 def test_windows_mapped_in_padded_equal_batches_give_the_same_blocks(problem, monkeypatch):
     """5 windows, at most 2 at a time: 3 batches of 2, the last padded with a copy of the last
     window (dropped), rather than a remainder batch traced and compiled as a second program."""
-    from activebonds.identify import shooting_normal
+    from activebonds.identify.solvers import shooting_normal
 
     assert shooting_normal._batches(5, 2) == (2, 6)
     assert shooting_normal._batches(40, 24) == (20, 40)  # the tetrahedron's: no padding

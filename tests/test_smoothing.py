@@ -10,9 +10,9 @@ import pytest
 
 from activebonds import load_model
 from activebonds.data.smoothing import noise_of, smooth_positions
-from activebonds.identify.cost import make_windows
-from activebonds.identify.lsq import least_squares
+from activebonds.identify.costs.restart import make_windows
 from activebonds.identify.settings import FitSettings
+from activebonds.identify.solvers.lsq import least_squares
 from activebonds.simulation import simulate
 
 TRIANGLE = (

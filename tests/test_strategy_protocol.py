@@ -25,10 +25,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify import evolve, fit, operators, strategies
-from activebonds.identify.cost import Display
-from activebonds.identify.random_search import RandomSearch
-from activebonds.identify.strategy import Problem
+from activebonds.identify import fit
+from activebonds.identify.costs.restart import Display
+from activebonds.identify.search import evolve, operators, strategies
+from activebonds.identify.search.random_search import RandomSearch
+from activebonds.identify.search.strategy import Problem
 from helpers import bowl_problem
 from reliability_runner import (
     EXAMPLES,

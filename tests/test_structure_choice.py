@@ -1,5 +1,5 @@
 """The variants of a scaffold's linear structure that ``activebonds auto`` chooses among on a
-validation tail (identify/structure_choice.py), and the one-step BIC that keeps or drops the
+validation tail (identify/discover/structure_choice.py), and the one-step BIC that keeps or drops the
 ground model."""
 
 from __future__ import annotations
@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory
-from activebonds.identify.cost import make_windows
-from activebonds.identify.lsq import least_squares
-from activebonds.identify.scaffold import scaffold
-from activebonds.identify.structure_choice import (
+from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.discover.scaffold import scaffold
+from activebonds.identify.discover.structure_choice import (
     TIE,
     TRAIN,
     Variant,
@@ -22,6 +21,7 @@ from activebonds.identify.structure_choice import (
     momentum_masses,
     variants,
 )
+from activebonds.identify.solvers.lsq import least_squares
 from activebonds.model import build, loads_model
 from activebonds.simulation import simulate
 from helpers import HORSE_TROT, TRIANGLE
@@ -151,13 +151,13 @@ def test_the_criterion_is_the_one_step_bic_of_the_exact_cost(triangle_recording)
 
 
 def _scored(masses, decided, tail, zero, per, per_zero, bonds):
-    from activebonds.identify.structure_choice import Scored, Variant
+    from activebonds.identify.discover.structure_choice import Scored, Variant
 
     return Scored(Variant(masses, "springs", decided), tail, zero, per, per_zero, bonds)
 
 
 def test_a_tail_no_variant_predicts_better_than_zero_force_chooses_nothing():
-    from activebonds.identify.structure_choice import Variant, pick
+    from activebonds.identify.discover.structure_choice import Variant, pick
 
     # a body at rest on the tail: zero force predicts it best; every variant is worse
     rest = [
@@ -225,7 +225,7 @@ def _thrown_body():
 
 
 def test_masses_conserving_momentum_from_the_frames_in_flight():
-    from activebonds.identify.structure_choice import flight_frames, momentum_masses
+    from activebonds.identify.discover.structure_choice import flight_frames, momentum_masses
 
     model, traj, truth = _thrown_body()
     x = np.asarray(traj.positions)

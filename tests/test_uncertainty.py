@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from activebonds.experiments.coverage import coverage, trial
-from activebonds.identify.uncertainty import Z95, describe, from_jacobian
+from activebonds.identify.judge.uncertainty import Z95, describe, from_jacobian
 from activebonds.model import load_model
 from helpers import TRIANGLE, cli_in_process
 
@@ -168,9 +168,9 @@ def test_masses_under_a_total_are_reported_in_kg_whatever_the_weights_scale():
     """Free masses under total_mass are genes w_i with m_i = total w_i / sum(w): the report
     gives m_i in kg with a standard error (the weights' common scale, which changes nothing,
     is not 'not determined'), the same at any scale of the weights."""
+    from activebonds.identify.judge.uncertainty import estimate
     from activebonds.identify.problem import identification
     from activebonds.identify.settings import FitSettings
-    from activebonds.identify.uncertainty import estimate
     from activebonds.model import loads_model
     from activebonds.simulation import simulate
     from test_gravity_masses import FREE_MASS, MASSES, chain
@@ -216,7 +216,7 @@ def test_a_null_direction_in_the_start_states_alone_names_no_parameter():
 
 def test_a_jacobian_too_large_is_skipped_in_one_line(tmp_path, monkeypatch):
     """The fit completes; uncertainty.json says why there is no report; no CSV."""
-    import activebonds.identify.uncertainty as unc
+    import activebonds.identify.judge.uncertainty as unc
     from activebonds.identify import fit
     from activebonds.simulation import simulate
 
@@ -264,9 +264,9 @@ def test_a_log_searched_parameter_has_its_interval_in_log_space_never_below_zero
 def test_every_log_searched_interval_of_a_noisy_fit_is_positive():
     """The estimate of a fit on noisy data, every gene log-scaled (masses under total_mass,
     stiffnesses): no interval reaches 0 or below."""
+    from activebonds.identify.judge.uncertainty import estimate
     from activebonds.identify.problem import identification
     from activebonds.identify.settings import FitSettings
-    from activebonds.identify.uncertainty import estimate
     from activebonds.model import loads_model
     from activebonds.simulation import simulate
     from test_gravity_masses import FREE_MASS, MASSES, chain
@@ -287,7 +287,7 @@ def test_every_log_searched_interval_of_a_noisy_fit_is_positive():
 
 
 def test_the_intervals_say_where_they_cannot_be_trusted():
-    from activebonds.identify.uncertainty import warnings
+    from activebonds.identify.judge.uncertainty import warnings
 
     one_step = warnings("restart", 1, 1)
     assert len(one_step) == 2
@@ -304,7 +304,7 @@ def test_a_fit_that_rejected_shooting_is_not_told_to_refit_with_shooting(tmp_pat
     one-step stage is refined in its place. The uncertainty warning says so, from the stage
     records, and does not send the user to --cost shooting."""
     from activebonds.identify import fit
-    from activebonds.identify.uncertainty import shooting_rejected, warnings
+    from activebonds.identify.judge.uncertainty import shooting_rejected, warnings
     from activebonds.model import loads_model
     from activebonds.simulation import simulate
 
@@ -358,10 +358,10 @@ def test_a_model_that_misses_forces_is_told_its_intervals_do_not_describe_the_mi
     sigma a coordinate one step ahead): at the true stiffnesses the fit's residual is that,
     within 6 %, and no misfit is said; at stiffnesses 10 % and 50 % off, on markers precise
     to 0.01 mm, the residuals are 3-40 times it and the warning says so."""
+    from activebonds.identify.judge.uncertainty import MISFIT, estimate, misfit, noise_gain
     from activebonds.identify.problem import identification
     from activebonds.identify.settings import FitSettings
     from activebonds.identify.stages.uncertainty import marker_noise
-    from activebonds.identify.uncertainty import MISFIT, estimate, misfit, noise_gain
     from activebonds.model import loads_model
     from activebonds.simulation import simulate
     from test_gravity_masses import STIFFNESS, chain

@@ -1,6 +1,6 @@
 """The verdict on every score: better than zero force by X %, or worse (the model does not
 explain this motion), overall and per marker, one step and K frames ahead; the rule and the
-words of one module (activebonds.identify.verdict) wherever a model is scored."""
+words of one module (activebonds.identify.judge.verdict) wherever a model is scored."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, write_trajectory
-from activebonds.identify.ahead import compare, comparisons, zero_force_ahead
-from activebonds.identify.metrics import window_metrics
-from activebonds.identify.verdict import (
+from activebonds.identify.judge.ahead import compare, comparisons, zero_force_ahead
+from activebonds.identify.judge.metrics import window_metrics
+from activebonds.identify.judge.verdict import (
     EXPLAINS_NOT,
     MARGIN_PCT,
     Comparison,
@@ -204,7 +204,7 @@ def test_a_free_run_that_falls_away_gets_one_line_of_advice(recording):
     """The triangle with gravity and nothing to hold it: its free run falls metres in a
     second; evaluate says so once, with what to add: ground contacts first (it has none). The
     true model gets no advice."""
-    from activebonds.identify.verdict import free_run_advice
+    from activebonds.identify.judge.verdict import free_run_advice
     from activebonds.report.evaluate import evaluate
 
     falling = loads_model(
@@ -244,7 +244,7 @@ def test_a_model_with_contacts_that_diverges_is_not_told_to_add_contacts(recordi
     """The falling triangle with a ground contact too far below to catch it: the advice names
     what it lacks (anchors; a drive only where the recording repeats itself), stiffer contacts
     and a shorter horizon, never contacts to add."""
-    from activebonds.identify.verdict import free_run_advice
+    from activebonds.identify.judge.verdict import free_run_advice
     from activebonds.report.evaluate import evaluate
 
     text = TRIANGLE.read_text().replace(

@@ -233,8 +233,9 @@ def test_the_space_estimate_covers_what_a_run_writes(tmp_path, inputs):
 
 
 def _template(result):
-    from activebonds.identify import driver, strategies
-    from activebonds.identify.evolve import Evolution, keys
+    from activebonds.identify import driver
+    from activebonds.identify.search import strategies
+    from activebonds.identify.search.evolve import Evolution, keys
 
     ident, s = result.identification, result.settings
     strategy = strategies.make(s.optimizer, ident.problem, s, driver._dtype(s))

@@ -268,8 +268,8 @@ def fixed_masses_note(run: Path, flight: Path | None = None) -> str | None:
     """Where the kept run's model has no free mass, a note that its stiffnesses and dampings
     are relative to masses it did not identify; else None. ``flight``: the run that tried
     to identify them on a flight and was not kept (the note then says so, not how to try)."""
+    from .identify.discover.structure_choice import mass_of
     from .identify.rundir import RunDir
-    from .identify.structure_choice import mass_of
     from .model import load_model
 
     spec = load_model(RunDir(run).best_model_path).spec
@@ -310,8 +310,8 @@ def run(
     progress (with a ``status``), or None. Bad input raises InputError before anything is
     written."""
     from .data import read_trajectory
+    from .identify.discover.scaffold import scaffold
     from .identify.rundir import sha256_file
-    from .identify.scaffold import scaffold
 
     recording = read_trajectory(recording_path)
     if options.ahead < 1:
@@ -423,7 +423,7 @@ def run(
 
 
 def _structure(folder: Folder, recording, split: Windows, options: Options, say) -> str:
-    from .identify.structure import candidates
+    from .identify.discover.structure import candidates
     from .model import load_model
 
     scaffolded = load_model(folder.scaffold)
@@ -431,7 +431,7 @@ def _structure(folder: Folder, recording, split: Windows, options: Options, say)
     if n > MAX_DECIDED:
         return _undecided(folder, recording, split, options, say)
     from .atomic import write_text_atomic
-    from .identify.structure_choice import Variant, choose, decide
+    from .identify.discover.structure_choice import Variant, choose, decide
     from .model import save_model
 
     choice = choose(scaffolded, recording, split.fitted, say)
@@ -470,11 +470,11 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     squares does not solve (ground contacts), its linear parameters solved again with the
     contacts held: OUT/ground.toml, or None where the scaffold has neither."""
     from . import bonds
-    from .identify.cost import make_windows
+    from .identify.costs.restart import make_windows
+    from .identify.discover.structure import exact_optimum
+    from .identify.discover.structure_choice import criterion
     from .identify.problem import select_data
     from .identify.settings import FitSettings
-    from .identify.structure import exact_optimum
-    from .identify.structure_choice import criterion
     from .model import build, save_model
 
     extra = [b for b in scaffolded.bond if bonds.get(b.kind).linear is None]
@@ -496,7 +496,7 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
 def _undecided(folder: Folder, recording, split: Windows, options: Options, say) -> str:
     """Above MAX_DECIDED candidates: every candidate kept at its exact optimum."""
     from .atomic import write_text_atomic
-    from .identify.scaffold import scaffold
+    from .identify.discover.scaffold import scaffold
     from .model import load_model, loads_model, save_model
 
     result, eliminate, n = _decide(load_model(folder.scaffold), recording, split, say)
@@ -578,8 +578,8 @@ def recording_name(recording) -> str:
 
 def _decide(model, recording, split: Windows, say):
     """(structure_of's result, whether it eliminated, the candidates) of a scaffold."""
+    from .identify.discover.structure import candidates, structure_of
     from .identify.settings import FitSettings
-    from .identify.structure import candidates, structure_of
 
     n = len(candidates(model.spec))
     eliminate = n <= MAX_DECIDED
@@ -600,8 +600,8 @@ def _fit(folder, recording_path, recording, split, options, say, fit_progress, s
     kept where its one-step BIC on the fitted frames is lower; where ``noise`` dominates, the
     kept one refined by multiple shooting (:func:`_shoot`). Records the kept run's name in
     the fit step of ``state``."""
+    from .identify.discover.structure_choice import criterion
     from .identify.rundir import RunDir
-    from .identify.structure_choice import criterion
     from .model import load_model
 
     settings = fit_settings(options, split)
@@ -678,7 +678,14 @@ def _masses(
 
     import numpy as np
 
-    from .identify.flight_masses import HOLD, anchors, determined, freed, held, longest_flight
+    from .identify.discover.flight_masses import (
+        HOLD,
+        anchors,
+        determined,
+        freed,
+        held,
+        longest_flight,
+    )
     from .identify.problem import select_data
     from .identify.rundir import RunDir
     from .identify.settings import FitSettings
@@ -857,7 +864,7 @@ class _Scored:
     """An evaluation's record (evaluation.json), read back, with its verdict lines."""
 
     def __init__(self, record: dict):
-        from .identify.verdict import comparisons_from, free_run_advice
+        from .identify.judge.verdict import comparisons_from, free_run_advice
 
         self.record = record
         self.frames = tuple(record["frames"])

@@ -75,7 +75,7 @@ class Parameter:
 
 @dataclass(frozen=True)
 class LinearPart:
-    """How a kind enters the exact least squares (:mod:`activebonds.identify.lsq`).
+    """How a kind enters the exact least squares (:mod:`activebonds.identify.solvers.lsq`).
 
     ``fields`` are the parameters it solves for; ``switch_off(values, index, topology,
     layout)`` returns the kind's parameters with *every* force of the kind removed (or raises
@@ -92,7 +92,7 @@ class LinearPart:
 @dataclass(frozen=True)
 class PopulationForm:
     """A kind's forces for a whole population at once, at fixed recorded states (the ES's
-    one-step cost, :mod:`activebonds.identify.population_cost`): the same law as
+    one-step cost, :mod:`activebonds.identify.search.population_cost`): the same law as
     :attr:`BondKind.forces`, vmapped over individuals and states, to rounding.
 
     ``prepare(topology, x0, v0, n_particles, dtype, dense_limit)`` computes once what does not

@@ -29,11 +29,11 @@ def baselines(
     the momentum floor of internal-force models, and the exact bounded least-squares optimum of
     the model's linear parameters (neural gains at 0)."""
     from ..data import read_trajectory
-    from ..identify.baselines import model_floor_rms_mm, zero_force_rms_mm
-    from ..identify.cost import make_windows
-    from ..identify.lsq import least_squares
+    from ..identify.costs.restart import make_windows
+    from ..identify.judge.baselines import model_floor_rms_mm, zero_force_rms_mm
     from ..identify.problem import select_data, variant
     from ..identify.settings import parse_frames, parse_markers
+    from ..identify.solvers.lsq import least_squares
     from ..model import load_model
     from .options import settings_from_options
 

@@ -74,10 +74,10 @@ def _finish(summaries: dict, folder: Path, started: float) -> Path:
 
 
 def verdict_lines(summaries: dict) -> list[str]:
-    """Each series' verdicts (:mod:`activebonds.identify.verdict`): on the fitted frames and
+    """Each series' verdicts (:mod:`activebonds.identify.judge.verdict`): on the fitted frames and
     the next ones, one step (medians over seeds) and K frames ahead, and per marker (the best
     seed's), beside zero force on the same frames."""
-    from ..identify.verdict import comparisons_from, verdict
+    from ..identify.judge.verdict import comparisons_from, verdict
 
     lines = []
     for name, s in summaries.items():

@@ -221,7 +221,7 @@ def _fill_values(
 ):
     """(values [F, M, D] of the window, per gap to fill its uncertainty in metres, a note)."""
     if method == "model":
-        from ..identify.fill import model_fill
+        from ..identify.gaps.fill import model_fill
 
         found = model_fill(
             m,

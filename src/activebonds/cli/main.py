@@ -397,10 +397,10 @@ def _check_validation(model, traj, settings) -> None:
 
 
 def _choose_cost(model, first, settings, horizon_given: bool):
-    """:func:`~activebonds.identify.cost_choice.choose_cost` for the model file and the first
+    """:func:`~activebonds.identify.costs.choice.choose_cost` for the model file and the first
     recording (its markers followed by the model's particles)."""
     from ..data import read_trajectory
-    from ..identify.cost_choice import choose_cost
+    from ..identify.costs.choice import choose_cost
     from ..identify.problem import select_recordings, variant
     from ..model import load_model
 

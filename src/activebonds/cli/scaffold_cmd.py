@@ -55,7 +55,7 @@ def scaffold(
     where it came from."""
     from ..atomic import write_text_atomic
     from ..data import read_trajectory
-    from ..identify.scaffold import neural_text, scaffold
+    from ..identify.discover.scaffold import neural_text, scaffold
     from ..identify.settings import parse_frames, parse_markers
     from ..model import loads_model
 

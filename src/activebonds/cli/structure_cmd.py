@@ -36,8 +36,8 @@ def structure(
     linear parameters at their optimum; prints each decision with its evidence."""
     from ..data import read_trajectory
     from ..data.smoothing import check_window
+    from ..identify.discover.structure import structure_of
     from ..identify.settings import parse_frames, parse_markers
-    from ..identify.structure import structure_of
     from ..model import load_model, save_model
     from .options import settings_from_options
 

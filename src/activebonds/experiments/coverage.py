@@ -4,7 +4,7 @@ One trial: simulate a model (the truth) with this package, add independent Gauss
 every marker coordinate, fit it from the data alone (the exact one-step least squares as the
 start, then Levenberg-Marquardt on the restart cost at a horizon of 10 frames, then on one
 shooting window over the whole recording, i.e. an output-error fit with the start state free), and compute the Gauss-Newton intervals
-(:mod:`activebonds.identify.uncertainty`). Over many noise seeds, the share of intervals
+(:mod:`activebonds.identify.judge.uncertainty`). Over many noise seeds, the share of intervals
 that contain the true value estimates their coverage.
 """
 
@@ -14,12 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify.cost import make_windows
-from ..identify.lsq import least_squares
+from ..identify.costs.restart import make_windows
+from ..identify.judge.uncertainty import Uncertainty, estimate
 from ..identify.problem import identification
-from ..identify.refine import Refinement
 from ..identify.settings import FitSettings
-from ..identify.uncertainty import Uncertainty, estimate
+from ..identify.solvers.lsq import least_squares
+from ..identify.solvers.refine import Refinement
 from ..model import Model
 from ..simulation import simulate
 

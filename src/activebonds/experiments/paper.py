@@ -24,13 +24,13 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
-from ..identify.ahead import DEFAULT_AHEAD, comparisons
-from ..identify.baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
-from ..identify.cost import make_windows
-from ..identify.es import ESSettings
-from ..identify.lsq import least_squares
+from ..identify.costs.restart import make_windows
+from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
+from ..identify.judge.baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from ..identify.problem import identification
+from ..identify.search.es import ESSettings
 from ..identify.settings import FitSettings
+from ..identify.solvers.lsq import least_squares
 from ..model import Model, as_neural, as_standard, load_model, save_model
 from ..report.predict import predict
 from ..runtime import float64

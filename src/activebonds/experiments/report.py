@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..document import Marked
-from ..identify.verdict import verdict
+from ..identify.judge.verdict import verdict
 from ..model import load_model
 from ..report import animation, plots
 from ..report.html import Figure, Section, Table, fmt, write_comparison_report

@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..identify import es
-from ..identify.cost import Display
-from ..identify.evolve import DEFAULT_CHUNK, Evolution, keys
+from ..identify.costs.restart import Display
 from ..identify.problem import Identification
+from ..identify.search import es
+from ..identify.search.evolve import DEFAULT_CHUNK, Evolution, keys
 from ..runtime import float64
 
 

@@ -1,7 +1,7 @@
 """Edge recovery on the NRI springs benchmark by structure identification.
 
 Each trajectory of :mod:`.springs` is fitted with the candidate model (one optional spring per
-pair of particles) by :func:`activebonds.identify.structure.identify_structure`: backward
+pair of particles) by :func:`activebonds.identify.discover.structure.identify_structure`: backward
 elimination under the BIC on the exact one-step least squares. The walls are known physics
 that the model does not contain: the particle-frames near a wall (:func:`.springs.near_wall`)
 are masked, as gaps, so no prediction across a bounce enters the fit.
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.smoothing import smooth_positions
-from ..identify.cost import make_windows
-from ..identify.structure import identify_structure
+from ..identify.costs.restart import make_windows
+from ..identify.discover.structure import identify_structure
 from ..model import loads_model
 from .springs import FRAME_DT, candidate_model_toml, near_wall
 

@@ -23,14 +23,15 @@ from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model, load_model
 from ..runtime import keep_compiled
-from . import rundir, stages, strategies
-from .cost import Display
-from .evolve import Evolution, history_columns, keys
+from . import rundir, stages
+from .costs.restart import Display
 from .problem import Identification, identification
 from .progress import shown
-from .refine import Stage
 from .rundir import RunDir
+from .search import strategies
+from .search.evolve import Evolution, history_columns, keys
 from .settings import FitSettings
+from .solvers.refine import Stage
 
 Progress = Callable[[int, int, float], None]  # (generation, total, best RMS mm)
 # What the run does next, for people, before a phase that may take long with no progress to
@@ -60,7 +61,7 @@ class FitResult:
 
     def __repr__(self) -> str:
         """One line for notebooks: the model, the error, the verdict, the status, no arrays."""
-        from .verdict import short_text
+        from .judge.verdict import short_text
 
         stages = f", {len(self.refinement)} refinement stages" if self.refinement else ""
         run = f", run={str(self.run)!r}" if self.run is not None else ""
@@ -80,8 +81,8 @@ class FitResult:
         """A small table for notebooks: the model, the error beside its baselines, the
         verdict, the search and the run."""
         from ..notebook import html_table, number
+        from .judge.verdict import fit_verdict
         from .stages.baselines import FLOOR, LSQ, ZERO
-        from .verdict import fit_verdict
 
         s = self.settings
         rows: list[tuple[str, object]] = [
@@ -122,20 +123,20 @@ class FitResult:
 
     @property
     def comparisons(self) -> dict[str, list]:
-        """The model beside zero force (:class:`~activebonds.identify.verdict.Comparison`:
+        """The model beside zero force (:class:`~activebonds.identify.judge.verdict.Comparison`:
         one step and K frames ahead, overall and per marker): ``"fitted"`` on the fitted
         frames (the first recording) and ``"held_out"`` on the validation frames, where
         those stages ran."""
-        from .verdict import judged_comparisons
+        from .judge.verdict import judged_comparisons
 
         return judged_comparisons(self.records)
 
     @property
     def verdict(self):
-        """The one-step :class:`~activebonds.identify.verdict.Verdict` on the held-out frames
+        """The one-step :class:`~activebonds.identify.judge.verdict.Verdict` on the held-out frames
         when there are some, else on the fitted frames (None before the baselines ran):
         ``result.verdict.better``, ``.gain_pct``, ``.text()``."""
-        from .verdict import fit_verdict
+        from .judge.verdict import fit_verdict
 
         found = fit_verdict(self.records)
         return None if found is None else found[1]
@@ -248,7 +249,7 @@ def validation_frames(model: Model, recording: Trajectory, settings: FitSettings
     (:class:`InputError` naming ``--validate``), or None without validation."""
     if settings.validation is None:
         return None
-    from .metrics import validation_data
+    from .judge.metrics import validation_data
 
     return validation_data(model, recording, settings, settings.validation)
 

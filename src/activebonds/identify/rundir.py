@@ -227,9 +227,9 @@ def write_meta(run: Path, meta: dict) -> None:
 # Format 1 (activebonds 0.2): the paper's ES only, no strategy, columns or display in run.json,
 # variants numbered (trials_v1 ...), costs shown in mm for the best only. Read as format 2.
 def _upgrade_meta(run: Path, meta: dict) -> dict:
-    from .cost import Display, make_windows
-    from .es import PaperES
-    from .evolve import history_columns
+    from .costs.restart import Display, make_windows
+    from .search.es import PaperES
+    from .search.evolve import history_columns
 
     try:
         horizon = meta["settings"].get("horizon", 1)  # an int in format 1; a curriculum later
@@ -256,8 +256,8 @@ def upgrade_history(history: dict[str, np.ndarray], meta: dict) -> dict[str, np.
     other history unchanged."""
     if "trials_v1" not in history:
         return history
-    from .cost import Display
-    from .operators import VARIANTS
+    from .costs.restart import Display
+    from .search.operators import VARIANTS
 
     out = dict(history)
     for i, v in enumerate(VARIANTS):
@@ -777,8 +777,8 @@ def run_rows(status: dict, settings: dict, records: dict, model=None) -> list[tu
     """What a notebook shows of a run (status.json, run.json's settings, the post-fit stages'
     records, the best model or None): (name, value) rows."""
     from ..notebook import number
+    from .judge.verdict import fit_verdict
     from .stages.baselines import ZERO
-    from .verdict import fit_verdict
 
     g, total = status.get("generation"), status.get("generations", settings.get("generations"))
     rows: list[tuple[str, object]] = [

@@ -113,15 +113,15 @@ class FitSettings(BaseModel):
     @field_validator("optimizer")
     @classmethod
     def _optimizer(cls, v):
-        from .strategies import names
+        from .search.strategies import names
 
         if v not in names():
             raise ValueError(f"unknown optimizer {v!r}; choose one of {', '.join(names())}")
         return v
 
     def es(self):
-        """The paper's ES's own settings (:class:`~activebonds.identify.es.ESSettings`)."""
-        from .es import ESSettings
+        """The paper's ES's own settings (:class:`~activebonds.identify.search.es.ESSettings`)."""
+        from .search.es import ESSettings
 
         return ESSettings(
             population=self.population,

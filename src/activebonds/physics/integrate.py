@@ -269,7 +269,7 @@ def start_velocity(
     kind, whose landing map has kinks (a contact starting, ending or sticking within the
     frame) where Newton's method can stall, it is the last iterate's (corrected to first
     order by its residual, a few micrometres in such frames): the fit counts these starts
-    and says so (:func:`activebonds.identify.cost.unsolved_starts`).
+    and says so (:func:`activebonds.identify.costs.restart.unsolved_starts`).
 
     ``newton``: solve by Newton's method on the exact Jacobian for every kind (about P D + 1
     times a step's cost per round), differentiated implicitly (:func:`_landing_velocity`).
@@ -277,8 +277,8 @@ def start_velocity(
     diverges beyond: on a 41-marker spring body fitted to a real walk (2 Verlet substeps at
     60 Hz) it contracts by 0.67 a round, and its 12 rounds leave every start unsolved. The
     callers with one parameter vector try the fixed point first and take Newton's method
-    where it failed (:meth:`activebonds.identify.refine.Refinement._to_newton`,
-    :func:`activebonds.identify.predictions.solved`); a population keeps the fixed point.
+    where it failed (:meth:`activebonds.identify.solvers.refine.Refinement._to_newton`,
+    :func:`activebonds.identify.judge.predictions.solved`); a population keeps the fixed point.
 
     ``with_residual``: also return the last residual where the solve has not converged (m;
     0 where it has or none is needed), for counting the starts that could not be solved.

@@ -1,7 +1,7 @@
 """Reports of identification runs: predictions, figures, an animated GIF and one
 self-contained HTML file (no external resource; works offline)."""
 
-from ..identify.metrics import FreeRunMetrics, free_run_metrics, zero_force_metrics
+from ..identify.judge.metrics import FreeRunMetrics, free_run_metrics, zero_force_metrics
 from .animation import payload, projection_axes, write_gif
 from .files import staged_directory
 from .html import (

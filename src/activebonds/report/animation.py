@@ -19,7 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
-from ..identify.predictions import to_mm
+from ..identify.judge.predictions import to_mm
 from .plots import AXES, DPI, FREE_RUN, ONE_STEP
 from .predict import Prediction
 

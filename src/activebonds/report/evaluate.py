@@ -5,7 +5,7 @@ selects its data (:func:`~activebonds.identify.problem.select_data`), and measur
 for the model and for the zero-force (constant-velocity) predictor:
 
 * the three numbers of ``fit``'s summary and ``fit --validate``, from the same function
-  (:func:`~activebonds.identify.metrics.window_metrics`): one-step RMS (mm), free-run RMS
+  (:func:`~activebonds.identify.judge.metrics.window_metrics`): one-step RMS (mm), free-run RMS
   (mm) and the median number of frames a free run stays within 50 mm of every marker;
 * per particle, the one-step and free-run RMS (mm) over the same terms
   (:func:`~activebonds.report.predict.predict` for the model,
@@ -19,8 +19,8 @@ for the model and for the zero-force (constant-velocity) predictor:
 * asked for (``gait``), the free runs scored as a gait, insensitive to their phase
   (:mod:`activebonds.report.gait`): period, feet excursions, body distance, cycle RMS;
 * one step and ``horizon`` frames ahead (the model's free run from each recorded state, beside
-  the zero-force predictor's: :func:`~activebonds.identify.ahead.comparisons`), overall and per
-  marker, each with its verdict (:mod:`activebonds.identify.verdict`: better than zero force by
+  the zero-force predictor's: :func:`~activebonds.identify.judge.ahead.comparisons`), overall and per
+  marker, each with its verdict (:mod:`activebonds.identify.judge.verdict`: better than zero force by
   X %, or worse: the model does not explain this motion).
 
 The model's time starts at the window's first frame (only a model with a rhythmic drive
@@ -38,17 +38,17 @@ from pydantic import ValidationError
 
 from ..data import Trajectory
 from ..errors import InputError
-from ..identify.ahead import DEFAULT_AHEAD, comparisons
-from ..identify.baselines import zero_force_predictions
-from ..identify.metrics import (
+from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
+from ..identify.judge.baselines import zero_force_predictions
+from ..identify.judge.metrics import (
     DEFAULT_STARTS,
     THRESHOLD_MM,
     FreeRunMetrics,
     start_frames,
     window_metrics,
 )
-from ..identify.predictions import rms_mm
-from ..identify.verdict import Comparison, Verdict, free_run_advice, holds
+from ..identify.judge.predictions import rms_mm
+from ..identify.judge.verdict import Comparison, Verdict, free_run_advice, holds
 from ..model import Model
 from .gait_runs import GaitEvaluation, gait_evaluation
 from .predict import predict

@@ -7,7 +7,7 @@ model puts in contact with a surface (its one-particle bonds of a kind with a
 surface); the lowest markers by mean height (:func:`~activebonds.report.gait.lowest_markers`).
 Up is the caller's axis, else against the model's gravity, else the recording's guess
 (:func:`~activebonds.data.orientation.guess_ground`). The model's free runs start at the
-recorded frames ``s - 1`` and ``s`` of the window (:func:`~activebonds.identify.metrics.
+recorded frames ``s - 1`` and ``s`` of the window (:func:`~activebonds.identify.judge.metrics.
 free_run_from`); the zero-force predictor's run at constant velocity from the same frames.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from .. import bonds
 from ..data import Trajectory
 from ..errors import InputError
-from ..identify.metrics import free_run_from
+from ..identify.judge.metrics import free_run_from
 from ..model import Model
 from . import gait as g
 

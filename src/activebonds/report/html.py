@@ -21,14 +21,14 @@ import numpy as np
 from ..document import Figure, Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
-from ..identify.ahead import DEFAULT_AHEAD
-from ..identify.ahead import comparisons as ahead_comparisons
-from ..identify.baselines import zero_force_predictions
-from ..identify.metrics import FreeRunMetrics
-from ..identify.predictions import rms_mm
+from ..identify.judge.ahead import DEFAULT_AHEAD
+from ..identify.judge.ahead import comparisons as ahead_comparisons
+from ..identify.judge.baselines import zero_force_predictions
+from ..identify.judge.metrics import FreeRunMetrics
+from ..identify.judge.predictions import rms_mm
+from ..identify.judge.verdict import Comparison, comparisons_from, free_run_advice, verdict
+from ..identify.judge.verdict import lines as verdict_lines
 from ..identify.stages import baselines, validation
-from ..identify.verdict import Comparison, comparisons_from, free_run_advice, verdict
-from ..identify.verdict import lines as verdict_lines
 from ..model.names import NEAR_BOUND, parameter_rows
 from . import animation, plots
 from .files import check_replaceable, staged_directory, write_html
@@ -327,7 +327,7 @@ def errors_table(
 @dataclass(frozen=True)
 class Beyond:
     """The frames beyond the fit scored as ``evaluate --frames START:STOP --horizon K`` scores
-    them (:func:`~activebonds.identify.ahead.comparisons`): their frames [start, stop) of the
+    them (:func:`~activebonds.identify.judge.ahead.comparisons`): their frames [start, stop) of the
     recording and the comparisons, one step then K frames ahead, overall and per marker."""
 
     frames: tuple[int, int]
@@ -363,7 +363,7 @@ def beyond_scores(record: RunRecord, pred: Prediction, horizon: int = DEFAULT_AH
 
 
 def verdict_text(record: RunRecord, pred: Prediction, beyond: Beyond | None = None) -> list[str]:
-    """The verdicts in words (:mod:`activebonds.identify.verdict`): on the fitted frames and,
+    """The verdicts in words (:mod:`activebonds.identify.judge.verdict`): on the fitted frames and,
     after ``fit --validate``, the validation frames (one step and K frames ahead, overall and
     per marker, as ``fit`` printed them), and on the frames beyond the fitted window
     (``beyond``: one step and K frames ahead, as ``evaluate`` scores them)."""
@@ -384,7 +384,7 @@ def verdict_text(record: RunRecord, pred: Prediction, beyond: Beyond | None = No
 
 def free_run_table(record: RunRecord) -> Table | None:
     """One-step RMS, free-run RMS and frames within the threshold
-    (:func:`activebonds.identify.metrics.free_run_metrics`) of the model and the zero-force
+    (:func:`activebonds.identify.judge.metrics.free_run_metrics`) of the model and the zero-force
     predictor on the fitted frames and, after ``fit --validate``, on the validation frames,
     as the baselines and validation stages recorded them."""
     s = record.settings

@@ -19,8 +19,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
-from ..identify.operators import VARIANTS
-from ..identify.predictions import neural_bonds, to_mm
+from ..identify.judge.predictions import neural_bonds, to_mm
+from ..identify.search.operators import VARIANTS
 from ..model import Model
 from ..model.names import parameter_label, parameter_rows
 from .predict import Prediction, neural_weights

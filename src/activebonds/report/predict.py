@@ -1,5 +1,5 @@
 """What an identified model predicts along a recording, for the report: the predictions of
-:mod:`activebonds.identify.predictions` over the fitted window and beyond, and its neurons.
+:mod:`activebonds.identify.judge.predictions` over the fitted window and beyond, and its neurons.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import bonds
 from ..data import Trajectory
-from ..identify.predictions import (
+from ..identify.judge.predictions import (
     StaticTopology,
     float64_params,
     free_run,
@@ -186,7 +186,7 @@ def predict(
     """One-step and free-run predictions of ``model`` along ``traj`` (markers already in the
     model's particle order). ``fit_frames``: length of the fitted window at the start of
     ``traj`` (default: all of it); ``offset``: frames from the model's time origin to
-    ``traj``'s first frame (:func:`~activebonds.identify.predictions.one_step`)."""
+    ``traj``'s first frame (:func:`~activebonds.identify.judge.predictions.one_step`)."""
     if traj.n_markers != model.topology.n_particles:
         raise ValueError(
             f"{traj.n_markers} markers for a model of {model.topology.n_particles} particles"

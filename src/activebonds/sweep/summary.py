@@ -3,8 +3,8 @@
 Each row is measured the way ``fit``'s summary and ``report`` measure one run, with their
 functions: the fit's RMS error (status.json, as the run stored it), the zero-force
 (constant-velocity) baseline over the same one-step terms of every fitted recording
-(:func:`~activebonds.identify.baselines.zero_force_rms_mm_of`), the free-run RMS and the
-frames a free run stays within 50 mm (:func:`~activebonds.identify.metrics.window_metrics` on the
+(:func:`~activebonds.identify.judge.baselines.zero_force_rms_mm_of`), the free-run RMS and the
+frames a free run stays within 50 mm (:func:`~activebonds.identify.judge.metrics.window_metrics` on the
 first fitted recording), and the identified value of every free parameter (best_model.toml).
 """
 
@@ -20,8 +20,8 @@ from ..atomic import write_text_atomic
 from ..document import Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
-from ..identify.metrics import THRESHOLD_MM, censored_text
-from ..identify.verdict import EXPLAINS_NOT
+from ..identify.judge.metrics import THRESHOLD_MM, censored_text
+from ..identify.judge.verdict import EXPLAINS_NOT
 from ..report.html import render
 from ..report.runs import load_run
 from .manifest import Job

@@ -4,7 +4,7 @@ The zero-force (constant-velocity) predictor over the fit's own one-step terms (
 recording), the momentum floor of internal-force models and the exact least-squares optimum
 of the model's linear family where they apply (the plain one-step cost), and the free-run
 metrics of the model and of the zero-force predictor on the first fitted recording
-(:mod:`activebonds.identify.baselines`, :mod:`activebonds.identify.metrics`).
+(:mod:`activebonds.identify.judge.baselines`, :mod:`activebonds.identify.judge.metrics`).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import numpy as np
 
 from ...document import Section, Table
 from ...errors import InputError
-from ..ahead import DEFAULT_AHEAD, comparisons
-from ..baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
-from ..metrics import FreeRunMetrics, censored_text, window_metrics
-from ..verdict import comparisons_from, free_run_advice, holds, verdict
-from ..verdict import lines as verdict_lines
+from ..judge.ahead import DEFAULT_AHEAD, comparisons
+from ..judge.baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
+from ..judge.metrics import FreeRunMetrics, censored_text, window_metrics
+from ..judge.verdict import comparisons_from, free_run_advice, holds, verdict
+from ..judge.verdict import lines as verdict_lines
 from .base import Fit, Outcome
 
 NAME = "baselines"
@@ -94,8 +94,8 @@ def verdict_columns(prefix: str, record: dict) -> dict:
 def _least_squares_rms_mm(model, data) -> float | None:
     """The exact least-squares optimum's RMS (mm) of the model's family, where every free
     parameter is linear in the forces (None otherwise, or where it cannot be formed)."""
-    from ..cost import make_windows
-    from ..lsq import least_squares, nonlinear_genes
+    from ..costs.restart import make_windows
+    from ..solvers.lsq import least_squares, nonlinear_genes
 
     if nonlinear_genes(model):
         return None

@@ -1,5 +1,5 @@
 """The refinement stage (``fit --refine lm``): Levenberg-Marquardt from the search's best, one
-stage per horizon of the curriculum (:mod:`activebonds.identify.refine`). Each stage is saved
+stage per horizon of the curriculum (:mod:`activebonds.identify.solvers.refine`). Each stage is saved
 as it ends (RUN/refine.json and refine.npz with the shooting states), so a resumed run
 continues with the next one. Ctrl-C between two steps of a stage saves it where it got to
 (the record's ``interrupted``: its best genome so far, the shooting states) and ends the fit;
@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from ...document import Section, Table
-from ..refine import Refinement, Stage, StageInterrupted
+from ..solvers.refine import Refinement, Stage, StageInterrupted
 from .base import Fit, Outcome
 
 NAME = "refine"
@@ -234,11 +234,11 @@ def table(record: dict) -> Table:
 
 def _starts(fit: Fit, genome) -> str | None:
     """The line on the restart states whose start velocity the refinement's substeps could
-    not solve at its result (:func:`~activebonds.identify.cost.starts_line`), if any."""
+    not solve at its result (:func:`~activebonds.identify.costs.restart.starts_line`), if any."""
     s = fit.settings
     if s.substeps == 1:
         return None
-    from ..cost import join_windows, make_windows, starts_line
+    from ..costs.restart import join_windows, make_windows, starts_line
 
     windows = join_windows(
         [make_windows(d.positions, d.mask, d.dt, 1, s.smooth) for d in fit.ident.all_data]

@@ -1,6 +1,6 @@
 """The uncertainty stage: the Gauss-Newton standard errors and 95 % intervals of the free
 parameters at the fit's optimum, on the cost of its last accepted refinement stage (the
-search's cost without one) (:mod:`activebonds.identify.uncertainty`). RUN/uncertainty.csv
+search's cost without one) (:mod:`activebonds.identify.judge.uncertainty`). RUN/uncertainty.csv
 (one row per parameter) and uncertainty.json; a fit whose report cannot be formed says why."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 from ...data.smoothing import noise_of
 from ...document import Section, Table
 from ...model.names import labeller
-from .. import integrator_check, modes, uncertainty
+from ..judge import integrator_check, modes, uncertainty
 from .base import Fit, Outcome
 
 NAME = "uncertainty"

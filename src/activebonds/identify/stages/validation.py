@@ -1,6 +1,6 @@
 """The validation stage (``fit --validate START:STOP``, ``FitSettings.validation``): the model
 and the zero-force predictor on frames of the recording the fit did not use: one-step RMS,
-free-run RMS and frames within 50 mm (:func:`activebonds.identify.metrics.validation_record`).
+free-run RMS and frames within 50 mm (:func:`activebonds.identify.judge.metrics.validation_record`).
 """
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...document import Section
-from ..metrics import read_validation, validation_record
-from ..verdict import comparisons_from
-from ..verdict import lines as verdict_lines
+from ..judge.metrics import read_validation, validation_record
+from ..judge.verdict import comparisons_from
+from ..judge.verdict import lines as verdict_lines
 from .base import Fit, Outcome
 from .baselines import metrics_line, verdict_columns
 

@@ -34,7 +34,7 @@ def fastest(model, positions: np.ndarray) -> float:
     import jax
     import jax.numpy as jnp
 
-    from ..physics.forces import total_force
+    from ...physics.forces import total_force
 
     params, top = model.params, model.topology
     x = np.asarray(positions, np.float64)

@@ -5,13 +5,13 @@ frames on its own (the start velocity from those two frames, as the fit cost's, 
 the one-step prediction) and its position at ``s + K`` is compared with the recording; the
 zero-force (constant-velocity) predictor gives ``x_s + K (x_s - x_{s-1})``. The RMS over every
 (start, marker) term whose target is recorded, overall and per marker, is a
-:class:`~activebonds.identify.verdict.Comparison`; a non-finite prediction of a recorded
+:class:`~activebonds.identify.judge.verdict.Comparison`; a non-finite prediction of a recorded
 target makes its marker's RMS, and the overall one, +inf.
 
 The model's time starts at the window's first frame (``offset``: frames from the model's time
-origin to the window, as :func:`~activebonds.identify.metrics.free_run_metrics`); an entrained
+origin to the window, as :func:`~activebonds.identify.judge.metrics.free_run_metrics`); an entrained
 drive's phase at each start is tracked along the window
-(:func:`~activebonds.identify.predictions.tracked_phases`).
+(:func:`~activebonds.identify.judge.predictions.tracked_phases`).
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data import Trajectory
-from ..model import Model
-from ..runtime import float64
+from ...data import Trajectory
+from ...model import Model
+from ...runtime import float64
 from .predictions import StaticTopology, float64_params, solved, tracked_phases
 from .verdict import Comparison
 
@@ -48,7 +48,7 @@ def _runs(
     """(start velocities, the runs' last positions): ``psis``, an entrained drive's phases at
     the frames of ``x_prev`` and ``x0``; ``newton``, the start velocities by Newton's method
     (:func:`.predictions.solved`)."""
-    from ..physics.integrate import rollout_states, start_velocity
+    from ...physics.integrate import rollout_states, start_velocity
 
     def one(a, b, t, *psi):
         p_prev, p0 = psi if psi else (None, None)

@@ -15,7 +15,7 @@ beside the zero-force (constant-velocity) predictor on the same terms:
 A :class:`Comparison` holds one kind of prediction (one step, or K frames ahead: the model's
 free run from each recorded state) on one window, overall and per marker; its
 :meth:`Comparison.lines` are what people read. Plain numbers only: nothing here computes a
-prediction (:mod:`activebonds.identify.ahead` does).
+prediction (:mod:`activebonds.identify.judge.ahead` does).
 """
 
 from __future__ import annotations
@@ -216,8 +216,8 @@ def holds(model, data=None) -> dict:
     gravity, of every coordinate without one). Plain JSON values, kept in the records."""
     import numpy as np
 
-    from .. import bonds
-    from ..data.period import recording_period
+    from ... import bonds
+    from ...data.period import recording_period
 
     counts = model.bond_counts()
     gravity = np.asarray(model.params.gravity, float)

@@ -39,12 +39,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ..model.names import labeller
-from .cost import join_windows, make_residuals, make_windows
-from .problem import Identification
-from .settings import FitSettings
-from .shooting import join_shooting, make_shooting, shooting_windows, start_states
-from .shooting_normal import make_normal, marginal_information
+from ...model.names import labeller
+from ..costs.restart import join_windows, make_residuals, make_windows
+from ..costs.shooting import join_shooting, make_shooting, shooting_windows, start_states
+from ..problem import Identification
+from ..settings import FitSettings
+from ..solvers.shooting_normal import make_normal, marginal_information
 
 RANK_RTOL = 1e-8  # singular values below this share of the largest: not determined
 Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
@@ -264,7 +264,7 @@ def _span(gene) -> float:
 
 def shooting_rejected(stages) -> list[str]:
     """Why the refinement's shooting stages were not kept (``stages``: its
-    :class:`~activebonds.identify.refine.Stage` records or their dicts), one line each: a
+    :class:`~activebonds.identify.solvers.refine.Stage` records or their dicts), one line each: a
     shooting stage rejected, or a one-step stage refined in its place."""
     out = []
     for s in stages:

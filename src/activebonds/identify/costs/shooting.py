@@ -28,9 +28,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..model.model import Model
-from ..physics import phase
-from ..physics.integrate import rollout_states
+from ...model.model import Model
+from ...physics import phase
+from ...physics.integrate import rollout_states
 
 CONTINUITY_WEIGHT = 100.0  # weight of a continuity defect against a position error
 

@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import bonds
-from ..model.schema import ModelSpec
-from ..model.values import Param, VectorParam, Weights
+from ... import bonds
+from ...model.schema import ModelSpec
+from ...model.values import Param, VectorParam, Weights
 
 # frames in flight in a row, at least: two of the shooting's 10-frame windows, so that the
 # masses are seen through a continuity defect and not a single window's start
@@ -43,7 +43,7 @@ def longest_flight(spec: ModelSpec, positions, first: int = 0) -> tuple[int, int
     of ``spec`` is off its plane, as absolute frames ``(start, stop)`` (``first``: the frame
     of ``positions[0]``); None without contacts or gravity, or where the longest run is
     shorter than :data:`MIN_FLIGHT`."""
-    from ..model import build
+    from ...model import build
     from .structure_choice import flight_frames
 
     if not np.any(np.asarray(build(spec).params.gravity) != 0.0):  # the model's own field

@@ -30,12 +30,12 @@ import numpy as np
 from scipy.linalg import lstsq, qr, solve_triangular
 from scipy.optimize import LinearConstraint, lsq_linear, minimize, nnls
 
-from .. import bonds
-from ..errors import InputError
-from ..model import Gene, Model
-from ..model.params import Params
-from ..physics.forces import total_force
-from .cost import Windows, start_phases
+from ... import bonds
+from ...errors import InputError
+from ...model import Gene, Model
+from ...model.params import Params
+from ...physics.forces import total_force
+from ..costs.restart import Windows, start_phases
 
 
 @dataclass(frozen=True)
@@ -505,7 +505,7 @@ def equation_error_fit(
         total_mass = model.spec.total_mass
     if free_mass.all() and total_mass is None:
         raise InputError(model.name, "every mass is free: give the total mass")
-    from ..model.model import build
+    from ...model.model import build
 
     particles = [p.model_copy(update={"mass": 1.0}) for p in model.spec.particle]
     unit = build(model.spec.model_copy(update={"particle": particles}), disable=model.disabled)

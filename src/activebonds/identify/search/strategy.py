@@ -1,4 +1,4 @@
-"""What an optimiser must provide to run under :mod:`activebonds.identify.evolve`.
+"""What an optimiser must provide to run under :mod:`activebonds.identify.search.evolve`.
 
 A strategy is an object bound to one :class:`Problem` (bounds, bond-type groups, start genomes)
 and its settings, in the style of evosax and optax: pure functions over a state pytree.
@@ -38,7 +38,7 @@ class Problem(NamedTuple):
     group_slots: np.ndarray  # [T, S] extremity particles of each group, -1 padded
     start: np.ndarray | None = None  # [K, G] genomes placed first in the initial population
     # genes [N, G] -> (cost [N], local [N, P]) for a whole population at once, where a faster
-    # form than vmapping ``evaluate`` exists (the one-step cost: identify/population_cost.py)
+    # form than vmapping ``evaluate`` exists (the one-step cost: identify/search/population_cost.py)
     evaluate_population: object = None
 
 

@@ -28,9 +28,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import solve_triangular
 
-from ..model.model import Model
-from ..physics.integrate import rollout_states
-from .shooting import CONTINUITY_WEIGHT, ShootingWindows, window_phases
+from ...model.model import Model
+from ...physics.integrate import rollout_states
+from ..costs.shooting import CONTINUITY_WEIGHT, ShootingWindows, window_phases
 
 BATCH_BYTES = 2**27  # Jacobian blocks computed at once, at most (windows are batched to fit)
 LANES = 1024  # tangents (windows x unknowns per window) propagated at once, at most

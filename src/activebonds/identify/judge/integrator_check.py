@@ -27,12 +27,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics.integrate import stiff
-from .lm import JITTER
-from .problem import Identification
-from .settings import FitSettings
-from .shooting import join_shooting, shooting_windows, start_states
-from .shooting_normal import damped_step, make_normal
+from ...physics.integrate import stiff
+from ..costs.shooting import join_shooting, shooting_windows, start_states
+from ..problem import Identification
+from ..settings import FitSettings
+from ..solvers.lm import JITTER
+from ..solvers.shooting_normal import damped_step, make_normal
 from .uncertainty import Z95, _residual_function
 
 FACTOR = 4  # the check's substeps: this many times the fit's
@@ -173,7 +173,7 @@ def _shooting_step(ident, settings, genome, horizon, states) -> np.ndarray | str
     """The natural parameters after one Gauss-Newton step of multiple shooting at the check's
     substeps from the fit's parameters and window states (the normal equations by window,
     the states eliminated: :mod:`.shooting_normal`)."""
-    from .refine import Bounded
+    from ..solvers.refine import Bounded
 
     if states is None:
         return "the shooting fit's states are not at hand"

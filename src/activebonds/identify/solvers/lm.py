@@ -118,7 +118,7 @@ def levenberg_marquardt(
     (default: :func:`activebonds.runtime.stop_requested`); True raises :class:`Interrupted`
     with the last accepted point."""
     if stop is None:
-        from ..runtime import stop_requested as stop
+        from ...runtime import stop_requested as stop
     y = y0
     r = residual(y)
     loss = 0.5 * float(_dot(r, r))

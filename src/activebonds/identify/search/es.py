@@ -13,7 +13,7 @@ Recipe (one generation, §3.2 of Stanciulescu & Louchet 2000, completed by DESIG
 4. survivors are selected from parents + children: 10 % elite, the rest random biased to low
    cost, population size constant.
 
-Steps 1-2 are :meth:`PaperES.ask`, 3 is the loop's (:mod:`activebonds.identify.evolve`), 4 is
+Steps 1-2 are :meth:`PaperES.ask`, 3 is the loop's (:mod:`activebonds.identify.search.evolve`), 4 is
 :meth:`PaperES.tell`. Randomness: the key of generation g is ``fold_in(PRNGKey(seed), g)``, so a
 run is a pure function of (problem, settings, seed) and does not depend on how it is chunked or
 resumed.

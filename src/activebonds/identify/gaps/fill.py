@@ -73,14 +73,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data.fill import FillPlan
-from ..errors import InputError
-from ..model.model import Model
-from ..physics import phase
-from ..physics.integrate import rollout_states
-from ..runtime import float64
-from .lm import levenberg_marquardt
-from .shooting import (
+from ...data.fill import FillPlan
+from ...errors import InputError
+from ...model.model import Model
+from ...physics import phase
+from ...physics.integrate import rollout_states
+from ...runtime import float64
+from ..costs.shooting import (
     CONTINUITY_WEIGHT,
     ShootingWindows,
     frame_states,
@@ -88,7 +87,8 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
-from .shooting_normal import block_tridiagonal_solve, floored, make_normal
+from ..solvers.lm import levenberg_marquardt
+from ..solvers.shooting_normal import block_tridiagonal_solve, floored, make_normal
 
 MAX_STEPS = 200
 RATIO_FRAMES = 8  # frames ahead of the prediction that sets the continuity weight
@@ -328,7 +328,7 @@ def one_step_ratio(
     the marker noise, which a one-frame ratio would measure instead. (``substeps`` and
     ``integrator`` are the fill's; the ratio reads the forces alone. ``phases`` [S]: an
     entrained drive's phase at each frame.)"""
-    from ..physics.forces import total_force
+    from ...physics.forces import total_force
 
     n = RATIO_FRAMES
     if len(positions) <= 2 * n:
@@ -394,7 +394,7 @@ def pca_prior(positions: np.ndarray, mask: np.ndarray, gaps):
     one frame to the next) is often better than where it puts the marker (its error is
     mostly an offset): its steps' errors, measured the same way, give the deviation of a
     second prior, on the missing marker's steps. NaN for a gap with no room for a test."""
-    from ..data.fill import fill_pca, self_test_errors
+    from ...data.fill import fill_pca, self_test_errors
 
     targets = fill_pca(positions, mask, gaps)
     sigma = np.full(mask.shape, np.nan)

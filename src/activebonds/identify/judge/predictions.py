@@ -16,10 +16,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import bonds
-from ..model import Model, Params, Topology
-from ..physics import advance, phase, rollout_states, start_velocity
-from ..runtime import float64
+from ... import bonds
+from ...model import Model, Params, Topology
+from ...physics import advance, phase, rollout_states, start_velocity
+from ...runtime import float64
 
 
 class StaticTopology:

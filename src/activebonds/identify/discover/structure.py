@@ -38,13 +38,13 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from .. import bonds
-from ..errors import InputError
-from ..model import Model, build
-from ..model.schema import ModelSpec
-from ..model.values import Param
-from .cost import Windows
-from .lsq import LinearProblem, compress, least_squares, linear_problem, solve
+from ... import bonds
+from ...errors import InputError
+from ...model import Model, build
+from ...model.schema import ModelSpec
+from ...model.values import Param
+from ..costs.restart import Windows
+from ..solvers.lsq import LinearProblem, compress, least_squares, linear_problem, solve
 
 TINY = 1e-300  # keeps a relative change finite when an RSS is exactly 0
 RESOLUTION = 1e-3  # the one-step model's accuracy, a share of the zero-force residual's RMS
@@ -357,9 +357,9 @@ def structure_of(
     """:func:`identify_structure` on the frames and markers of ``settings`` of ``recording``
     (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
     the pipeline of ``activebonds structure``."""
-    from ..data.smoothing import smooth_positions
-    from .cost import make_windows
-    from .problem import select_data
+    from ...data.smoothing import smooth_positions
+    from ..costs.restart import make_windows
+    from ..problem import select_data
 
     data = select_data(model, recording, settings)
     positions = smooth_positions(data.positions, data.mask, smooth) if smooth else data.positions

@@ -76,8 +76,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import bonds
-from ..errors import InputError
+from ... import bonds
+from ...errors import InputError
 
 MASS_PER_MARKER = 1.0  # kg: the default total mass is this times the markers
 RIGID = 0.05  # a near-rigid pair's distance spread (5th-95th percentile) / its median
@@ -172,7 +172,7 @@ def _flat_axes(x: np.ndarray) -> list[int]:
 
 def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
     """(axis, sign, ground height along up or None) of the gravity, or None for none."""
-    from ..data.orientation import agree, guess_gravity, guess_ground
+    from ...data.orientation import agree, guess_gravity, guess_ground
 
     x = np.asarray(traj.positions)
     d = x.shape[2]
@@ -256,7 +256,7 @@ def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
 def _ground(x: np.ndarray, axis: int, sign: float) -> float:
     """The ground along up: the 5th percentile of the lowest foot of each frame (the feet:
     the markers that reach the lowest height often, :func:`~activebonds.data.orientation.feet`)."""
-    from ..data.orientation import ground_level
+    from ...data.orientation import ground_level
 
     return ground_level(sign * x[:, :, axis])
 
@@ -403,7 +403,7 @@ def scaffold(
         f"# Frames {offset}:{offset + f_count} ({f_count} frames at {rate:g} Hz, T = "
         f"{duration:.4g} s), {p} markers.",
         "# Every candidate bond is optional: `activebonds structure` decides which the recording",
-        "# needs. The rules behind every number: activebonds.identify.scaffold's docstring.",
+        "# needs. The rules behind every number: activebonds.identify.discover.scaffold's docstring.",
         f"name = {_q(name or 'scaffold')}",
         f"dimension = {d}  # the recording's",
     ]
@@ -614,8 +614,8 @@ def neural_text(found, recording=None) -> str:
     mechanical-neural bonds (``fit --bonds neural``'s defaults for the neural parameters) and
     its absent candidates dropped: neural bonds cannot be optional. With ``recording``, its
     markers must hold the model's (InputError otherwise)."""
-    from ..model import dumps_model, load_model
-    from ..model.variants import as_neural
+    from ...model import dumps_model, load_model
+    from ...model.variants import as_neural
 
     model = load_model(found)
     if recording is not None:
@@ -631,7 +631,7 @@ def neural_text(found, recording=None) -> str:
         if not b.absent
     ]
     spec = model.spec.model_copy(update={"bond": kept})
-    from ..model import build
+    from ...model import build
 
     neural = as_neural(build(spec))
     return (

@@ -49,11 +49,11 @@ from itertools import product
 
 import numpy as np
 
-from .. import bonds
-from ..data.coverage import present_windows
-from ..data.orientation import MIN_PHASE
-from ..model import Model, build
-from ..model.schema import ModelSpec
+from ... import bonds
+from ...data.coverage import present_windows
+from ...data.orientation import MIN_PHASE
+from ...model import Model, build
+from ...model.schema import ModelSpec
 
 TRAIN = 0.8  # the share of the fitted frames each variant is fitted on; the rest is the tail
 # variants within this share of the lowest tail RMS are tied: the fewest bonds win. At 1 % the
@@ -283,8 +283,8 @@ def mass_of(p) -> float:
 def decide(model: Model, recording, frames: tuple[int, int], variant: Variant):
     """``variant`` of the scaffold ``model`` decided and solved on ``frames`` of
     ``recording`` (:func:`~.structure.structure_of`): a :class:`~.structure.Structure`."""
-    from .problem import select_data
-    from .settings import FitSettings
+    from ..problem import select_data
+    from ..settings import FitSettings
     from .structure import candidates, structure_of
 
     settings = FitSettings(frames=frames)
@@ -299,10 +299,10 @@ def choose(model: Model, recording, frames: tuple[int, int], say=None) -> Choice
     """The variants of the scaffold ``model`` fitted on the first :data:`TRAIN` of ``frames``
     and scored on the rest (see the module's docstring); None where the tail would hold
     fewer than :data:`MIN_TAIL` frames or the training part fewer than that."""
-    from .baselines import zero_force_predictions
-    from .predictions import one_step, rms_mm
-    from .problem import select_data
-    from .settings import FitSettings
+    from ..judge.baselines import zero_force_predictions
+    from ..judge.predictions import one_step, rms_mm
+    from ..problem import select_data
+    from ..settings import FitSettings
 
     a, b = frames
     split = a + int(round(TRAIN * (b - a)))
@@ -391,9 +391,9 @@ class Criterion:
 def criterion(model: Model, recording, frames: tuple[int, int]) -> Criterion:
     """The one-step BIC of ``model`` on ``frames`` of ``recording`` (every frame predicted
     from the two recorded before it, one Euler step, as the fit's one-step cost)."""
-    from .predictions import one_step
-    from .problem import select_data
-    from .settings import FitSettings
+    from ..judge.predictions import one_step
+    from ..problem import select_data
+    from ..settings import FitSettings
 
     data = select_data(model, recording, FitSettings(frames=frames))
     rec = np.asarray(data.positions, np.float64)

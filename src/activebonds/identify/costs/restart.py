@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data.smoothing import smooth_positions
-from ..model.model import Model
-from ..physics import phase
-from ..physics.integrate import (
+from ...data.smoothing import smooth_positions
+from ...model.model import Model
+from ...physics import phase
+from ...physics.integrate import (
     START_ITERATIONS,
     START_TOLERANCE,
     advance,

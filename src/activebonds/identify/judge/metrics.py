@@ -6,11 +6,11 @@ velocity) predictor. The report, ``fit``'s summary and ``fit --validate`` all ca
 the numbers agree everywhere.
 
 * **One-step RMS** (mm): every frame predicted from the two recorded frames before it, as the
-  fit cost predicts it (:func:`~activebonds.identify.predictions.one_step`); the RMS over every
+  fit cost predicts it (:func:`~activebonds.identify.judge.predictions.one_step`); the RMS over every
   (frame, marker) term whose target is recorded and whose two input frames are complete. For
   a run of horizon 1 it is the fit's own RMS error.
 * **Free-run RMS** (mm): one free run from the first two complete consecutive frames
-  (:func:`~activebonds.identify.predictions.free_run`), never looking at the data again; the RMS
+  (:func:`~activebonds.identify.judge.predictions.free_run`), never looking at the data again; the RMS
   over every later recorded (frame, marker). A run that went non-finite gives +inf.
 * **Frames within the threshold**: free runs started from several frames ``s`` (the start
   frames, where frames ``s - 1`` and ``s`` are both complete; by default
@@ -34,8 +34,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..data import Trajectory
-from ..model import Model
+from ...data import Trajectory
+from ...model import Model
 from .baselines import zero_force_predictions
 from .predictions import free_run, one_step, tracked_phases
 
@@ -347,8 +347,8 @@ def validation_data(
     for validation. Raises :class:`InputError` (``--validate``) for a window out of range,
     overlapping the fitted frames (``settings.frames``), shorter than
     :data:`MIN_VALIDATION_FRAMES` or with fewer than :data:`MIN_STARTS` possible starts."""
-    from ..errors import InputError
-    from .problem import select_data
+    from ...errors import InputError
+    from ..problem import select_data
 
     n = recording.n_frames
     start, stop = frames
@@ -387,8 +387,8 @@ def validation_record(
 ) -> dict:
     """What RUN/validation.json holds: the frames, the model's and the zero-force
     predictor's metrics on them (:func:`window_metrics`) and their comparisons one step and
-    :data:`~activebonds.identify.ahead.DEFAULT_AHEAD` frames ahead, overall and per marker
-    (``judged``, :mod:`activebonds.identify.ahead`)."""
+    :data:`~activebonds.identify.judge.ahead.DEFAULT_AHEAD` frames ahead, overall and per marker
+    (``judged``, :mod:`activebonds.identify.judge.ahead`)."""
     # time runs on from the fitted window (a window before it starts at time 0)
     offset = max(int(frames[0]) - int(settings.frames[0]), 0)
     found = window_metrics(

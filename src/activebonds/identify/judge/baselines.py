@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import bonds
-from ..model import Model
-from .cost import make_windows
+from ... import bonds
+from ...model import Model
+from ..costs.restart import make_windows
 
 
 def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float):
@@ -32,7 +32,7 @@ def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float):
 def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
     """The constant-velocity predictor's one-step predictions [F, P, D] (NaN for frames 0
     and 1 and where an input frame is incomplete, as the model's) and its free run from frames ``start - 1`` and ``start`` (NaN up to ``start``),
-    the predictions of :func:`~activebonds.identify.metrics.zero_force_metrics`."""
+    the predictions of :func:`~activebonds.identify.judge.metrics.zero_force_metrics`."""
     rec = np.asarray(positions, np.float64)
     one = np.full_like(rec, np.nan)
     one[2:] = 2.0 * rec[1:-1] - rec[:-2]

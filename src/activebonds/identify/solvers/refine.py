@@ -34,12 +34,15 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from .compile_ahead import ahead
-from .cost import constant_velocity_cost, join_windows, make_residuals, make_windows, rms_mm
-from .lm import Interrupted, levenberg_marquardt
-from .problem import Identification
-from .settings import FitSettings
-from .shooting import (
+from ..compile_ahead import ahead
+from ..costs.restart import (
+    constant_velocity_cost,
+    join_windows,
+    make_residuals,
+    make_windows,
+    rms_mm,
+)
+from ..costs.shooting import (
     CONTINUITY_WEIGHT,
     frame_states,
     join_shooting,
@@ -47,6 +50,9 @@ from .shooting import (
     shooting_windows,
     start_states,
 )
+from ..problem import Identification
+from ..settings import FitSettings
+from .lm import Interrupted, levenberg_marquardt
 from .shooting_normal import Normal, damped_step, floored, make_normal, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most

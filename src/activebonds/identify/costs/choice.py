@@ -17,7 +17,7 @@ well, only slower than the one-step cost, which is exact on such data.
 
 from __future__ import annotations
 
-from .settings import FitSettings
+from ..settings import FitSettings
 
 AFFORDABLE_UNKNOWNS = 300  # genes + a window's start state; more: the restart cost
 SHOOTING_HORIZON = 10  # frames per shooting window when --horizon is not given

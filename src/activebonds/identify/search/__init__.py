@@ -1,0 +1,1 @@
+"""The search: the paper's evolution strategy and the other strategies, their operators, and the population's cost."""
