@@ -134,7 +134,7 @@ def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"
 
 def fit_half(model, traj, frames: tuple[int, int]):
     """The model's linear genes by exact least squares on ``frames`` (one step, horizon 1)."""
-    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.costs.windows import make_windows
     from activebonds.identify.solvers.lsq import least_squares
 
     part = traj.select(list(model.markers)).window(*frames)

@@ -3,7 +3,7 @@
 Same algorithm as ``activebonds.identify.search.es`` / ``operators`` (tournament parents; multi-parent
 crossover per bond type biased by local cost; one of four mutation variants per child with
 log-normal self-adaptation; elitist, rank-biased selection from parents + children) and the same
-cost as ``activebonds.identify.costs.restart.make_cost`` (restart from the recorded state with a
+cost as ``activebonds.identify.costs.windows.make_cost`` (restart from the recorded state with a
 backward-difference velocity, semi-implicit Euler or velocity Verlet, H steps; binary
 viscoelastic and mechanical-neural bonds, gravity: a fixed vector or a free magnitude along a
 fixed direction; masses, free as ratios of a total mass or not). None of these forces depends
@@ -393,7 +393,7 @@ def check(verbose: bool = True) -> bool:
 
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
     import problems as P
-    from activebonds.identify.costs.restart import make_cost
+    from activebonds.identify.costs.windows import make_cost
     from activebonds.identify.search.es import ESSettings
 
     rng = np.random.default_rng(0)

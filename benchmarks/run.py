@@ -44,7 +44,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import problems as P  # noqa: E402  (imports activebonds: XLA flags, float64)
-from activebonds.identify.costs.restart import Display  # noqa: E402
+from activebonds.identify.costs.windows import Display  # noqa: E402
 from activebonds.identify.search import es, evolve  # noqa: E402
 from numpy_es import NumpyES  # noqa: E402
 

@@ -100,7 +100,9 @@ def _traced(timeline: list) -> None:
     """Record the stage's parts (warm start, checks, the one-step stage instead) and every
     Levenberg-Marquardt solve (steps, message, seconds) in ``timeline``, each also printed to
     stderr as it ends, every 10th step's loss too (``--trace``: where a long stage goes)."""
-    from activebonds.identify.solvers import refine
+    from activebonds.identify.costs.restart_cost import RestartCost
+    from activebonds.identify.costs.shooting_cost import ShootingCost
+    from activebonds.identify.solvers import refine, stage
 
     t0 = time.perf_counter()
 
@@ -109,7 +111,7 @@ def _traced(timeline: list) -> None:
         timeline.append(entry)
         print(f"[{entry['at']:8.1f} s] {entry}", file=sys.stderr, flush=True)
 
-    solve = refine.levenberg_marquardt
+    solve = stage.levenberg_marquardt
 
     def traced_solve(*args, **kwargs):
         t, user = time.perf_counter(), kwargs.get("on_step")
@@ -124,18 +126,23 @@ def _traced(timeline: list) -> None:
         note({"solve": out[1], "message": out[2], "seconds": round(time.perf_counter() - t, 1)})
         return out
 
-    refine.levenberg_marquardt = traced_solve
-    for part in ("_restart", "_versus_constant_velocity", "_one_step_instead"):
-        method = getattr(refine.Refinement, part)
+    stage.levenberg_marquardt = traced_solve
+    parts = (
+        (RestartCost, "stage", "restart"),
+        (refine.Refinement, "versus_constant_velocity", "versus_constant_velocity"),
+        (ShootingCost, "_one_step_instead", "one_step_instead"),
+    )
+    for owner, part, label in parts:
+        method = getattr(owner, part)
 
-        def traced(self, *args, _method=method, _part=part, **kwargs):
+        def traced(self, *args, _method=method, _part=label, **kwargs):
             t = time.perf_counter()
             out = _method(self, *args, **kwargs)
             said = getattr(out, "message", out)
             note({"part": _part, "seconds": round(time.perf_counter() - t, 1), "result": said})
             return out
 
-        setattr(refine.Refinement, part, traced)
+        setattr(owner, part, traced)
 
 
 def child(name: str, path: str) -> dict:
@@ -148,7 +155,7 @@ def child(name: str, path: str) -> dict:
 
     compilation_cache()  # the parent's choice: off, or a folder of its own (--warm)
 
-    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.costs.windows import make_windows
     from activebonds.identify.problem import identification
     from activebonds.identify.settings import FitSettings
     from activebonds.identify.solvers.lsq import least_squares

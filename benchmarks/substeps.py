@@ -56,13 +56,13 @@ def programs(name: str):
     import numpy as np
     from jax.flatten_util import ravel_pytree
 
-    from activebonds.identify.costs.restart import make_cost, make_residuals, make_windows
     from activebonds.identify.costs.shooting import (
         frame_states,
         make_shooting,
         shooting_windows,
         start_states,
     )
+    from activebonds.identify.costs.windows import make_cost, make_residuals, make_windows
     from activebonds.identify.problem import identification
     from activebonds.identify.settings import FitSettings
     from activebonds.identify.solvers.lsq import least_squares

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify.costs.restart import Display
+from activebonds.identify.costs.windows import Display
 from activebonds.identify.driver import fit
 from activebonds.identify.problem import identification
 from activebonds.identify.search import evolve, strategies

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory
-from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.windows import make_cost, make_windows, rms_mm
 from activebonds.model import load_model
 from helpers import HORSE_LIMB, HORSE_TROT, cli
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from activebonds.identify import fit, resume, rundir
-from activebonds.identify.costs.restart import Display
+from activebonds.identify.costs.windows import Display
 from activebonds.identify.search import evolve
 from activebonds.identify.search.cmaes import CMAES
 from activebonds.identify.search.strategy import Problem

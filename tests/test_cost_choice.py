@@ -10,7 +10,7 @@ import pytest
 
 import activebonds
 from activebonds.identify.costs.choice import AFFORDABLE_UNKNOWNS, choose_cost
-from activebonds.identify.costs.restart import constant_velocity_cost, make_windows, rms_mm
+from activebonds.identify.costs.windows import constant_velocity_cost, make_windows, rms_mm
 from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings
 from activebonds.identify.solvers.refine import Refinement

@@ -13,7 +13,7 @@ from activebonds.data import Trajectory, describe, read_trajectory, write_trajec
 from activebonds.data.coverage import count_gaps, coverage, longest, present_windows
 from activebonds.data.orientation import G, guess_gravity
 from activebonds.errors import InputError
-from activebonds.identify.costs.restart import count_predictions, make_windows
+from activebonds.identify.costs.windows import count_predictions, make_windows
 from helpers import EXAMPLES, HORSE_TROT, TRIANGLE, both_ways_fresh_in_slow
 
 HORSE_WALK = HORSE_TROT.with_name("Horse1_M1_walk1_kinematics.csv")

@@ -21,7 +21,6 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.costs.restart import join_windows, make_cost, make_windows, start_phases
 from activebonds.identify.costs.shooting import (
     frame_states,
     join_shooting,
@@ -30,6 +29,7 @@ from activebonds.identify.costs.shooting import (
     window_phases,
 )
 from activebonds.identify.costs.shooting import start_states as window_starts
+from activebonds.identify.costs.windows import join_windows, make_cost, make_windows, start_phases
 from activebonds.identify.judge.ahead import model_ahead
 from activebonds.identify.judge.predictions import free_run, one_step, tracked_phases
 from activebonds.identify.search.population_cost import make_population_cost

@@ -16,7 +16,7 @@ from scipy.optimize import minimize
 from activebonds.data import read_trajectory
 from activebonds.errors import InputError
 from activebonds.identify import fit
-from activebonds.identify.costs.restart import make_cost, make_windows
+from activebonds.identify.costs.windows import make_cost, make_windows
 from activebonds.identify.judge.baselines import (
     model_floor_rms_mm,
     momentum_floor_rms_mm,

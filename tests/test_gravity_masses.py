@@ -20,7 +20,7 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.solvers.lsq import least_squares
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force

@@ -25,7 +25,7 @@ import pytest
 
 from activebonds.data import read_trajectory, write_trajectory
 from activebonds.identify import fit
-from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.windows import make_cost, make_windows, rms_mm
 from activebonds.identify.search import es, evolve
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate

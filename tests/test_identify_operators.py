@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.windows import make_cost, make_windows, rms_mm
 from activebonds.identify.search import operators as ops
 from activebonds.model import load_model, loads_model
 from activebonds.simulation import simulate

@@ -160,12 +160,12 @@ def test_no_module_imports_a_module_of_a_higher_layer():
 
 
 def test_the_layering_check_sees_an_arrow_up():
-    graph = {"activebonds.bonds.binary": {"activebonds.identify.costs.restart"}}
+    graph = {"activebonds.bonds.binary": {"activebonds.identify.costs.windows"}}
     assert upward_arrows(graph) == {
-        ("activebonds.bonds.binary", "activebonds.identify.costs.restart")
+        ("activebonds.bonds.binary", "activebonds.identify.costs.windows")
     }
     assert (
-        upward_arrows({"activebonds.identify.costs.restart": {"activebonds.bonds.binary"}}) == set()
+        upward_arrows({"activebonds.identify.costs.windows": {"activebonds.bonds.binary"}}) == set()
     )
 
 
@@ -214,7 +214,7 @@ def test_every_module_outside_bonds_is_checked_for_kind_names():
     assert {"model/names.py", "model/variants.py", "export/mjcf.py"} <= checked
     assert {
         "experiments/springs.py",
-        "identify/costs/restart.py",
+        "identify/costs/windows.py",
         "cli/__init__.py",
         "__init__.py",
     } <= checked

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.judge import integrator_check, uncertainty
 from activebonds.identify.problem import identification
 from activebonds.identify.settings import FitSettings

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from activebonds.identify import fit
-from activebonds.identify.costs.restart import make_cost, make_windows, rms_mm
+from activebonds.identify.costs.windows import make_cost, make_windows, rms_mm
 from activebonds.model import load_model
 from activebonds.physics import advance, start_velocity
 from activebonds.simulation import simulate
@@ -191,7 +191,7 @@ def test_the_restart_residuals_vanish_where_the_population_cost_cannot_start(tru
     """Data the damped tetrahedron above generated (2 Euler substeps at 50 Hz): the
     population's cost (fixed-point starts) is +inf at the truth, and so are the residuals
     by default; with Newton's starts (``newton=True``) they vanish there."""
-    from activebonds.identify.costs.restart import make_residuals
+    from activebonds.identify.costs.windows import make_residuals
 
     p = _stiff_damped(truth, damping=20.0)
     model, layout = truth, truth.layout

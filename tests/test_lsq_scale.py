@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.optimize import LinearConstraint, lsq_linear, minimize
 
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.discover import structure as st
 from activebonds.identify.solvers.lsq import (
     LinearProblem,

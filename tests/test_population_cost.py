@@ -11,7 +11,7 @@ import pytest
 
 from activebonds.bonds.accumulate import accumulate
 from activebonds.data import Trajectory, read_trajectory
-from activebonds.identify.costs.restart import join_windows, make_cost, make_windows
+from activebonds.identify.costs.windows import join_windows, make_cost, make_windows
 from activebonds.identify.problem import identification
 from activebonds.identify.search import population_cost
 from activebonds.identify.search.population_cost import applies, make_population_cost

@@ -19,9 +19,9 @@ import pytest
 import reference_numpy as ref
 from activebonds import fit
 from activebonds.errors import InputError
-from activebonds.identify.costs.restart import make_cost, make_windows
 from activebonds.identify.costs.shooting import make_shooting, shooting_windows
 from activebonds.identify.costs.shooting import start_states as window_starts
+from activebonds.identify.costs.windows import make_cost, make_windows
 from activebonds.identify.gaps.fill import fill_phases
 from activebonds.identify.judge.predictions import tracked_phases
 from activebonds.model import dumps_model, loads_model

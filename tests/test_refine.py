@@ -12,6 +12,7 @@ from activebonds.data import Trajectory
 from activebonds.identify import rundir
 from activebonds.identify.costs.shooting import shooting_windows
 from activebonds.identify.solvers import refine as refine_mod
+from activebonds.identify.solvers import stage as stage_mod
 from activebonds.identify.solvers.refine import Bounded
 from activebonds.model import load_model, loads_model
 from helpers import EXAMPLES, each_case_both_ways
@@ -118,7 +119,7 @@ def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
             "converged",
         )
 
-    monkeypatch.setattr(refine_mod, "_solve", diverge)
+    monkeypatch.setattr(stage_mod, "solve", diverge)
     run = tmp_path / "run"
     result = activebonds.fit(model_path, data, refine="lm", out=run, **FAST)
     (stage,) = result.refinement
@@ -149,7 +150,7 @@ def test_the_cli_says_a_divergent_stage_in_one_line(triangle, tmp_path, monkeypa
     def diverge(residual, y0, max_steps, *_):
         return np.full_like(np.asarray(y0), np.nan), 3, "converged"
 
-    monkeypatch.setattr(refine_mod, "_solve", diverge)
+    monkeypatch.setattr(stage_mod, "solve", diverge)
     from activebonds.cli.main import app
 
     args = ["fit", str(EXAMPLES / "triangle.toml"), str(data), "--out", str(tmp_path / "r")]
@@ -249,7 +250,7 @@ def test_a_shooting_fit_from_the_exact_start_searches_on_the_one_step_cost(trian
     (whatever --substeps the shooting uses), whose optimum the least squares is: the search's
     best is that optimum exactly, its RMS the least squares' own, and the shooting at 4 Verlet
     substeps then recovers the truth, the fit saying which cost each stage used."""
-    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.costs.windows import make_windows
     from activebonds.identify.solvers.lsq import least_squares
 
     model, _, truth = triangle
@@ -286,7 +287,7 @@ def test_a_model_whose_predictions_cannot_be_computed_is_not_said_to_lose():
     genome = np.array(layout.initial(), np.float64)
     damping = [i for i, g in enumerate(layout.genes) if g.name.endswith("damping")]
     genome[damping] = np.where(layout.log[damping], np.log(500.0), 500.0)
-    why = refine_mod.Refinement(ident, settings)._versus_constant_velocity(genome, (1,))
+    why = refine_mod.Refinement(ident, settings).versus_constant_velocity(genome, (1,))
     assert why == (
         "its 1-frame predictions cannot be computed at these parameters (a start velocity or a "
         "prediction diverged: more --substeps may hold them)"

@@ -10,7 +10,7 @@ import pytest
 
 from activebonds import load_model
 from activebonds.data.smoothing import noise_of, smooth_positions
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.settings import FitSettings
 from activebonds.identify.solvers.lsq import least_squares
 from activebonds.simulation import simulate

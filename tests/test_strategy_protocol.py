@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from activebonds.identify import fit
-from activebonds.identify.costs.restart import Display
+from activebonds.identify.costs.windows import Display
 from activebonds.identify.search import evolve, operators, strategies
 from activebonds.identify.search.random_search import RandomSearch
 from activebonds.identify.search.strategy import Problem

@@ -12,7 +12,7 @@ from activebonds.data.writers import write_trajectory
 from activebonds.errors import InputError
 from activebonds.experiments.springs import candidate_model_toml, dataset
 from activebonds.experiments.springs_structure import recover_edges
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.discover.structure import identify_structure
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import total_force

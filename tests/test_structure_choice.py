@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from activebonds.data import read_trajectory
-from activebonds.identify.costs.restart import make_windows
+from activebonds.identify.costs.windows import make_windows
 from activebonds.identify.discover.scaffold import scaffold
 from activebonds.identify.discover.structure_choice import (
     TIE,

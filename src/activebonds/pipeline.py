@@ -470,7 +470,7 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     squares does not solve (ground contacts), its linear parameters solved again with the
     contacts held: OUT/ground.toml, or None where the scaffold has neither."""
     from . import bonds
-    from .identify.costs.restart import make_windows
+    from .identify.costs.windows import make_windows
     from .identify.discover.structure import exact_optimum
     from .identify.discover.structure_choice import criterion
     from .identify.problem import select_data

@@ -12,7 +12,7 @@ from .atomic import output_path
 from .data import Trajectory, read_trajectory, write_trajectory
 from .errors import DivergenceError, InputError
 from .model import Model, build, load_model
-from .physics import advance, phase, rollout, start_velocity
+from .physics import advance, integrators, phase, rollout, start_velocity
 from .runtime import float64
 
 
@@ -51,8 +51,9 @@ def simulate(
     """
     if not (np.isfinite(rate) and rate > 0):
         raise InputError("--rate", f"must be a positive number of Hz, got {rate}")
-    if integrator not in ("euler", "verlet"):
-        raise InputError("--integrator", f"expected euler or verlet, got '{integrator}'")
+    if integrator not in integrators.names():
+        known = " or ".join(integrators.names())
+        raise InputError("--integrator", f"expected {known}, got '{integrator}'")
     dt = 1.0 / rate
     psi_first = psi_second = None  # an entrained drive's phase at the first two frames
     if phase.entrained(model.topology):

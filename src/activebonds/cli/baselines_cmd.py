@@ -29,7 +29,7 @@ def baselines(
     the momentum floor of internal-force models, and the exact bounded least-squares optimum of
     the model's linear parameters (neural gains at 0)."""
     from ..data import read_trajectory
-    from ..identify.costs.restart import make_windows
+    from ..identify.costs.windows import make_windows
     from ..identify.judge.baselines import model_floor_rms_mm, zero_force_rms_mm
     from ..identify.problem import select_data, variant
     from ..identify.settings import parse_frames, parse_markers

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated, get_args
+from typing import Annotated
 
 from . import interrupts
 
@@ -22,6 +22,7 @@ from rich.table import Table  # noqa: E402
 
 from ..errors import InputError  # noqa: E402
 from ..identify.settings import (  # noqa: E402
+    AUTO,
     FitSettings,
     frames_text,
     parse_frames,
@@ -144,8 +145,6 @@ def simulate(
 
 # the fit's defaults are the settings' own (one source for Python and the command line)
 DEFAULT = {name: f.default for name, f in FitSettings.model_fields.items()}
-# --cost: auto (the command line's choice between the settings' own) or one of them
-COSTS = ("auto", *get_args(FitSettings.model_fields["cost"].annotation))
 
 
 @app.command()
@@ -202,7 +201,7 @@ def fit(
             "auto: shooting (10-frame windows unless --horizon) where a window has at most "
             "300 unknowns, else restart."
         ),
-    ] = "auto",
+    ] = AUTO,
     smooth: Annotated[
         int,
         typer.Option(
@@ -262,6 +261,7 @@ def fit(
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
     from ..identify import fit as run_fit
     from ..identify.driver import compiling_text
+    from ..identify.prepare import prepare
     from ..identify.rundir import RunWriteError
     from .options import settings_from_options
     from .preflight import check_output_folder, write_failure_line
@@ -269,10 +269,7 @@ def fit(
     interrupts.expect_run(out_dir)
     try:
         check_order("fit", model, traj)
-        if cost not in COSTS:
-            raise InputError(
-                "--cost", f"expected {', '.join(COSTS[:-1])} or {COSTS[-1]}, got '{cost}'"
-            )
+        check_cost(cost)
         settings = settings_from_options(
             markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
@@ -283,7 +280,7 @@ def fit(
             horizon=parse_horizons(horizon or ",".join(map(str, DEFAULT["horizon"]))),
             refine=refine,
             max_steps=max_steps,
-            cost="restart" if cost == "auto" else cost,
+            cost=cost,
             smooth=smooth,
             substeps=substeps,
             integrator=integrator,
@@ -297,24 +294,20 @@ def fit(
             else None,
         )
         check_output_folder(out_dir, overwrite)  # before any computation
-        if strict:  # checked before anything is written; the fit then reads them as usual
-            from ..data import read_trajectory
-
-            for path in traj:
-                read_trajectory(path, strict=True)
-        first = traj[0]
-        if cost == "auto":
-            settings, why = _choose_cost(model, first, settings, horizon_given=horizon is not None)
-            say(why)
-        predictions = _check_predictions(model, traj, settings)
-        _check_validation(model, first, settings)
-        out.print(predictions, markup=False, highlight=False)
-        data = traj if len(traj) > 1 else first
+        prepared = prepare(
+            model,
+            traj if len(traj) > 1 else traj[0],
+            settings,
+            horizon_given=horizon is not None,
+            strict=strict,
+        )
+        if prepared.cost_note:
+            say(prepared.cost_note)
+        out.print(prepared.predictions, markup=False, highlight=False)
         with _progress(generations, compiling_text(optimizer)) as progress:
             result = run_fit(
-                model,
-                data,
-                settings,
+                prepared,
+                None,
                 out=out_dir,
                 overwrite=overwrite,
                 progress=progress,
@@ -328,6 +321,17 @@ def fit(
     except KeyboardInterrupt:
         interrupts.stop(_interrupted_fit(out_dir))
     _summary(result)
+
+
+def check_cost(cost: str) -> None:
+    """``--cost``: auto or a registered cost's name, or a one-line error listing them."""
+    from ..identify.costs import names
+
+    accepted = (AUTO, *names())
+    if cost not in accepted:
+        raise InputError(
+            "--cost", f"expected {', '.join(accepted[:-1])} or {accepted[-1]}, got '{cost}'"
+        )
 
 
 def _interrupted_fit(out_dir: Path) -> str:
@@ -380,45 +384,6 @@ def parse_horizons(text: str) -> tuple[int, ...]:
         raise InputError(
             "--horizon", f"expected integers separated by commas, got '{text}'"
         ) from None
-
-
-def _check_validation(model, traj, settings) -> None:
-    """The ``--validate`` frames checked before the fit starts (one line if they cannot be
-    used); the fit's validation stage measures the model there."""
-    from ..data import read_trajectory
-    from ..identify.driver import validation_frames
-    from ..identify.problem import variant
-    from ..model import load_model
-
-    if settings.validation is not None:
-        validation_frames(
-            variant(load_model(model), settings.bonds), read_trajectory(traj), settings
-        )
-
-
-def _choose_cost(model, first, settings, horizon_given: bool):
-    """:func:`~activebonds.identify.costs.choice.choose_cost` for the model file and the first
-    recording (its markers followed by the model's particles)."""
-    from ..data import read_trajectory
-    from ..identify.costs.choice import choose_cost
-    from ..identify.problem import select_recordings, variant
-    from ..model import load_model
-
-    spec = variant(load_model(model), settings.bonds)
-    data = select_recordings(spec, [read_trajectory(first)], settings)[0]
-    coords = data.positions.shape[1] * data.positions.shape[2]
-    return choose_cost(settings, spec.layout.n_genes, coords, horizon_given)
-
-
-def _check_predictions(model, trajs, settings) -> str:
-    """:func:`~activebonds.identify.problem.check_predictions` of the files, before anything
-    is compiled."""
-    from ..data import read_trajectory
-    from ..identify.problem import check_predictions, variant
-    from ..model import load_model
-
-    spec = variant(load_model(model), settings.bonds)
-    return check_predictions(spec, [read_trajectory(p) for p in trajs], settings)
 
 
 def _summary(result) -> None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..identify.costs.restart import make_windows
+from ..identify.costs.windows import make_windows
 from ..identify.judge.uncertainty import Uncertainty, estimate
 from ..identify.problem import identification
 from ..identify.settings import FitSettings

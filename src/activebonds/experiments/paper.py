@@ -24,7 +24,7 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from ..data import Trajectory, read_trajectory
-from ..identify.costs.restart import make_windows
+from ..identify.costs.windows import make_windows
 from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
 from ..identify.judge.baselines import model_floor_rms_mm, momentum_floor_rms_mm, zero_force_rms_mm
 from ..identify.problem import identification

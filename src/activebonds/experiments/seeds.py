@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..identify.costs.restart import Display
+from ..identify.costs.windows import Display
 from ..identify.problem import Identification
 from ..identify.search import es
 from ..identify.search.evolve import DEFAULT_CHUNK, Evolution, keys

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.smoothing import smooth_positions
-from ..identify.costs.restart import make_windows
+from ..identify.costs.windows import make_windows
 from ..identify.discover.structure import identify_structure
 from ..model import loads_model
 from .springs import FRAME_DT, candidate_model_toml, near_wall

@@ -18,13 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..data import Trajectory, read_trajectory
+from ..data import Trajectory
 from ..data.writers import render_npz
 from ..errors import InputError
-from ..model import Model, dumps_model, load_model
+from ..model import Model, dumps_model
 from ..runtime import keep_compiled
 from . import rundir, stages
-from .costs.restart import Display
+from .costs.windows import Display
+from .prepare import Prepared, prepare, validation_frames
 from .problem import Identification, identification
 from .progress import shown
 from .rundir import RunDir
@@ -181,7 +182,9 @@ def fit(
     without the free space the run needs is refused up front, and a write that fails later
     raises :class:`~activebonds.identify.rundir.RunWriteError` with the newest checkpoint
     kept. ``command`` is the command line run.json records (default: this process's,
-    ``sys.argv``).
+    ``sys.argv``). ``cost="auto"`` chooses the refinement's cost for the recording
+    (:mod:`activebonds.identify.costs.choice`); ``model`` may be what
+    :func:`~activebonds.identify.prepare.prepare` returned (its inputs read and checked).
 
     ``progress=True`` shows a progress bar, in a notebook (Jupyter) or a terminal: the
     generation, the best RMS error, the time, and what the fit does in its silent phases
@@ -196,10 +199,13 @@ def fit(
     ```
     """
     clock = Clock()
-    settings = settings or FitSettings(**options)
+    if not isinstance(model, Prepared):
+        given = settings is not None or "horizon" in options
+        model = prepare(model, data, settings or FitSettings(**options), horizon_given=given)
+    settings = model.settings
     keep_compiled()  # a second fit of the same shapes loads this one's programs
     with _precision(settings), shown(progress, status) as (progress, status):
-        return _fit(model, data, settings, out, overwrite, progress, status, command, clock)
+        return _fit(model, out, overwrite, progress, status, command, clock)
 
 
 class Clock:
@@ -216,42 +222,18 @@ class Clock:
         return round(self.before + time.time() - self.start, 3)
 
 
-def _fit(
-    model,
-    data,
-    settings: FitSettings,
-    out,
-    overwrite: bool,
-    progress,
-    status=None,
-    command=None,
-    clock=None,
-):
-    model_path = Path(model) if isinstance(model, str | Path) else None
-    many = isinstance(data, list | tuple)
-    items = list(data) if many else [data]
-    paths = [Path(d) if isinstance(d, str | Path) else None for d in items]
-    model_obj = load_model(model_path) if model_path else model
-    trajs = [read_trajectory(p) if p else d for p, d in zip(paths, items, strict=True)]
-    ident = identification(model_obj, trajs if many else trajs[0], settings)
-    held_out = validation_frames(ident.model, trajs[0], settings)
+def _fit(prepared: Prepared, out, overwrite: bool, progress, status=None, command=None, clock=None):
+    settings = prepared.settings
+    ident = identification(prepared.model, prepared.data, settings)
+    held_out = validation_frames(ident.model, prepared.recordings[0], settings)
     run = None
     if out is not None:
-        model_text = model_path.read_bytes() if model_path else dumps_model(model_obj).encode()
+        path = prepared.model_path
+        model_text = path.read_bytes() if path else dumps_model(prepared.model).encode()
         run = _create_run(
-            out, model_text, ident, settings, model_path, paths, overwrite, command, held_out
+            out, model_text, ident, settings, path, prepared.paths, overwrite, command, held_out
         )
     return _evolve(ident, settings, run, progress, status=status, held_out=held_out, clock=clock)
-
-
-def validation_frames(model: Model, recording: Trajectory, settings: FitSettings):
-    """The frames ``settings.validation`` of ``recording`` (the model's markers), checked
-    (:class:`InputError` naming ``--validate``), or None without validation."""
-    if settings.validation is None:
-        return None
-    from .judge.metrics import validation_data
-
-    return validation_data(model, recording, settings, settings.validation)
 
 
 def _create_run(

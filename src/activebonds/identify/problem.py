@@ -11,7 +11,7 @@ import numpy as np
 from ..data.trajectory import Trajectory
 from ..errors import InputError
 from ..model import Model, as_neural, as_standard
-from .costs.restart import Windows, join_windows, make_cost, make_windows
+from .costs.windows import Windows, join_windows, make_cost, make_windows
 from .search.es import Problem
 from .search.population_cost import make_population_cost
 from .settings import FitSettings
@@ -135,14 +135,14 @@ def identification(
 
 def check_predictions(spec: Model, recordings: Sequence[Trajectory], settings: FitSettings) -> str:
     """'gaps removed 17 of 144 predictions (12 %) in frames 0:50', counted like the ES's cost
-    (:func:`~activebonds.identify.costs.restart.count_predictions`), for ``spec`` (the bond variant
+    (:func:`~activebonds.identify.costs.windows.count_predictions`), for ``spec`` (the bond variant
     fitted) on ``recordings``.
 
     Too few left is an InputError naming the gap-free windows that would do: none, or fewer
     predicted coordinates (predictions x dimension, the cost's residuals) than the model has
     free parameters (genes), which the data could then not determine."""
     from ..data.coverage import longest, present_windows, window_text
-    from .costs.restart import count_predictions
+    from .costs.windows import count_predictions
 
     data = select_recordings(spec, recordings, settings)
     counts = [count_predictions(d.mask, settings.es_horizon) for d in data]

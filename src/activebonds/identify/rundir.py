@@ -227,7 +227,7 @@ def write_meta(run: Path, meta: dict) -> None:
 # Format 1 (activebonds 0.2): the paper's ES only, no strategy, columns or display in run.json,
 # variants numbered (trials_v1 ...), costs shown in mm for the best only. Read as format 2.
 def _upgrade_meta(run: Path, meta: dict) -> dict:
-    from .costs.restart import Display, make_windows
+    from .costs.windows import Display, make_windows
     from .search.es import PaperES
     from .search.evolve import history_columns
 
@@ -256,7 +256,7 @@ def upgrade_history(history: dict[str, np.ndarray], meta: dict) -> dict[str, np.
     other history unchanged."""
     if "trials_v1" not in history:
         return history
-    from .costs.restart import Display
+    from .costs.windows import Display
     from .search.operators import VARIANTS
 
     out = dict(history)

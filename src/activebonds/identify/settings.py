@@ -6,6 +6,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+AUTO = "auto"  # a cost chosen for the recording (identify.costs.choice)
+
 
 class FitSettings(BaseModel):
     """Everything that, with the model, the data and the software versions, decides a run."""
@@ -20,13 +22,15 @@ class FitSettings(BaseModel):
     seed: int = Field(0, ge=0, le=2**31 - 1)
     # frames per prediction: the ES's cost uses the first; ``refine`` runs a stage per entry
     horizon: tuple[int, ...] = (1,)
-    cost: Literal["restart", "shooting"] = "restart"  # the refinement's cost (ES: restart)
+    # the refinement's cost, a name of identify.costs ("auto": chosen when the fit reads its
+    # recording, identify.costs.choice; never stored so)
+    cost: str = "restart"
     refine: Literal["none", "lm"] = "lm"
     # Levenberg-Marquardt steps per refinement stage, at most (``fit --max-steps``)
     max_steps: int = Field(500, ge=1, le=1_000_000)
     smooth: int = Field(0, ge=0, le=1001)  # Savitzky-Golay window of the restart states, 0: off
     substeps: int = Field(1, ge=1, le=1000)
-    integrator: Literal["euler", "verlet"] = "euler"
+    integrator: str = "euler"  # a scheme of physics.integrators
     elite_fraction: float = Field(0.1, gt=0, lt=1)
     crossover_rate: float = Field(0.5, ge=0, le=1)
     selection_pressure: float = Field(4.0, ge=0)
@@ -71,15 +75,29 @@ class FitSettings(BaseModel):
             raise ValueError(
                 "a horizon curriculum (several horizons) is run by the refinement; add --refine lm"
             )
-        if self.refine == "none" and self.cost == "shooting":
-            raise ValueError("the shooting cost is the refinement's; add --refine lm")
+        if self.refine == "none" and self.cost != AUTO and self._cost().refinement_only:
+            raise ValueError(f"the {self.cost} cost is the refinement's; add --refine lm")
         return self
+
+    def _cost(self):
+        from .costs import get
+
+        if self.cost == AUTO:
+            raise ValueError("the cost is chosen when the fit reads its recording (cost 'auto')")
+        return get(self.cost)
+
+    @property
+    def stepper(self):
+        """The integrator with its substeps (:class:`~activebonds.physics.integrators.Integrator`)."""
+        from ..physics.integrators import Integrator
+
+        return Integrator(self.integrator, self.substeps)
 
     @property
     def es_horizon(self) -> int:
         """The horizon of the ES's cost: the first of ``horizon``; 1 (the one-step cost) when
         the refinement shoots, as a shooting state cannot be evolved."""
-        return 1 if self.cost == "shooting" else self.horizon[0]
+        return self.horizon[0] if self._cost().evolvable else 1
 
     @property
     def es_exact(self) -> bool:
@@ -88,7 +106,7 @@ class FitSettings(BaseModel):
         shoots: the ES's cost is then only the shooting's start, and at the shooting's
         substeps it would cost them times more (a start-velocity solve per prediction, Newton's
         method on contact models) for a start no better."""
-        return self.cost == "shooting"
+        return not self._cost().evolvable
 
     @property
     def es_substeps(self) -> int:
@@ -98,7 +116,9 @@ class FitSettings(BaseModel):
     @property
     def es_integrator(self) -> str:
         """Integrator of the ES's cost (``integrator`` unless :attr:`es_exact`)."""
-        return "euler" if self.es_exact else self.integrator
+        from ..physics.integrators import DEFAULT
+
+        return DEFAULT if self.es_exact else self.integrator
 
     @field_validator("frames", "validation")
     @classmethod
@@ -108,6 +128,24 @@ class FitSettings(BaseModel):
         start, stop = v
         if start < 0 or (stop is not None and stop <= start):
             raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
+        return v
+
+    @field_validator("cost")
+    @classmethod
+    def _cost_name(cls, v):
+        from .costs import names
+
+        if v != AUTO and v not in names():
+            raise ValueError(f"unknown cost {v!r}; choose one of {', '.join((*names(), AUTO))}")
+        return v
+
+    @field_validator("integrator")
+    @classmethod
+    def _integrator(cls, v):
+        from ..physics.integrators import names
+
+        if v not in names():
+            raise ValueError(f"unknown integrator {v!r}; choose one of {', '.join(names())}")
         return v
 
     @field_validator("optimizer")

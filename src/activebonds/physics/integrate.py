@@ -10,7 +10,6 @@ a model without them does not change."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -19,8 +18,10 @@ from .. import bonds
 from ..model.params import Params, Topology
 from . import linsolve, phase
 from .forces import total_force
+from .integrators import DEFAULT, EULER, VERLET
+from .integrators import Integrator as Stepper
 
-Integrator = Literal["euler", "verlet"]
+Integrator = str  # a scheme's name (:data:`activebonds.physics.integrators.SCHEMES`)
 
 
 def stiff_kinds() -> frozenset[str]:
@@ -113,7 +114,7 @@ def _needs_phase(topo: Topology, psi) -> None:
         )
 
 
-STEPS: dict[str, Callable] = {"euler": euler_step, "verlet": verlet_step}
+STEPS: dict[str, Callable] = {EULER.name: euler_step, VERLET.name: verlet_step}
 
 
 def advance(
@@ -123,7 +124,7 @@ def advance(
     v,
     dt,
     substeps: int = 1,
-    method: Integrator = "euler",
+    method: Integrator = DEFAULT,
     t=0.0,
     psi=None,
     unroll: bool = False,
@@ -227,7 +228,7 @@ def start_velocity(
     x,
     dt,
     substeps: int = 1,
-    method: Integrator = "euler",
+    method: Integrator = DEFAULT,
     iterations: int = START_ITERATIONS,
     t=0.0,
     with_residual: bool = False,
@@ -269,7 +270,7 @@ def start_velocity(
     kind, whose landing map has kinks (a contact starting, ending or sticking within the
     frame) where Newton's method can stall, it is the last iterate's (corrected to first
     order by its residual, a few micrometres in such frames): the fit counts these starts
-    and says so (:func:`activebonds.identify.costs.restart.unsolved_starts`).
+    and says so (:func:`activebonds.identify.costs.windows.unsolved_starts`).
 
     ``newton``: solve by Newton's method on the exact Jacobian for every kind (about P D + 1
     times a step's cost per round), differentiated implicitly (:func:`_landing_velocity`).
@@ -286,19 +287,20 @@ def start_velocity(
     """
     _needs_phase(topo, psi)
     v_b = (x - x_prev) / dt
-    if substeps == 1 and method == "euler":
+    stepper = Stepper(method, substeps)
+    if stepper.exact_backward:
         return (v_b, jnp.zeros(())) if with_residual else v_b
     inv_m = 1.0 / params.mass[:, None]
     at_prev, at_t = params, params  # the forces' parameters at frames t - 1 and t
     if psi is not None:
         at_prev = phase.at_phase(params, psi)
         at_t = phase.at_phase(params, psi + dt * phase.rate(params, topo, x_prev, psi))
-    if substeps == 1 and method == "verlet":
+    if stepper.half_kick_start:
         v = v_b + 0.5 * dt * total_force(at_t, topo, x, v_b, t) * inv_m
         return (v, jnp.zeros(())) if with_residual else v
     # Constant acceleration a: Euler's N substeps start from v_b - dt (N+1)/(2N) a, Verlet's
     # from v_b - dt/2 a.
-    lag = 0.5 * (substeps + 1) / substeps if method == "euler" else 0.5
+    lag = stepper.start_lag()
     t_prev = t - dt
     v = v_b - lag * dt * total_force(at_prev, topo, x_prev, v_b, t_prev) * inv_m
 
@@ -344,7 +346,7 @@ def rollout(
     dt,
     n_frames: int,
     substeps: int = 1,
-    method: Integrator = "euler",
+    method: Integrator = DEFAULT,
     t0=0.0,
     psi0=None,
 ):
@@ -379,7 +381,7 @@ def rollout_states(
     dt,
     n_steps: int,
     substeps: int = 1,
-    method="euler",
+    method=DEFAULT,
     t0=0.0,
     psi0=None,
     unroll: bool = False,

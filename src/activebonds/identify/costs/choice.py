@@ -1,4 +1,4 @@
-"""Which cost the refinement uses when the command line is not told (``fit --cost auto``).
+"""Which cost the refinement uses when it is not told (``fit --cost auto``, ``cost="auto"``).
 
 On a recording (a lab's or another simulator's), marker noise biases the one-step cost's
 optimum (dampings several times over on MuJoCo's tendons with 0.5 mm of noise) while
@@ -17,7 +17,9 @@ well, only slower than the one-step cost, which is exact on such data.
 
 from __future__ import annotations
 
-from ..settings import FitSettings
+from ..settings import AUTO, FitSettings
+from .restart_cost import RESTART
+from .shooting_cost import SHOOTING
 
 AFFORDABLE_UNKNOWNS = 300  # genes + a window's start state; more: the restart cost
 SHOOTING_HORIZON = 10  # frames per shooting window when --horizon is not given
@@ -34,16 +36,32 @@ def choose_cost(
         return FitSettings(**{**values, "cost": cost, "horizon": horizon})
 
     if settings.refine == "none":
-        return chosen("restart", settings.horizon), "cost: restart (auto: --refine none)"
+        return chosen(RESTART.name, settings.horizon), "cost: restart (auto: --refine none)"
     unknowns = n_genes + 2 * n_coordinates
     if unknowns > AFFORDABLE_UNKNOWNS:
-        return chosen("restart", settings.horizon), (
+        return chosen(RESTART.name, settings.horizon), (
             f"cost: restart (auto: a shooting window would have {unknowns} unknowns, more than "
             f"{AFFORDABLE_UNKNOWNS}, seconds a step; --cost shooting runs it anyway)"
         )
     horizon = settings.horizon if horizon_given else (SHOOTING_HORIZON,)
-    return chosen("shooting", horizon), (
+    return chosen(SHOOTING.name, horizon), (
         f"cost: shooting (auto: on a recording, marker noise biases the one-step optimum, "
         f"multiple shooting over {horizon[0]}-frame windows is unbiased; --cost restart for "
         "the one-step refinement)"
     )
+
+
+def choose(
+    settings: FitSettings, spec, first, horizon_given: bool
+) -> tuple[FitSettings, str | None]:
+    """``settings`` with an ``auto`` cost chosen for the model ``spec`` (the bond variant
+    fitted) following the first recording ``first`` (its markers and frames as the settings
+    select them), and the line saying which and why; ``settings`` as they are (and None) where
+    the cost is named."""
+    from ..problem import select_recordings
+
+    if settings.cost != AUTO:
+        return settings, None
+    data = select_recordings(spec, [first], settings)[0]
+    coords = data.positions.shape[1] * data.positions.shape[2]
+    return choose_cost(settings, spec.layout.n_genes, coords, horizon_given)

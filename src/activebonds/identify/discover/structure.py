@@ -43,7 +43,7 @@ from ...errors import InputError
 from ...model import Model, build
 from ...model.schema import ModelSpec
 from ...model.values import Param
-from ..costs.restart import Windows
+from ..costs.windows import Windows
 from ..solvers.lsq import LinearProblem, compress, least_squares, linear_problem, solve
 
 TINY = 1e-300  # keeps a relative change finite when an RSS is exactly 0
@@ -358,7 +358,7 @@ def structure_of(
     (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
     the pipeline of ``activebonds structure``."""
     from ...data.smoothing import smooth_positions
-    from ..costs.restart import make_windows
+    from ..costs.windows import make_windows
     from ..problem import select_data
 
     data = select_data(model, recording, settings)

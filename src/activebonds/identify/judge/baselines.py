@@ -20,7 +20,7 @@ import numpy as np
 
 from ... import bonds
 from ...model import Model
-from ..costs.restart import make_windows
+from ..costs.windows import make_windows
 
 
 def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float):

@@ -14,7 +14,7 @@ interval's half-width (1.96 standard errors) means the intervals do not describe
 integrator's error, and the fit says so with the numbers.
 
 For the restart cost (the one-step cost and its horizons: a dense Jacobian of at most
-``MAX_BYTES``) and for multiple shooting (the step from the normal equations by window, the
+:data:`~activebonds.identify.costs.restart_cost.MAX_STEP_BYTES`) and for multiple shooting (the step from the normal equations by window, the
 window states eliminated, from the fit's states), and for at most ``MAX_GENES`` parameters;
 otherwise the check is not made and the warning stays in words.
 """
@@ -24,26 +24,22 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ...physics.integrate import stiff
-from ..costs.shooting import join_shooting, shooting_windows, start_states
+from .. import costs
 from ..problem import Identification
 from ..settings import FitSettings
-from ..solvers.lm import JITTER
-from ..solvers.shooting_normal import damped_step, make_normal
-from .uncertainty import Z95, _residual_function
+from .uncertainty import Z95
 
 FACTOR = 4  # the check's substeps: this many times the fit's
-CHECKED_EULER = 4  # Euler substeps checked up to (Verlet: one substep alone)
+CHECKED_EULER = 4  # first-order substeps checked up to (second order: one substep alone)
 
 
 def applies(settings: FitSettings) -> bool:
     """Whether a fit with ``settings`` is checked: one substep per frame (any integrator), or
     Euler (first order) at up to :data:`CHECKED_EULER` substeps."""
     s = int(settings.substeps)
-    return s == 1 or (settings.integrator == "euler" and s <= CHECKED_EULER)
+    return s == 1 or (settings.stepper.scheme.order == 1 and s <= CHECKED_EULER)
 
 
 def finer(settings: FitSettings) -> int:
@@ -51,7 +47,6 @@ def finer(settings: FitSettings) -> int:
     return FACTOR * int(settings.substeps)
 
 
-MAX_BYTES = 2**28  # the check's dense Jacobian at most (256 MiB)
 MAX_GENES = 200  # a larger model is not checked (the check would compile longer than it fits)
 AT_BOUND = 1e-6  # of its span: a parameter this close to a bound is held there, not judged
 
@@ -94,19 +89,17 @@ def check(
     genome,
     horizon: int,
     estimates,
-    cost: str = "restart",
+    cost: str = costs.DEFAULT,
     states=None,
 ) -> SubstepsCheck | str:
-    """The check of a fit ``genome`` (search space) on ``cost`` ("restart", or "shooting"
-    with the refinement's per-frame ``states``) at ``horizon``, its ``estimates``
+    """The check of a fit ``genome`` (search space) on ``cost`` (a cost's name; one that
+    needs them with the refinement's per-frame ``states``) at ``horizon``, its ``estimates``
     (:class:`.uncertainty.Estimate`, natural units); or why it was not made."""
     if ident.model.layout.n_genes > MAX_GENES:
         return f"more than {MAX_GENES} parameters (its compilation would outlast the fit's)"
+    more = settings.model_copy(update={"substeps": finer(settings)})
     with jax.enable_x64(True):
-        if cost == "shooting":
-            after = _shooting_step(ident, settings, genome, horizon, states)
-        else:
-            after = _restart_step(ident, settings, genome, horizon)
+        after = costs.get(cost).finer_step(ident, more, genome, horizon, states)
     if isinstance(after, str):
         return after
     g, lo, hi = np.asarray(genome, np.float64), ident.problem.lower, ident.problem.upper
@@ -130,67 +123,3 @@ def check(
         determined=len(rows),
         fitted=int(settings.substeps),
     )
-
-
-NOT_COMPUTED = (
-    "the predictions at the check's substeps cannot be computed at these parameters "
-    "(a start velocity or a prediction diverged)"
-)
-
-
-def _restart_step(ident, settings, genome, horizon) -> np.ndarray | str:
-    """The natural parameters after one Gauss-Newton step of the restart cost at the check's
-    substeps (least squares over the parameters, columns scaled)."""
-    layout = ident.model.layout
-    if stiff(ident.model.topology):
-        # the start velocities of a stiff kind (contacts) are Newton solves with a Jacobian of
-        # their own; forward mode over the parameters through them left XLA waiting forever
-        # (the tutorial's contact model), as Newton's chord method did on a 41-marker body
-        return "a contact's start velocities are Newton solves, not differentiated twice here"
-    more = settings.model_copy(update={"substeps": finer(settings)})
-    # the uncertainty's own residuals (natural units), at the check's substeps
-    flat, _, _, observed, _ = _residual_function(ident, more, horizon, "restart", None)
-    size = 8.0 * observed * layout.n_genes
-    if size > MAX_BYTES:
-        return f"its Jacobian would take {size / 2**20:.0f} MiB"
-
-    def both(theta):  # the residuals beside their Jacobian: one program
-        r = flat(theta)
-        return r, r
-
-    theta = jnp.asarray(layout.natural(np.asarray(genome, np.float64)), jnp.float64)
-    jac, r = (np.asarray(a, np.float64) for a in jax.jit(jax.jacfwd(both, has_aux=True))(theta))
-    if not np.all(np.isfinite(r)):
-        return NOT_COMPUTED
-    if not np.all(np.isfinite(jac)):
-        return f"the Jacobian at {finer(settings)} substeps is not finite"
-    norms = np.linalg.norm(jac, axis=0)
-    norms[norms == 0] = 1.0  # a parameter without effect does not move
-    return np.asarray(theta) + np.linalg.lstsq(jac / norms, -r, rcond=None)[0] / norms
-
-
-def _shooting_step(ident, settings, genome, horizon, states) -> np.ndarray | str:
-    """The natural parameters after one Gauss-Newton step of multiple shooting at the check's
-    substeps from the fit's parameters and window states (the normal equations by window,
-    the states eliminated: :mod:`.shooting_normal`)."""
-    from ..solvers.refine import Bounded
-
-    if states is None:
-        return "the shooting fit's states are not at hand"
-    windows = join_shooting(
-        [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in ident.all_data]
-    )
-    bounded = Bounded(ident.problem.lower, ident.problem.upper)
-    make = make_normal(
-        ident.model, windows, finer(settings), settings.integrator, bounded.to_genome
-    )
-    x0, v0 = start_states(windows, states)
-    k = x0.shape[0]
-    u = jnp.asarray(bounded.from_genome(np.asarray(genome, np.float64)))
-    system = jax.jit(make)(u, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
-    scale = float(jnp.max(jnp.abs(jnp.diagonal(system.diag, axis1=1, axis2=2))))
-    du, _ = damped_step(system, JITTER * max(scale, float(jnp.max(jnp.diag(system.params)))))
-    after = np.asarray(bounded.to_genome(u + du), np.float64)
-    if not np.all(np.isfinite(after)):
-        return NOT_COMPUTED
-    return np.asarray(ident.model.layout.natural(after), np.float64)

@@ -19,6 +19,7 @@ import numpy as np
 from ... import bonds
 from ...model import Model, Params, Topology
 from ...physics import advance, phase, rollout_states, start_velocity
+from ...physics.integrators import Integrator
 from ...runtime import float64
 
 
@@ -77,7 +78,7 @@ def solved(program, *args, **kwargs):
     (:func:`~activebonds.physics.integrate.start_velocity`). A run that diverges after its
     start is not run again."""
     out = program(*args, **kwargs)
-    if kwargs["substeps"] == 1 and kwargs["method"] == "euler":
+    if Integrator(kwargs["method"], kwargs["substeps"]).exact_backward:
         return out
     if np.isfinite(np.asarray(out[0])).all():
         return out

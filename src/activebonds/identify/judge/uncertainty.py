@@ -34,17 +34,12 @@ import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from ...model.names import labeller
-from ..costs.restart import join_windows, make_residuals, make_windows
-from ..costs.shooting import join_shooting, make_shooting, shooting_windows, start_states
+from .. import costs
 from ..problem import Identification
 from ..settings import FitSettings
-from ..solvers.shooting_normal import make_normal, marginal_information
 
 RANK_RTOL = 1e-8  # singular values below this share of the largest: not determined
 Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
@@ -71,7 +66,7 @@ class Uncertainty:
     """The Gauss-Newton report of one fit."""
 
     estimates: list[Estimate]
-    cost: str  # "restart" or "shooting"
+    cost: str  # the name of the cost whose residuals these are (identify.costs)
     horizon: int
     residuals: int  # residual coordinates
     variables: int  # parameters plus nuisance variables (shooting start states)
@@ -263,16 +258,15 @@ def _span(gene) -> float:
 
 
 def shooting_rejected(stages) -> list[str]:
-    """Why the refinement's shooting stages were not kept (``stages``: its
-    :class:`~activebonds.identify.solvers.refine.Stage` records or their dicts), one line each: a
-    shooting stage rejected, or a one-step stage refined in its place."""
+    """Why the refinement's stages on other costs were not kept (``stages``: its
+    :class:`~activebonds.identify.solvers.refine.Stage` records or their dicts), one line each:
+    a stage its cost rejected, or a one-step stage refined in its place."""
     out = []
     for s in stages:
         s = s if isinstance(s, dict) else s.record()
-        if s.get("instead_of_shooting"):
-            out.append(s["instead_of_shooting"])
-        elif s.get("cost") == "shooting" and not s.get("accepted"):
-            out.append(f"horizon {s['horizon']}: {s['message']}")
+        why = s.get("instead_of_shooting") or costs.get(s["cost"]).rejection(s)
+        if why:
+            out.append(why)
     return out
 
 
@@ -295,27 +289,9 @@ def warnings(
     sentence, or None where the step resolves it); False: not computed, the warning stays in
     words."""
     out = []
-    if cost == "restart" and int(horizon) == 1:
-        head = (
-            "these intervals come from the one-step cost: on noisy markers they can be up to "
-            "18 times too wide and blind to the bias noise puts in the damping (5-7 standard "
-            "errors); "
-        )
-        if rejected:
-            tried = f"this fit tried shooting and did not keep it ({'; '.join(rejected)})"
-            if any("constant velocity" in r for r in rejected):
-                then = (
-                    ", so refitting with --cost shooting would not help: the model does not "
-                    "predict the recording over the shooting windows better than constant "
-                    "velocity; a model that does (see the free run's advice) comes first"
-                )
-            else:
-                then = (
-                    ", so refitting with --cost shooting alone would not give intervals that hold"
-                )
-            out.append(head + tried + then)
-        else:
-            out.append(head + "refit with --cost shooting for intervals that hold")
+    caveat = costs.get(cost).interval_warning(horizon, rejected)
+    if caveat:
+        out.append(caveat)
     if hasattr(checked, "warning"):
         if checked.warning():
             out.append(checked.warning())
@@ -337,14 +313,8 @@ MISFIT = 3.0  # residuals this many times what the markers' noise alone leaves: 
 
 def noise_gain(cost: str, horizon: int) -> float:
     """The residual RMS a correct model leaves on ``cost`` at ``horizon``, per coordinate, in
-    units of the markers' white noise sigma. Shooting (output error, the states free): 1. The
-    restart cost predicts frame t + j from x_t and the backward difference x_t - x_t-1, so
-    noise n enters as n_t+j - (1 + j) n_t + j n_t-1, of variance (1 + (1 + j)^2 + j^2)
-    sigma^2 (6 sigma^2 one step ahead), averaged over j = 1..horizon."""
-    if cost == "shooting":
-        return 1.0
-    j = np.arange(1, max(1, int(horizon)) + 1, dtype=np.float64)
-    return float(np.sqrt(np.mean(1.0 + (1.0 + j) ** 2 + j**2)))
+    units of the markers' white noise sigma (:meth:`~activebonds.identify.costs.base.Cost.noise_gain`)."""
+    return costs.get(cost).noise_gain(horizon)
 
 
 def misfit(sigma_mm: float, noise_mm: float, cost: str, horizon: int) -> str | None:
@@ -369,81 +339,12 @@ def misfit(sigma_mm: float, noise_mm: float, cost: str, horizon: int) -> str | N
     )
 
 
-def _residual_function(
-    ident: Identification, settings: FitSettings, horizon: int, cost: str, states
-):
-    """(function of the flat variables -> flat residuals, start variables, nuisance count,
-    observed coordinates) for the fit's cost; the parameters come first, in natural units."""
-    model, data = ident.model, ident.all_data
-    layout = model.layout
-    log = jnp.asarray(layout.log)
-
-    def to_genome(theta):
-        return jnp.where(log, jnp.log(theta), theta)
-
-    if cost == "shooting" and states is not None:
-        windows = join_shooting(
-            [shooting_windows(d.positions, d.mask, d.dt, horizon) for d in data]
-        )
-        residuals, _ = make_shooting(model, windows, settings.substeps, settings.integrator)
-        x0, v0 = start_states(windows, states)
-        observed = int(np.sum(windows.weight)) * model.dimension
-        nuisance = x0.size + v0.size
-        p = layout.n_genes
-
-        def flat(y):
-            theta, xs, vs = y[:p], y[p : p + x0.size], y[p + x0.size :]
-            tree = residuals(to_genome(theta), (xs.reshape(x0.shape), vs.reshape(v0.shape)))
-            return ravel_pytree(tree)[0]
-
-        extra = np.concatenate([np.ravel(x0), np.ravel(v0)])
-        links = int(np.sum(windows.link)) * 2 * model.dimension * len(model.particle_names)
-        return flat, extra, nuisance, observed, links
-    windows = join_windows(
-        [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in data]
-    )
-    residuals = make_residuals(model, windows, settings.substeps, settings.integrator)
-
-    def flat(theta):
-        return ravel_pytree(residuals(to_genome(theta)))[0]
-
-    observed = int(np.sum(windows.weight)) * model.dimension
-    return flat, np.zeros(0), 0, observed, 0
-
-
-def _marginal_system(ident, settings, horizon, states, theta, fn, y):
-    """(R [p, p] with R^T R the parameters' information with every window state eliminated
-    (:func:`.shooting_normal.marginal_information`, built window by window: no dense
-    Jacobian), the residuals at the optimum). R stands for the Jacobian: its covariance
-    ``s^2 (R^T R)^-1`` is the parameters' block of the full one's."""
-    model, data = ident.model, ident.all_data
-    log = jnp.asarray(model.layout.log)
-    windows = join_shooting([shooting_windows(d.positions, d.mask, d.dt, horizon) for d in data])
-    x0, v0 = start_states(windows, states)
-    k = x0.shape[0]
-    with jax.enable_x64(True):
-        normal = make_normal(
-            model,
-            windows,
-            settings.substeps,
-            settings.integrator,
-            lambda t: jnp.where(log, jnp.log(t), t),
-        )
-        s = jnp.concatenate([jnp.reshape(x0, (k, -1)), jnp.reshape(v0, (k, -1))], axis=1)
-        info = np.asarray(marginal_information(jax.jit(normal)(jnp.asarray(theta), s)))
-        resid = np.asarray(jax.jit(fn)(jnp.asarray(y, jnp.float64)), np.float64)
-    if not np.all(np.isfinite(info)):
-        return np.full(info.shape, np.nan), resid
-    w, v = np.linalg.eigh(info)
-    return np.sqrt(np.maximum(w, 0.0))[:, None] * v.T, resid
-
-
 def estimate(
     ident: Identification,
     settings: FitSettings,
     genome: np.ndarray,
     horizon: int | None = None,
-    cost: str = "restart",
+    cost: str = costs.DEFAULT,
     states=None,
 ) -> Uncertainty:
     """The Gauss-Newton report of the fit ``genome`` (search space) of ``ident`` on the cost
@@ -452,26 +353,14 @@ def estimate(
     layout = ident.model.layout
     horizon = int(horizon or settings.es_horizon)
     theta = np.asarray(layout.natural(np.asarray(genome, np.float64)), np.float64)
-    cost = cost if (cost == "shooting" and states is not None) else "restart"
-    fn, extra, nuisance, observed, links = _residual_function(
-        ident, settings, horizon, cost, states
+    chosen = costs.get(cost)
+    if chosen.needs_states and states is None:  # without them, the restart cost's report
+        chosen = costs.get(costs.DEFAULT)
+    residuals = chosen.residual_function(ident, settings, horizon, states)
+    observed, nuisance, links = residuals.observed, residuals.nuisance, residuals.links
+    jac, resid = chosen.information(
+        ident, settings, horizon, states, theta, residuals, MAX_JACOBIAN_BYTES
     )
-    y = np.concatenate([theta, extra])
-    if cost == "shooting":  # the states eliminated: the parameters' marginal information
-        jac, resid = _marginal_system(ident, settings, horizon, states, theta, fn, y)
-    else:
-        size = float(observed) * len(y) * 8  # bytes of the dense Jacobian
-        if size > MAX_JACOBIAN_BYTES:
-            raise MemoryError(
-                f"the Jacobian would take {size / 2**30:.1f} GiB ({len(y)} variables); "
-                f"the limit is {MAX_JACOBIAN_BYTES / 2**30:.1f} GiB"
-            )
-        with jax.enable_x64(True):  # scoped, as the least squares
-            yj = jnp.asarray(y, jnp.float64)
-            resid = np.asarray(jax.jit(fn)(yj), np.float64)
-            jac = np.asarray(jax.jit(jax.jacfwd(fn))(yj), np.float64)
-        keep = np.any(jac != 0, axis=1) | (resid != 0)  # rows of masked-out terms are all 0
-        jac, resid = jac[keep], resid[keep]
     names = [g.name for g in layout.genes]
     spans = np.array([_span(g) for g in layout.genes], np.float64)
     masses = {i for i, g in enumerate(layout.genes) if g.owner == "mass"}
@@ -498,7 +387,7 @@ def estimate(
     estimates = [replace(e, label=label(e.name)) for e in estimates]
     return Uncertainty(
         estimates=estimates,
-        cost=cost,
+        cost=chosen.name,
         horizon=horizon,
         residuals=int(observed),
         variables=int(len(theta) + nuisance),

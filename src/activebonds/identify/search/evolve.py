@@ -156,7 +156,7 @@ class Chunking:
 class Evolution:
     """Compiled start and chunks of one strategy on one problem; ``seeds`` runs them side by
     side (vmapped: they share the compiled code and the vector width). ``display`` turns
-    costs into what people read (the cost's :class:`~activebonds.identify.costs.restart.Display`).
+    costs into what people read (the cost's :class:`~activebonds.identify.costs.windows.Display`).
     ``requested`` caps the generations of a chunk; within it, chunks are sized by time."""
 
     def __init__(

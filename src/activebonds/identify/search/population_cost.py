@@ -13,7 +13,7 @@ once from that fixed geometry (e.g. the neuron inputs of the whole population as
 product); the other kinds, and the uniform field, are evaluated per individual (vmapped) at
 the same fixed states.
 
-The result equals :func:`~activebonds.identify.costs.restart.make_cost` vmapped over the population (to
+The result equals :func:`~activebonds.identify.costs.windows.make_cost` vmapped over the population (to
 rounding: tested), and is used by the ES whenever the one-step form applies
 (:func:`make_population_cost` returns None otherwise, and the loop vmaps the per-individual
 cost). ``dtype=float32`` evaluates in single precision (the fixed part is formed in float64
@@ -30,14 +30,15 @@ import numpy as np
 from ... import bonds
 from ...model.model import Model
 from ...physics import phase
-from ..costs.restart import Windows
+from ...physics.integrators import Integrator
+from ..costs.windows import Windows
 
 DENSE_LIMIT = 512  # bonds x particles up to which a kind's rows are spread by a dense product
 
 
 def applies(windows: Windows, substeps: int, method: str) -> bool:
     """Whether the one-step population form computes this cost."""
-    return windows.horizon == 1 and substeps == 1 and method == "euler"
+    return windows.horizon == 1 and Integrator(method, substeps).exact_backward
 
 
 def make_population_cost(

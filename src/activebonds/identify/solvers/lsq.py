@@ -35,7 +35,7 @@ from ...errors import InputError
 from ...model import Gene, Model
 from ...model.params import Params
 from ...physics.forces import total_force
-from ..costs.restart import Windows, start_phases
+from ..costs.windows import Windows, start_phases
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ...document import Section, Table
 from ...errors import InputError
+from ...physics.integrators import Integrator
 from ..judge.ahead import DEFAULT_AHEAD, comparisons
 from ..judge.baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..judge.metrics import FreeRunMetrics, censored_text, window_metrics
@@ -41,7 +42,7 @@ class BaselinesStage:
         data = ident.data
         record: dict = {"zero_force_rms_mm": zero_force_rms_mm_of(ident.all_data)}
         model = fit.model
-        if s.es_horizon == 1 and s.es_substeps == 1 and s.es_integrator == "euler":
+        if s.es_horizon == 1 and Integrator(s.es_integrator, s.es_substeps).exact_backward:
             record["momentum_floor_rms_mm"] = model_floor_rms_mm(
                 model, data.positions, data.mask, data.dt
             )
@@ -94,7 +95,7 @@ def verdict_columns(prefix: str, record: dict) -> dict:
 def _least_squares_rms_mm(model, data) -> float | None:
     """The exact least-squares optimum's RMS (mm) of the model's family, where every free
     parameter is linear in the forces (None otherwise, or where it cannot be formed)."""
-    from ..costs.restart import make_windows
+    from ..costs.windows import make_windows
     from ..solvers.lsq import least_squares, nonlinear_genes
 
     if nonlinear_genes(model):

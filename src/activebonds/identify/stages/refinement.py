@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from ...document import Section, Table
+from .. import costs
 from ..solvers.refine import Refinement, Stage, StageInterrupted
 from .base import Fit, Outcome
 
@@ -59,16 +60,9 @@ def costs_line(settings) -> str:
             "exactly; only the shooting's start)"
         )
         if s.es_exact
-        else f"the search on the restart cost (horizon {s.es_horizon}, {s.substeps} "
-        f"{s.integrator} substep(s))"
+        else f"the search on the restart cost (horizon {s.es_horizon}, {s.stepper.describe()})"
     )
-    if s.cost == "shooting":
-        refine = (
-            f"the refinement on multiple shooting ({s.substeps} {s.integrator} substep(s)), "
-            "which marker noise does not bias"
-        )
-    else:
-        refine = "the refinement on the same restart cost (--cost shooting: unbiased by noise)"
+    refine = costs.get(s.cost).describe(s)
     return f"costs: {search}; {refine}"
 
 
@@ -183,17 +177,9 @@ class RefinementStage:
 
 
 def _objective(st: dict) -> str:
-    """Where a shooting stage's position RMS rose while its objective fell (its windows gave
-    up fitting the markers to join): both, said."""
-    a, b = st.get("start_objective"), st.get("end_objective")
-    if st.get("cost") != "shooting" or a is None or b is None:
-        return ""
-    if not st["end_rms_mm"] > st["start_rms_mm"]:
-        return ""
-    return (
-        f" (the markers' RMS rose as the windows were made to join: the objective, markers "
-        f"and joins together, fell from {a:.4g} to {b:.4g} m^2)"
-    )
+    """What the stage's cost adds to its row (a shooting stage whose markers' RMS rose as its
+    windows were made to join: both numbers)."""
+    return costs.get(st["cost"]).stage_note(st)
 
 
 def table(record: dict) -> Table:
@@ -234,11 +220,11 @@ def table(record: dict) -> Table:
 
 def _starts(fit: Fit, genome) -> str | None:
     """The line on the restart states whose start velocity the refinement's substeps could
-    not solve at its result (:func:`~activebonds.identify.costs.restart.starts_line`), if any."""
+    not solve at its result (:func:`~activebonds.identify.costs.windows.starts_line`), if any."""
     s = fit.settings
     if s.substeps == 1:
         return None
-    from ..costs.restart import join_windows, make_windows, starts_line
+    from ..costs.windows import join_windows, make_windows, starts_line
 
     windows = join_windows(
         [make_windows(d.positions, d.mask, d.dt, 1, s.smooth) for d in fit.ident.all_data]

@@ -10,6 +10,7 @@ import numpy as np
 from ...data.smoothing import noise_of
 from ...document import Section, Table
 from ...model.names import labeller
+from .. import costs
 from ..judge import integrator_check, modes, uncertainty
 from .base import Fit, Outcome
 
@@ -30,7 +31,7 @@ class UncertaintyStage:
         stages, states = fit.products.get("refine", ([], None))
         last = next((s for s in reversed(stages) if s.accepted), None)
         horizon = last.horizon if last else fit.settings.es_horizon
-        cost = last.cost if last else "restart"
+        cost = last.cost if last else costs.DEFAULT
         try:
             report = uncertainty.estimate(
                 fit.ident, fit.settings, fit.genome, horizon, cost, states

@@ -32,6 +32,7 @@ from ...physics.integrate import (
     start_velocity,
     stiff,
 )
+from ...physics.integrators import Integrator
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,7 +208,7 @@ def _predictor(
     x0, v0 = jnp.asarray(windows.x0), jnp.asarray(windows.v0)
     t0 = jnp.asarray(windows.times)
     dt, horizon = windows.dt, windows.horizon
-    exact_backward = substeps == 1 and method == "euler"  # the start velocity is v0 itself
+    exact_backward = Integrator(method, substeps).exact_backward  # the start velocity is v0
     phases = start_phases(model, windows, substeps)
     if phases is not None:
         return _phased_predictor(model, windows, substeps, method, phases, newton, unroll)
@@ -280,7 +281,7 @@ def _phased_predictor(
     def predict(params):
         psi_prev, psi0 = phases(params)
         v = v0
-        if not (substeps == 1 and method == "euler"):
+        if not Integrator(method, substeps).exact_backward:
             v = _start_velocities(params, topo, windows, substeps, method, newton, unroll, psi_prev)
 
         def run(x, v, t, p):
