@@ -119,7 +119,7 @@ def run_gait(gait: str) -> dict:
     from horse_ground import per_marker_rms, zero_force_per_marker
 
     from activebonds import read_trajectory
-    from activebonds.identify.costs.restart import make_windows
+    from activebonds.identify.costs.windows import make_windows
     from activebonds.identify.discover.structure import identify_structure
     from activebonds.model import dumps_model, loads_model
 
