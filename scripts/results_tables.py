@@ -363,6 +363,49 @@ def horse_gait(results: Results) -> str:
 
 
 @table
+def horse_gait_tried(results: Results) -> str:
+    """The kept gait models beside what else was tried (horse_gait.json, ``tried``)."""
+    body = []
+    for gait in results("horse_gait"):
+        chosen = gait["held_out"]
+        variants = [("**chosen**", chosen), *gait["tried"].items()]
+        for name, record in variants:
+            h = record.get("held_out", record)
+            body.append(
+                [
+                    gait["gait"],
+                    name,
+                    f"{sig(h['one_step_mm'], 4)}: "
+                    + beats(h["one_step_mm"], chosen["zero_force_one_step_mm"]).split(" (")[0],
+                    sig(h["ahead_mm"], 3),
+                    num(h["frames_within_50mm"]),
+                    num(h["body_frames_within_50mm"]),
+                ]
+            )
+        body.append(
+            [
+                gait["gait"],
+                "zero force",
+                sig(chosen["zero_force_one_step_mm"], 4),
+                sig(chosen["zero_force_ahead_mm"], 4),
+                num(chosen["zero_force_frames_within_50mm"]),
+                num(chosen["zero_force_body_frames_within_50mm"]),
+            ]
+        )
+    return rows(
+        [
+            "gait",
+            "model (held out 300-599)",
+            "one step (mm): beats zero force",
+            "10 ahead (mm)",
+            "frames within 50 mm",
+            "body frames",
+        ],
+        body,
+    )
+
+
+@table
 def horse_drive(results: Results) -> str:
     """The trot with a clock-driven rhythm (horse_drive.json)."""
     record = results("horse_drive")
