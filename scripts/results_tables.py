@@ -453,9 +453,7 @@ def springs_structure(results: Results) -> str:
                 f"({row['graphs_all_right']} / {row['trajectories']} graphs)"
             )
         body.append(cells)
-    header = ["observation noise"] + [
-        f"smoothed over {w} frames" if w else "raw" for w in windows
-    ]
+    header = ["observation noise"] + [f"smoothed over {w} frames" if w else "raw" for w in windows]
     body.append(
         [f"NRI, supervised, trained on noiseless data: {record['nri_supervised_percent']} %"]
         + [""] * len(windows)
@@ -505,7 +503,8 @@ def heldout_horse(results: Results) -> str:
     body = []
     for gait in results("heldout_horse")["results"]:
         a = gait["auto"]
-        ratios = [m / z for m, z in zip(a["per_marker_mm"], a["zero_force_per_marker_mm"])]
+        pairs = zip(a["per_marker_mm"], a["zero_force_per_marker_mm"], strict=True)
+        ratios = [m / z for m, z in pairs]
         worst = max(range(len(ratios)), key=ratios.__getitem__)
         body.append(
             [
