@@ -38,7 +38,7 @@ exact least squares: :func:`auto_half`). ``--fitted-on same`` fits each half's m
 gaps' own half: gaps the model has seen, the set on which a design is chosen before the
 benchmark is run (the step prior of ``--prior pca`` was chosen so, ``--seed 1``).
 
-The figures in docs/EXPERIMENTS.md were run one thread per process (the fill's solves are
+The figures in docs/experiments/gaps.md were run one thread per process (the fill's solves are
 small; under a second process's load XLA's and OpenBLAS's threads wait on each other)::
 
     OPENBLAS_NUM_THREADS=1 XLA_FLAGS=--xla_cpu_multi_thread_eigen=false python benchmarks/gaps.py ...

@@ -20,7 +20,7 @@ recording, QR-factored at every step).
 
 Cases: ``tetra``, MuJoCo's tendon tetrahedron (4 particles, 6 tendons, 18 genes; RK4 at
 1e-4 s) at 100 Hz for 8 s (801 frames), 0.5 mm noise, H = 20, 5 Verlet substeps (the design
-of docs/EXPERIMENTS.md); ``horse7``, a 7-marker spring model of the bundled horse at trot
+of docs/experiments/shooting.md); ``horse7``, a 7-marker spring model of the bundled horse at trot
 (600 frames); ``bodyN``, a 41-marker spring network of the bundled human walk's markers
 (``body_model``: at least 100 bonds), simulated by our own integrator for N frames, 0.5 mm
 noise; ``walk``, that model on the bundled human walk itself (151 frames, 60 Hz). The body

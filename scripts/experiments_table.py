@@ -1,4 +1,4 @@
-"""Print the Markdown tables of docs/EXPERIMENTS.md from the summary.json files written by
+"""Print the Markdown tables of docs/experiments/paper.md from the summary.json files written by
 `activebonds reproduce` (usage: python scripts/experiments_table.py OUT/horse OUT/synthetic)."""
 
 from __future__ import annotations

@@ -190,7 +190,7 @@ def _pct(x: float) -> str:
 
 
 def table(record: dict) -> str:
-    """The markdown table of docs/EXPERIMENTS.md for a JSON record of this script."""
+    """The markdown table of docs/experiments/shooting.md for a JSON record of this script."""
     lines = [
         "| seed | estimate | stiffness max / median | rest length max | damping max / median | time |",
         "|---|---|---|---|---|---|",

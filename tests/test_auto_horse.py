@@ -1,5 +1,5 @@
 """``activebonds auto`` on the bundled horse, fitted on frames 0-299 and judged on 300-599
-(issue 25's held-out one-step targets; docs/EXPERIMENTS.md, "The held-out horse in one
+(issue 25's held-out one-step targets; docs/experiments/auto.md, "The held-out horse in one
 command"): the trot at most 4.6 mm with every marker below its zero-force error, the walk at
 most 3.2 mm with no marker above 1.15 times its own; the ground model fitted beside the
 structure and dropped by the one-step BIC."""

@@ -117,7 +117,7 @@ def test_a_20_particle_network_under_noise_is_recovered_by_the_recommended_fit()
     frames at 100 Hz, 0.5 mm of noise; the recommended command for real data (the search on
     the one-step cost from the exact least squares, one shooting stage at 5 Verlet
     substeps): every stiffness within 2 %, the median damping within 10 %, and the fit's
-    RMS below the zero-force predictor's (docs/EXPERIMENTS.md)."""
+    RMS below the zero-force predictor's (docs/experiments/shooting.md)."""
     row = network_recovery.run(particles=20, neighbours=5, frames=400, noise_mm=0.5, seed=0)
     errors = row["errors_pct"]
     assert errors["stiffness"]["max"] < 2.0, errors

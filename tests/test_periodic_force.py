@@ -262,7 +262,7 @@ def test_mujoco_export_refuses_it_in_one_line():
 
 
 # --------------------------------------------------------------------------------------------
-# The bundled horse's fitted gait (scripts/horse_gait.py, docs/EXPERIMENTS.md)
+# The bundled horse's fitted gait (scripts/horse_gait.py, docs/experiments/gait.md)
 # --------------------------------------------------------------------------------------------
 
 

@@ -2,7 +2,7 @@
 
 On a recording (a lab's or another simulator's), marker noise biases the one-step cost's
 optimum (dampings several times over on MuJoCo's tendons with 0.5 mm of noise) while
-multiple shooting is unbiased at the Cramer-Rao floor (docs/EXPERIMENTS.md). So ``auto``
+multiple shooting is unbiased at the Cramer-Rao floor (docs/experiments/shooting.md). So ``auto``
 refines by shooting, windows of :data:`SHOOTING_HORIZON` frames unless ``--horizon`` says
 otherwise, the search still evolving on the one-step cost, where it is affordable: where a
 window's unknowns (the genes and its start state: 2 x particles x dimension) are at most

@@ -25,7 +25,7 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   from 0 to :data:`REST_REACH` times the largest distance seen: there a spring is also a
   regression term of the exact least squares, and one held far from its rest length adds a
   nearly constant pull along the pair (on the horse, the narrower bounds cost 0.1 mm of
-  held-out one-step error; docs/EXPERIMENTS.md).
+  held-out one-step error; docs/experiments/auto.md).
 * **Anchors** (complete graphs only): a unary spring-damper per marker, ``-k (x - a) - c v``,
   its anchor ``a`` free from the marker's median position to :data:`ANCHOR_REACH` times the
   recording's extent (the largest distance between two markers) away on each axis: a body held

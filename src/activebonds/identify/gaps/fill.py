@@ -238,7 +238,7 @@ _states_step_jit = jax.jit(_states_step)
 class _LapackStep:
     """:func:`_states_step` by LAPACK (SciPy), the system copied out of JAX once per
     linearization: on a 41-marker body (blocks of 246) XLA's scan of triangular solves took
-    2 s a step, LAPACK 1 s (``benchmarks/gaps.py``'s human walk; docs/EXPERIMENTS.md)."""
+    2 s a step, LAPACK 1 s (``benchmarks/gaps.py``'s human walk; docs/experiments/gaps.md)."""
 
     def __init__(self):
         self._system, self._arrays = None, None

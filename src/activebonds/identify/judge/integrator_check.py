@@ -2,7 +2,7 @@
 
 A fit with one integrator step per frame (``--substeps 1``) of a motion that is finer than the
 frames can sit several standard errors off with no visible symptom (64 % coverage of the 95 %
-intervals measured on the triangle, docs/EXPERIMENTS.md): the integrator's own error is
+intervals measured on the triangle, docs/experiments/uncertainty.md): the integrator's own error is
 absorbed by the parameters. So can a fit at the 4 Euler substeps that advice names, on
 MuJoCo's tendons at 100 Hz (a new user's run: 95 % intervals that missed the truth, no
 warning). The check moves the fit to the same cost at :data:`FACTOR` times its substeps

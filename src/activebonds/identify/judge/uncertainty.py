@@ -22,7 +22,7 @@ last refinement stage's horizon; for multiple shooting the window start states a
 variables, nuisance parameters whose uncertainty widens the others'). The intervals are
 exact for an output-error cost (a free run or shooting) with Gaussian, independent marker
 noise, in the limit of many frames. For the one-step cost with noisy markers they are not:
-the noise is in the regressors too and biases the optimum itself (see EXPERIMENTS.md), which
+the noise is in the regressors too and biases the optimum itself (docs/experiments/shooting.md), which
 no covariance describes.
 """
 
@@ -279,7 +279,7 @@ def warnings(
     modes: str | None | bool = False,
 ) -> list[str]:
     """Where the intervals of a fit on cost ``cost`` at ``horizon`` with ``substeps`` cannot
-    be trusted, in words (measured in docs/EXPERIMENTS.md on the triangle). ``rejected``: why
+    be trusted, in words (measured on the triangle, docs/experiments/uncertainty.md). ``rejected``: why
     the fit's shooting stages were not kept (:func:`shooting_rejected`); then the one-step
     warning says so, instead of sending the user to a shooting fit that was already tried.
     ``checked``: the fit moved to finer substeps (:func:`.integrator_check.check`: its result,
@@ -322,7 +322,7 @@ def misfit(sigma_mm: float, noise_mm: float, cost: str, horizon: int) -> str | N
     times what the markers' noise (``noise_mm`` a coordinate, :func:`.smoothing.noise_of`)
     leaves on its cost, the warning in words: the model misses forces of the recording, the
     intervals describe the noise and not that misfit, and the parameters absorb it (on
-    MuJoCo's thrown body, stiffnesses 35 % low: docs/EXPERIMENTS.md); else None."""
+    MuJoCo's thrown body, stiffnesses 35 % low: docs/experiments/uncertainty.md); else None."""
     if not (np.isfinite(sigma_mm) and np.isfinite(noise_mm)) or noise_mm <= 0:
         return None
     expected = noise_gain(cost, horizon) * noise_mm
