@@ -258,7 +258,7 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
 
 
 def test_the_lapack_step_solves_the_block_tridiagonal_system_as_the_jax_one():
-    from activebonds.identify.gaps.fill import block_tridiagonal_lapack
+    from activebonds.identify.gaps.states import block_tridiagonal_lapack
     from activebonds.identify.solvers.shooting_normal import block_tridiagonal_solve
 
     rng = np.random.default_rng(1)
@@ -287,7 +287,7 @@ def test_the_step_prior_adds_its_exact_gauss_newton_terms():
     import jax
     import jax.numpy as jnp
 
-    from activebonds.identify.gaps.fill import _step_residuals, _with_steps
+    from activebonds.identify.gaps.states import step_residuals, with_steps
     from activebonds.identify.solvers.shooting_normal import Normal
 
     rng = np.random.default_rng(2)
@@ -304,10 +304,10 @@ def test_the_step_prior_adds_its_exact_gauss_newton_terms():
         jnp.zeros((k, n)),
         jnp.zeros(1),
     )
-    got = _with_steps(zero, z, delta, w)
-    jac = jax.jacfwd(lambda y: _step_residuals(y.reshape(k, n), delta, w))(z.ravel())
+    got = with_steps(zero, z, delta, w)
+    jac = jax.jacfwd(lambda y: step_residuals(y.reshape(k, n), delta, w))(z.ravel())
     jtj = np.asarray(jac.T @ jac)
-    grad = np.asarray(jac.T @ _step_residuals(z, delta, w))
+    grad = np.asarray(jac.T @ step_residuals(z, delta, w))
     for i in range(k):
         assert np.allclose(got.diag[i], jtj[i * n : (i + 1) * n, i * n : (i + 1) * n])
         if i < k - 1:
@@ -322,7 +322,8 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
     present steer the trajectory through a 60-frame gap: closer to the truth than the same model
     held to its dynamics (measured 2.9 vs 4.5 mm at 0.7, 2.7 vs 7.2 mm at 1.5) and far closer
     than the spline (18 mm)."""
-    from activebonds.identify.gaps.fill import model_fill, one_step_ratio
+    from activebonds.identify.gaps.dynamics import one_step_ratio
+    from activebonds.identify.gaps.fill import model_fill
 
     model = load_model(TRIANGLE)
     truth = _truth(240)
@@ -529,7 +530,8 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
     tracked along the record from the start phase; a gap in C, the signal itself, too: the
     phase is tracked along the model's own fill of C, refitted until it stops moving."""
-    from activebonds.identify.gaps.fill import fill_phases, model_fill
+    from activebonds.identify.gaps.dynamics import fill_phases
+    from activebonds.identify.gaps.fill import model_fill
     from activebonds.model import loads_model
     from activebonds.physics import phase
     from test_entrained_drive import entrained
