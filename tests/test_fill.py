@@ -258,7 +258,7 @@ def test_the_pca_prior_carries_a_wrong_model_where_the_markers_are_correlated():
 
 
 def test_the_lapack_step_solves_the_block_tridiagonal_system_as_the_jax_one():
-    from activebonds.identify.gaps.fill import block_tridiagonal_lapack
+    from activebonds.identify.gaps.states import block_tridiagonal_lapack
     from activebonds.identify.solvers.shooting_normal import block_tridiagonal_solve
 
     rng = np.random.default_rng(1)
@@ -287,7 +287,7 @@ def test_the_step_prior_adds_its_exact_gauss_newton_terms():
     import jax
     import jax.numpy as jnp
 
-    from activebonds.identify.gaps.fill import _step_residuals, _with_steps
+    from activebonds.identify.gaps.states import step_residuals, with_steps
     from activebonds.identify.solvers.shooting_normal import Normal
 
     rng = np.random.default_rng(2)
@@ -304,10 +304,10 @@ def test_the_step_prior_adds_its_exact_gauss_newton_terms():
         jnp.zeros((k, n)),
         jnp.zeros(1),
     )
-    got = _with_steps(zero, z, delta, w)
-    jac = jax.jacfwd(lambda y: _step_residuals(y.reshape(k, n), delta, w))(z.ravel())
+    got = with_steps(zero, z, delta, w)
+    jac = jax.jacfwd(lambda y: step_residuals(y.reshape(k, n), delta, w))(z.ravel())
     jtj = np.asarray(jac.T @ jac)
-    grad = np.asarray(jac.T @ _step_residuals(z, delta, w))
+    grad = np.asarray(jac.T @ step_residuals(z, delta, w))
     for i in range(k):
         assert np.allclose(got.diag[i], jtj[i * n : (i + 1) * n, i * n : (i + 1) * n])
         if i < k - 1:
@@ -322,7 +322,8 @@ def test_a_model_with_wrong_stiffnesses_fills_by_its_physics_not_by_a_free_run(s
     present steer the trajectory through a 60-frame gap: closer to the truth than the same model
     held to its dynamics (measured 2.9 vs 4.5 mm at 0.7, 2.7 vs 7.2 mm at 1.5) and far closer
     than the spline (18 mm)."""
-    from activebonds.identify.gaps.fill import model_fill, one_step_ratio
+    from activebonds.identify.gaps.dynamics import one_step_ratio
+    from activebonds.identify.gaps.fill import model_fill
 
     model = load_model(TRIANGLE)
     truth = _truth(240)
@@ -529,7 +530,8 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     substep: a 30-frame gap of A is its own trajectory again, the phase at every window start
     tracked along the record from the start phase; a gap in C, the signal itself, too: the
     phase is tracked along the model's own fill of C, refitted until it stops moving."""
-    from activebonds.identify.gaps.fill import fill_phases, model_fill
+    from activebonds.identify.gaps.dynamics import fill_phases
+    from activebonds.identify.gaps.fill import model_fill
     from activebonds.model import loads_model
     from activebonds.physics import phase
     from test_entrained_drive import entrained
@@ -559,3 +561,56 @@ def test_an_entrained_drive_fills_with_its_phase_tracked_along_the_record():
     found = model_fill(model, plan_fill(t, model.markers, frames=(40, 150)))
     err = np.linalg.norm(found.values[30:60, 0] - truth.positions[70:100, 0], axis=-1)
     assert err.max() < 1e-6
+
+
+# ----------------------------------------------------------------------------- in Python
+
+
+def test_fill_file_writes_what_the_command_writes(tmp_path):
+    """``fill_file`` (the library's ``activebonds fill``): the same filled file, the same
+    record and the same lines as the command, byte for byte."""
+    from activebonds import FillSettings, fill_file
+
+    src, _ = _gappy(tmp_path)
+    res = cli_in_process("fill", TRIANGLE, src, "--out", tmp_path / "cli.trc", "--max-gap", "30")
+    assert res.returncode == 0, res.stderr
+    done = fill_file(TRIANGLE, src, tmp_path / "py.trc", FillSettings(max_gap=30))
+    named = (tmp_path / "py.trc").read_bytes().replace(b"py.trc", b"cli.trc")  # TRC's header
+    assert named == (tmp_path / "cli.trc").read_bytes()
+    assert (tmp_path / "py.gaps.csv").read_bytes() == (tmp_path / "cli.gaps.csv").read_bytes()
+    assert done.record == tmp_path / "py.gaps.csv"
+    assert len(done.plan.to_fill) == 1 and len(done.plan.left) == 2
+    printed = res.stdout.replace(str(tmp_path / "cli"), str(tmp_path / "py")).splitlines()
+    assert done.lines() == printed
+
+
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        ({"method": "cubic"}, "--method: expected model, spline, linear, pca, got 'cubic'"),
+        ({"method": "spline", "denoise": True}, "--denoise: needs --method model, not spline"),
+        ({"frames": "10:4"}, "--frames: 10:4 is not a window of 120 frames"),
+        ({"max_gap": 0}, "--max-gap: expected a positive number of frames, got 0"),
+        ({"continuity": 0.0}, "--continuity: expected a positive weight, got 0.0"),
+        ({"prior": "ica"}, "--prior: expected pca, got 'ica'"),
+        ({"method": "spline", "prior": "pca"}, "--prior: needs --method model, not spline"),
+        ({"integrator": "rk4"}, "--integrator: expected euler or verlet, got 'rk4'"),
+    ],
+)
+def test_fill_file_refuses_what_the_command_refuses_in_the_same_line(tmp_path, options, line):
+    from pydantic import ValidationError
+
+    from activebonds import FillSettings, fill_file
+    from activebonds.errors import option_error
+
+    src, _ = _gappy(tmp_path)
+    args = [a for k, v in options.items() for a in (f"--{k.replace('_', '-')}", str(v))]
+    args = ["--denoise" if a == "--denoise" else a for a in args if a != "True"]
+    res = cli_in_process("fill", TRIANGLE, src, "--out", tmp_path / "cli.trc", *args)
+    assert res.returncode == 2 and res.stderr.strip() == f"error: {line}", res.stderr
+    with pytest.raises((InputError, ValidationError)) as caught:
+        fill_file(TRIANGLE, src, tmp_path / "py.trc", FillSettings(**options))
+    error = caught.value
+    said = error.line() if isinstance(error, InputError) else option_error(error).line()
+    assert said == line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gappy.trc"]

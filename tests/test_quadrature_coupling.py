@@ -22,7 +22,7 @@ from activebonds.errors import InputError
 from activebonds.identify.costs.shooting import make_shooting, shooting_windows
 from activebonds.identify.costs.shooting import start_states as window_starts
 from activebonds.identify.costs.windows import make_cost, make_windows
-from activebonds.identify.gaps.fill import fill_phases
+from activebonds.identify.gaps.dynamics import fill_phases
 from activebonds.identify.judge.predictions import tracked_phases
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import phase, rollout, rollout_states

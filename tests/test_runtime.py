@@ -83,4 +83,5 @@ def test_the_public_face_is_importable_from_the_top_level():
     assert set(activebonds.__all__) == {
         "fit", "resume", "FitResult", "FitSettings", "load_model", "save_model",
         "read_trajectory", "write_trajectory", "simulate", "write_report",
+        "fill_file", "FillSettings", "FilledFile",
     }  # fmt: skip

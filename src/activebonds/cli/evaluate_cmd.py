@@ -99,10 +99,10 @@ def evaluate(
     frames ahead, for the model and the zero-force (constant-velocity) predictor, overall and
     per particle (mm), each with its verdict (better than zero force by X %, or worse)."""
     from ..data import read_trajectory
+    from ..data.orientation import parse_up
     from ..identify.settings import parse_frames, parse_markers
     from ..model import load_model
     from ..report.evaluate import evaluate as run_evaluate
-    from ..report.gait_runs import parse_up
 
     try:
         check_order("evaluate", model, [traj])
@@ -120,7 +120,7 @@ def evaluate(
             horizon=horizon,
             gait=gait,
             feet=[f.strip() for f in feet.split(",") if f.strip()] if feet else None,
-            up=parse_up(up, loaded.dimension) if up else None,
+            up=parse_up(up, loaded.dimension, numbers=True) if up else None,
             body=[b.strip() for b in body.split(",") if b.strip()] if body else None,
             origin=origin,
         )

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 from pydantic import ValidationError
 
-from ..errors import InputError
+from ..errors import option_error
 from ..identify.settings import FitSettings
 
 
-def settings_from_options(**options) -> FitSettings:
+def settings_of(settings: type, **options):
+    """``settings(**options)`` (a pydantic model), a refusal as the one line of the option at
+    fault (:func:`activebonds.errors.option_error`)."""
     try:
-        return FitSettings(**options)
+        return settings(**options)
     except ValidationError as e:
-        first = e.errors()[0]
-        name = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "options"
-        raise InputError(name, first["msg"].removeprefix("Value error, ")) from None
+        raise option_error(e) from None
+
+
+def settings_from_options(**options) -> FitSettings:
+    """The fit's settings (:class:`FitSettings`) from its options."""
+    return settings_of(FitSettings, **options)

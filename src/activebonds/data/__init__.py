@@ -11,6 +11,7 @@ import numpy as np
 
 from activebonds.data.coverage import coverage
 from activebonds.data.orientation import (
+    AXES,
     agree,
     confident,
     guess_gravity,
@@ -64,7 +65,7 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
         "ground": None
         if ground is None
         else {
-            "up": ("+" if ground.up > 0 else "-") + "XYZ"[ground.axis],
+            "up": ("+" if ground.up > 0 else "-") + AXES[ground.axis],
             "normal": ground.normal,
             "height": ground.height,
             "clear": ground.clear,
@@ -76,7 +77,7 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
         "gravity": {
             "up": None
             if not gravity.found
-            else ("+" if gravity.up > 0 else "-") + "XYZ"[gravity.axis],
+            else ("+" if gravity.up > 0 else "-") + AXES[gravity.axis],
             "normal": gravity.normal,
             "acceleration": None if not gravity.found else list(gravity.acceleration),
             "along_up": gravity.along_up,

@@ -412,6 +412,19 @@ def warn_incomplete_row(source: str | Path, line: int, what: str, kept: int) -> 
     )
 
 
+def by_extension(table: dict, path: Path):
+    """The entry of ``table`` (a reader or a writer per file extension) for ``path``'s
+    extension; an :class:`InputError` naming the extensions known otherwise."""
+    entry = table.get(path.suffix.lower())
+    if entry is None:
+        raise InputError(
+            path,
+            f"unknown trajectory file extension {path.suffix or '(none)'!r}; "
+            f"expected one of {', '.join(table)}",
+        )
+    return entry
+
+
 def check_output_path(path: Path) -> None:
     """A writer's target must be in an existing folder and must not be a folder itself."""
     parent = path.parent if str(path.parent) else Path(".")

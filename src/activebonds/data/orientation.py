@@ -40,9 +40,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..errors import InputError
 from .trajectory import Trajectory
 
-AXES = "XYZ"
+AXES = "XYZ"  # the axes' letters (labels and file names may write them in lower case)
 CLEAR = 0.5  # the flattest axis must score at most this fraction of the next one
 G = 9.81  # m/s^2
 FLIGHT_MARGIN = 0.03  # m: in flight, the lowest marker is at least this far above the ground
@@ -51,6 +52,31 @@ GRAVITY_TOLERANCE = 0.25  # the flight acceleration is within this fraction of g
 MIN_COMPLETE = 10  # frames with every marker needed to check a guess made through gaps
 LOW_PERCENTILE = 10  # %: a marker's low level is the height it is at or below this often
 FOOT_REACH = 0.02  # m: a foot's low level is within this of the lowest marker's
+
+
+def parse_up(text: str, dimension: int, numbers: bool = False) -> tuple[float, ...]:
+    """The up direction (``--up``) as a vector of ``dimension`` components: an axis, 'Z',
+    '+Z' or '-y' (a unit vector); with ``numbers`` also its components, '0,0,1' (not all
+    zero). InputError naming ``--up`` otherwise."""
+    t = text.strip().upper()
+    sign = -1.0 if t.startswith("-") else 1.0
+    axis = t.lstrip("+-")
+    axes = AXES[:dimension]
+    if len(axis) == 1 and axis in axes:
+        out = [0.0] * dimension
+        out[axes.index(axis)] = sign
+        return tuple(out)
+    if not numbers:
+        raise InputError(
+            "--up", f"expected an axis {', '.join(axes)} (optionally + or -), got '{text}'"
+        )
+    try:
+        vec = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vec = ()
+    if len(vec) != dimension or not np.any(vec):
+        raise InputError("--up", f"expected an axis (+Z, -Y) or {dimension} numbers, got {text!r}")
+    return vec
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from activebonds.atomic import write_atomic
-from activebonds.data._common import check_output_path
+from activebonds.data._common import by_extension, check_output_path
 from activebonds.data.read_csv import AXIS_SEPARATORS
 from activebonds.data.trajectory import Trajectory
 from activebonds.errors import InputError
@@ -175,13 +175,7 @@ def write_trajectory(traj: Trajectory, path: str | Path) -> Path:
             OS error while writing (the target is then left untouched).
     """
     path = Path(path)
-    render = WRITERS.get(path.suffix.lower())
-    if render is None:
-        raise InputError(
-            path,
-            f"unknown trajectory file extension {path.suffix or '(none)'!r}; "
-            f"expected one of {', '.join(WRITERS)}",
-        )
+    render = by_extension(WRITERS, path)
     check_output_path(path)
     atomic_write(path, render(traj, path))
     return path

@@ -59,9 +59,9 @@ import numpy as np
 
 from .. import bonds
 from ..atomic import output_path, write_text_atomic
+from ..data.orientation import AXES
 from ..errors import InputError
 
-AXES = "xyz"
 INERTIA = 1e-6  # kg m^2: the bodies' rotational inertia (no rotational joint: it never acts)
 SITE_SIZE = "0.01"  # m, the sites' drawn radius (no physics)
 EXPRESSIBLE = (
@@ -221,7 +221,7 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
     root.append(
         ET.Comment(
             f" exported by activebonds from the model '{model.name}': qpos = world positions "
-            f"(particle by particle, axes {AXES[:d]}); initial velocities in keyframe "
+            f"(particle by particle, axes {AXES[:d].lower()}); initial velocities in keyframe "
             f"'initial' (mj_resetDataKeyframe(model, data, 0)) "
         )
     )
@@ -254,7 +254,7 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
             joint = ET.SubElement(
                 body,
                 "joint",
-                name=f"{particle.name}_{AXES[ax]}",
+                name=f"{particle.name}_{AXES[ax].lower()}",
                 type="slide",
                 axis=" ".join(axis),
                 ref=_num(start[ax]),

@@ -12,14 +12,27 @@ from __future__ import annotations
 import base64
 import html
 import io
+from pathlib import Path
 
 import numpy as np
 
 from ..data.fill import FillPlan, fill_baseline
+from ..data.orientation import AXES
+from ..errors import InputError
 
 CONTEXT = 30  # frames of the recording drawn on each side of a gap
 COLUMNS = 2  # panels per row
-AXES = "xyz"
+
+
+def check_page(path: Path | None) -> None:
+    """Refuse (:class:`InputError`, naming ``--report``) a page that is not .html or whose
+    folder does not exist, before anything is filled; None: no page."""
+    if path is None:
+        return
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise InputError("--report", f"expected an .html page, got '{path.name}'")
+    if not path.absolute().parent.is_dir():
+        raise InputError("--report", f"the folder of {path} does not exist")
 
 
 def fill_figure(plan: FillPlan, values: np.ndarray, method: str, spline: np.ndarray | None = None):
@@ -48,13 +61,13 @@ def fill_figure(plan: FillPlan, values: np.ndarray, method: str, spline: np.ndar
         for d in range(dim):
             c = colours[d % len(colours)]
             rec = np.where(present, plan.positions[a:b, g.column, d], np.nan)
-            ax.plot(frames[a:b], rec * 1000.0, color=c, lw=1.0, label=f"{AXES[d]} recorded")
+            ax.plot(frames[a:b], rec * 1000.0, color=c, lw=1.0, label=f"{AXES[d].lower()} recorded")
             ax.plot(
                 frames[inside],
                 values[inside, g.column, d] * 1000.0,
                 color=c,
                 lw=2.4,
-                label=f"{AXES[d]} {method}",
+                label=f"{AXES[d].lower()} {method}",
             )
             if method != "spline":
                 ax.plot(
@@ -63,7 +76,7 @@ def fill_figure(plan: FillPlan, values: np.ndarray, method: str, spline: np.ndar
                     color=c,
                     lw=1.2,
                     ls="--",
-                    label=f"{AXES[d]} spline",
+                    label=f"{AXES[d].lower()} spline",
                 )
         ax.axvspan(frames[g.start] - 0.5, frames[g.stop - 1] + 0.5, color="0.9", zorder=0)
         ax.set_title(f"{g.marker}, frames {frames[g.start]}:{frames[g.stop - 1] + 1}", fontsize=9)

@@ -20,12 +20,11 @@ import numpy as np
 
 from .. import bonds
 from ..data import Trajectory
+from ..data.orientation import AXES
 from ..errors import InputError
 from ..identify.judge.metrics import free_run_from
 from ..model import Model
 from . import gait as g
-
-AXES = "XYZ"
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,24 +211,6 @@ def _up_text(up: Sequence[float]) -> str:
     if np.count_nonzero(u) == 1 and i < len(AXES):
         return ("+" if u[i] > 0 else "-") + AXES[i]
     return str([float(v) for v in u])
-
-
-def parse_up(text: str, dimension: int) -> tuple[float, ...]:
-    """``+Z``, ``-Y``, ``Z`` or ``0,0,1`` to an up vector (InputError ``--up`` otherwise)."""
-    t = text.strip().upper()
-    sign = -1.0 if t.startswith("-") else 1.0
-    axis = t.lstrip("+-")
-    if axis in AXES[:dimension] and axis:
-        out = [0.0] * dimension
-        out[AXES.index(axis)] = sign
-        return tuple(out)
-    try:
-        vec = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        vec = ()
-    if len(vec) != dimension or not np.any(vec):
-        raise InputError("--up", f"expected an axis (+Z, -Y) or {dimension} numbers, got {text!r}")
-    return vec
 
 
 def contact_feet(model: Model) -> list[int]:

@@ -19,6 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
+from ..data.orientation import AXES
 from ..identify.judge.predictions import neural_bonds, to_mm
 from ..identify.search.operators import VARIANTS
 from ..model import Model
@@ -29,7 +30,6 @@ from .runs import history_rms_mm
 RECORDED = "black"
 ONE_STEP = "tab:blue"
 FREE_RUN = "tab:orange"
-AXES = "XYZ"
 DPI = 110
 
 

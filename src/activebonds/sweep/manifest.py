@@ -45,7 +45,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from ..data import Trajectory, read_trajectory
-from ..errors import InputError
+from ..errors import InputError, first_problem
 from ..identify.problem import identification
 from ..identify.settings import FitSettings, parse_frames, parse_markers
 from ..model import Model, load_model
@@ -97,13 +97,12 @@ def load_manifest(path: str | Path) -> list[Job]:
     try:
         layout = _Layout(**raw)
     except ValidationError as err:
-        first = min(err.errors(), key=lambda e: e["type"] != "extra_forbidden")
-        where = ".".join(str(p) for p in first["loc"])
+        first = first_problem(err)
         message = {
             "extra_forbidden": "unknown table; a manifest holds [defaults] and [[fit]] entries",
             "missing": "no [[fit]] entry",
-        }.get(first["type"], first["msg"])
-        raise InputError(path, message, where=where) from None
+        }.get(first.kind, first.message)
+        raise InputError(path, message, where=first.path) from None
     if not layout.fit:
         raise InputError(path, "no [[fit]] entry", where="fit")
     _check_keys(path, layout.defaults, "[defaults]", allowed=(*INPUT_KEYS, *SETTING_KEYS))
@@ -226,10 +225,9 @@ def _settings(path: Path, where: str, values: dict) -> FitSettings:
     try:
         return FitSettings(**options)
     except ValidationError as err:
-        first = err.errors()[0]
-        field = str(first["loc"][0]) if first["loc"] else "settings"
-        message = first["msg"].removeprefix("Value error, ")
-        raise InputError(path, message, where=f"{where}, field {field}") from None
+        first = first_problem(err)
+        field = first.field or "settings"
+        raise InputError(path, first.message, where=f"{where}, field {field}") from None
 
 
 def _check_markers(path: Path, where: str, settings: FitSettings, data: list[_Loaded]):

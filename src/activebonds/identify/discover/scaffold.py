@@ -70,14 +70,16 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ... import bonds
+from ...data.orientation import AXES
 from ...errors import InputError
+from .gravity import G, contact_blocks, gravity_axis
+from .model_text import quoted, searched, vector
 
 MASS_PER_MARKER = 1.0  # kg: the default total mass is this times the markers
 RIGID = 0.05  # a near-rigid pair's distance spread (5th-95th percentile) / its median
@@ -88,16 +90,6 @@ COMPLETE_MAX = 8  # markers: up to this many, every pair and an anchor per marke
 REST_REACH = 2.0  # complete graph: rest lengths from 0 to this times the largest distance seen
 ANCHOR_REACH = 2.0  # anchors: free this many extents of the recording about the median position
 REST_MARGIN = 0.2  # the rest length's bounds reach at least this share of the median
-G = 9.81  # m/s^2
-FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
-CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it
-CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at least this often
-HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
-PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
-BELT_SPEED = 0.1  # m/s: contact markers sliding faster than this ride a treadmill belt
-BELT_SPREAD = 0.5  # a belt's velocity: the contacts' (interquartile range) within this share
-FRICTION = (0.8, 0.0, 2.0)  # Coulomb coefficient: value, min, max
-AXES = "XYZ"
 
 
 @dataclass
@@ -110,37 +102,6 @@ class Scaffold:
     contacts: int
     gravity: str  # "-Z" or "none"
     notes: list[str] = field(default_factory=list)
-
-
-def parse_up(text: str, dimension: int) -> tuple[int, float]:
-    """'Z', '+Z', '-y' -> (axis, sign)."""
-    t = text.strip().upper()
-    sign = -1.0 if t.startswith("-") else 1.0
-    t = t.lstrip("+-")
-    axes = AXES[:dimension]
-    if len(t) != 1 or t not in axes:
-        raise InputError(
-            "--up", f"expected an axis {', '.join(axes)} (optionally + or -), got '{text}'"
-        )
-    return axes.index(t), sign
-
-
-def _f(x: float) -> str:
-    """A TOML float, six significant digits."""
-    s = f"{x:.6g}"
-    return s if any(c in s for c in ".en") else s + ".0"
-
-
-def _vec(xs) -> str:
-    return "[" + ", ".join(_f(x) for x in xs) + "]"
-
-
-def _q(s: str) -> str:
-    return json.dumps(s)
-
-
-def _param(value: float, lo: float, hi: float) -> str:
-    return f"{{ value = {_f(value)}, min = {_f(lo)}, max = {_f(hi)} }}"
 
 
 def _window(traj, markers, frames):
@@ -163,102 +124,6 @@ def _window(traj, markers, frames):
     if stop - start < 3:
         raise InputError("--frames", f"{start}:{stop} holds fewer than 3 frames")
     return traj.window(start, stop), start
-
-
-def _flat_axes(x: np.ndarray) -> list[int]:
-    extent = np.nanmax(x, axis=(0, 1)) - np.nanmin(x, axis=(0, 1))
-    return [a for a in range(x.shape[2]) if not extent[a] >= FLAT]
-
-
-def _vertical(traj, up: str | None, gravity: bool | None, notes: list[str]):
-    """(axis, sign, ground height along up or None) of the gravity, or None for none."""
-    from ...data.orientation import agree, guess_gravity, guess_ground
-
-    x = np.asarray(traj.positions)
-    d = x.shape[2]
-    flat = _flat_axes(x)
-    source = traj.source or "the recording"
-    asked = gravity is True or up is not None
-    if gravity is False and up is not None:
-        raise InputError(
-            "--up",
-            f"--up {up} names gravity's vertical and --no-gravity leaves gravity out: give one",
-        )
-    if gravity is False:
-        notes.append("gravity: none (--no-gravity)")
-        return None
-    if up is not None:
-        axis, sign = parse_up(up, d)
-        if axis in flat:
-            raise InputError(
-                source,
-                f"the recording is flat along {AXES[axis]} (its markers span less than "
-                f"{FLAT * 1000:g} mm there): no vertical for gravity along --up {up}",
-            )
-        down = ("-" if sign > 0 else "+") + AXES[axis]
-        notes.append(f"gravity: along {down} (--up {up})")
-        return axis, sign
-    if d == 2 or flat:
-        why = (
-            "a 2D recording"
-            if d == 2
-            else f"a flat recording (no extent along {', '.join(AXES[a] for a in flat)})"
-        )
-        if asked:
-            raise InputError(
-                source,
-                f"{why}: its plane may be horizontal, so the vertical cannot be guessed for "
-                "gravity; give --up AXIS or --no-gravity",
-            )
-        notes.append(f"gravity: none ({why}: give --up AXIS to add it)")
-        return None
-    ground = guess_ground(traj)
-    fall = guess_gravity(traj)
-    agrees = agree(ground, fall)
-    # the ground guess alone when it is clear; a doubtful one when the acceleration in flight
-    # (gravity itself, an independent cue) confirms it
-    sure = (
-        ground is not None
-        and (ground.clear or agrees is True)
-        and agrees is not False
-        and not (ground.against and agrees is None)
-    )
-    if not sure and fall.found:  # (a flight that agreed would have made it sure)
-        # gravity itself, measured in flight, names the vertical where the ground cue cannot
-        # (a body at rest most of the time keeps every coordinate of its lowest marker flat)
-        other = "no ground guess" if ground is None else f"the ground guess {ground.describe()}"
-        notes.append(
-            f"gravity: the vertical from the acceleration in flight, {fall.describe()}; "
-            f"{other} is not used"
-        )
-        return fall.axis, fall.up
-    if not sure:
-        said = "no guess" if ground is None else ground.describe()
-        if ground is not None and agrees is False:
-            said += f", but the acceleration in flight says {fall.describe()}"
-        elif ground is not None and not ground.clear:
-            said += " (not clearly flatter than another axis)"
-        if asked:
-            raise InputError(
-                source, f"the vertical is uncertain ({said}); give --up AXIS or --no-gravity"
-            )
-        notes.append(f"gravity: none (the vertical is uncertain: {said}; give --up AXIS)")
-        return None
-    confirmed = (
-        "" if ground.clear else f"; confirmed by the acceleration in flight: {fall.describe()}"
-    )
-    notes.append(
-        f"gravity: the vertical guessed from the recording, {ground.describe()}{confirmed}"
-    )
-    return ground.axis, ground.up
-
-
-def _ground(x: np.ndarray, axis: int, sign: float) -> float:
-    """The ground along up: the 5th percentile of the lowest foot of each frame (the feet:
-    the markers that reach the lowest height often, :func:`~activebonds.data.orientation.feet`)."""
-    from ...data.orientation import ground_level
-
-    return ground_level(sign * x[:, :, axis])
 
 
 def _delaunay(x: np.ndarray) -> set[tuple[int, int]]:
@@ -325,6 +190,67 @@ def scaffold(
     ``neighbours`` is given). InputError (one line) for one marker, no frame with every marker, a flat recording asked for gravity, a
     total mass <= 0 or unknown markers."""
     source = traj.source or "the recording"
+    data, offset, x, mask, whole = _checked(traj, markers, frames, total_mass, neighbours)
+    names = list(data.markers)
+    f_count, p, d = x.shape
+    notes: list[str] = []
+    vertical = gravity_axis(data, up, gravity, notes)
+    total, mass_note = _total_mass(total_mass, p, notes)
+    t0, v0, how = _placement(x, mask, int(whole[0]), data.dt)
+    if complete is None:
+        complete = neighbours is None and p <= COMPLETE_MAX
+    graph = _Graph(x, neighbours or NEIGHBOURS[d], t0, complete)
+    bounds = _Bounds(total / p / 2.0, data.rate, (f_count - 1) * data.dt)
+    lines = [
+        f"# Candidate model of {source}, written by activebonds scaffold.",
+        f"# Frames {offset}:{offset + f_count} ({f_count} frames at {data.rate:g} Hz, T = "
+        f"{bounds.duration:.4g} s), {p} markers.",
+        "# Every candidate bond is optional: `activebonds structure` decides which the recording",
+        "# needs. The rules behind every number: activebonds.identify.discover.scaffold's docstring.",
+        f"name = {quoted(name or 'scaffold')}",
+        f"dimension = {d}  # the recording's",
+    ]
+    bond_blocks: list[str] = []
+    up_text = "none"
+    if vertical is not None:
+        axis, sign = vertical
+        g = [0.0] * d
+        g[axis] = -sign * G
+        up_text = ("-" if sign > 0 else "+") + AXES[axis]
+        lines.append(f"gravity = {vector(g)}  # m/s^2: {notes[-1]}")
+        bond_blocks += contact_blocks(x, mask, names, axis, sign, total, data.dt, notes)
+    contacts = len(bond_blocks)
+    m = total / p
+    lines.append(f"total_mass = {total!r}  # kg: {mass_note}, split equally over the {p} particles")
+    for i, n in enumerate(names):
+        lines += [
+            "",
+            "[[particle]]",
+            f"name = {quoted(n)}",
+            f"mass = {m!r}  # kg: total_mass / {p} (fixed: structure needs fixed masses)",
+            f"position = {vector(x[t0, i])}  # m: frame {offset + t0}, the first with every marker",
+            f"velocity = {vector(v0[i])}  # m/s: at frame {offset + t0}, {how}",
+        ]
+    for (i, j), why in graph.pairs.items():
+        bond_blocks.append(_pair_block(graph, bounds, names, i, j, why, data.dt))
+    anchors = []
+    if complete:
+        extent = float(np.nanmax(graph.med))  # the largest median distance between two markers
+        limits = (m / bounds.mu) * np.array([*bounds.k, *bounds.c])
+        anchors = _anchors(x, names, m, limits, data.dt, extent)
+        notes.append(
+            f"candidates: every pair of the {p} markers and an anchor per marker (at most "
+            f"{COMPLETE_MAX} markers; --neighbours K for a neighbourhood graph)"
+        )
+    text = "\n".join(lines) + "\n" + "\n".join(bond_blocks + anchors) + "\n"
+    bonds_count = len(graph.pairs) + len(anchors)
+    return Scaffold(text, p, bonds_count, contacts, up_text, notes)
+
+
+def _checked(traj, markers, frames, total_mass, neighbours):
+    """(the window's recording, its first frame, positions [F, P, D], mask [F, P], the frames
+    with every marker): the scaffold's inputs checked, one InputError line otherwise."""
+    source = traj.source or "the recording"
     if total_mass is not None and not (math.isfinite(total_mass) and total_mass > 0):
         raise InputError("--total-mass", f"must be a number of kg > 0, got {total_mass:g}")
     if neighbours is not None and neighbours < 1:
@@ -339,7 +265,7 @@ def scaffold(
         )
     x = np.asarray(data.positions, np.float64)  # [F, P, D]
     mask = np.asarray(data.mask, bool)
-    f_count, _, d = x.shape
+    f_count = x.shape[0]
     whole = np.flatnonzero(mask.all(axis=1))  # the frames with every marker
     if whole.size == 0:
         raise InputError(
@@ -347,146 +273,116 @@ def scaffold(
             f"no frame of {offset}:{offset + f_count} holds every one of the {p} markers; "
             "choose --markers or --frames where they are all present (activebonds info)",
         )
-    notes: list[str] = []
-    vertical = _vertical(data, up, gravity, notes)
+    return data, offset, x, mask, whole
 
-    rate, dt = data.rate, data.dt
-    duration = (f_count - 1) * dt
-    if total_mass is None:
-        total, mass_note = p * MASS_PER_MARKER, f"{MASS_PER_MARKER:g} kg per marker (default)"
-        notes.append(
-            f"masses: {MASS_PER_MARKER:g} kg per marker (no --total-mass): every stiffness and "
-            "damping identified scales with the masses (markers alone cannot tell the force "
-            "scale); give --total-mass KG for forces in newtons"
-        )
-    else:
-        total, mass_note = float(total_mass), "--total-mass"
-    m = total / p
-    mu = m / 2.0  # the reduced mass of a pair of equal masses
 
-    # placement: the first complete frame; its velocity by a backward (else forward) difference
-    t0 = int(whole[0])
-    if t0 > 0 and mask[t0 - 1].all():
-        v0, how = (x[t0] - x[t0 - 1]) / dt, "backward difference"
-    elif t0 + 1 < f_count and mask[t0 + 1].all():
-        v0, how = (x[t0 + 1] - x[t0]) / dt, "forward difference"
-    else:
-        v0, how = np.zeros((p, d)), "none measurable (no complete neighbour frame): zero"
-
-    # the pairs' distances over the frames where both are present
-    diff = x[:, :, None, :] - x[:, None, :, :]
-    length = np.sqrt(np.sum(diff**2, axis=-1))  # [F, P, P], NaN where one is missing
-    with np.errstate(all="ignore"):
-        med = np.nanmedian(length, axis=0)
-        lo5, hi95 = np.nanpercentile(length, [5, 95], axis=0)
-        spread = (hi95 - lo5) / med
-    k_nn = neighbours or NEIGHBOURS[d]
-    pairs = _pairs(med, np.nan_to_num(spread, nan=np.inf), k_nn, x[t0])
-    if complete is None:
-        complete = neighbours is None and p <= COMPLETE_MAX
-    if complete:
-        every = f"every pair ({p} markers: the complete graph)"
-        pairs = {
-            (i, j): [every, *pairs.get((i, j), [])]
-            for i in range(p)
-            for j in range(i + 1, p)
-            if np.isfinite(med[i, j])
-        }
-
-    k_lo = mu * (2 * math.pi / duration) ** 2 / 10
-    k_hi = 10 * mu * (math.pi * rate) ** 2
-    c_lo = 2 * mu / (100 * duration)
-    c_hi = 20 * mu * rate
-
-    lines = [
-        f"# Candidate model of {source}, written by activebonds scaffold.",
-        f"# Frames {offset}:{offset + f_count} ({f_count} frames at {rate:g} Hz, T = "
-        f"{duration:.4g} s), {p} markers.",
-        "# Every candidate bond is optional: `activebonds structure` decides which the recording",
-        "# needs. The rules behind every number: activebonds.identify.discover.scaffold's docstring.",
-        f"name = {_q(name or 'scaffold')}",
-        f"dimension = {d}  # the recording's",
-    ]
-    bond_blocks: list[str] = []
-    contacts = 0
-    up_text = "none"
-    if vertical is not None:
-        axis, sign = vertical
-        g = [0.0] * d
-        g[axis] = -sign * G
-        up_text = ("-" if sign > 0 else "+") + AXES[axis]
-        lines.append(f"gravity = {_vec(g)}  # m/s^2: {notes[-1]}")
-        bond_blocks += _contacts(x, mask, names, axis, sign, total, dt, notes)
-        contacts = len(bond_blocks)
-    lines.append(f"total_mass = {total!r}  # kg: {mass_note}, split equally over the {p} particles")
-    for i, n in enumerate(names):
-        lines += [
-            "",
-            "[[particle]]",
-            f"name = {_q(n)}",
-            f"mass = {m!r}  # kg: total_mass / {p} (fixed: structure needs fixed masses)",
-            f"position = {_vec(x[t0, i])}  # m: frame {offset + t0}, the first with every marker",
-            f"velocity = {_vec(v0[i])}  # m/s: at frame {offset + t0}, {how}",
-        ]
-    binary = bonds.binary.KIND.name
-    for (i, j), why in pairs.items():
-        series = length[:, i, j]
-        seen = np.isfinite(series)
-        dmin, dmax = float(np.nanmin(series)), float(np.nanmax(series))
-        l0 = float(med[i, j])
-        half = 0.5 * (dmax - dmin)
-        rl_lo = max(0.0, min(dmin - half, (1 - REST_MARGIN) * l0))
-        rl_hi = max(dmax + half, (1 + REST_MARGIN) * l0)
-        rest_rule = f"widened by half the range and to +-{100 * REST_MARGIN:g} % of the median"
-        if complete:
-            rl_lo, rl_hi = 0.0, REST_REACH * dmax
-            rest_rule = f"bounds 0 .. {REST_REACH:g} x the largest (a complete graph)"
-        stretch = series - l0
-        acc = (series[2:] - 2 * series[1:-1] + series[:-2]) / dt**2
-        acc = acc[np.isfinite(acc)]
-        rms_s = float(np.sqrt(np.nanmean(stretch**2)))
-        rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
-        k0, c0 = _start_values(mu, rms_a, rms_s, (k_lo, k_hi), (c_lo, c_hi))
-        bond_blocks.append(
-            "\n".join(
-                [
-                    "",
-                    f"# {names[i]}-{names[j]}: {'; '.join(why)}".replace(
-                        f"particle {i}", names[i]
-                    ).replace(f"particle {j}", names[j]),
-                    "[[bond]]",
-                    f"kind = {_q(binary)}",
-                    f"particles = [{_q(names[i])}, {_q(names[j])}]",
-                    "optional = true",
-                    f"rest_length = {_param(l0, rl_lo, rl_hi)}  # m: median distance over "
-                    f"{int(seen.sum())} frames; observed {dmin:.4g}..{dmax:.4g}, {rest_rule}",
-                    f"stiffness = {_param(k0, k_lo, k_hi)}  # N/m: mu {mu:.4g} kg x rms "
-                    f"acceleration {rms_a:.3g} m/s^2 / rms stretch {1000 * rms_s:.3g} mm; "
-                    f"bounds mu (2 pi / {duration:.4g} s)^2 / 10 .. 10 mu (pi {rate:g} Hz)^2",
-                    f"damping = {_param(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
-                    f"2 sqrt(k mu); bounds 2 mu / (100 T) .. 20 mu f",
-                ]
-            )
-        )
-    extent = float(np.nanmax(med))  # the largest median distance between two markers
-    anchors = (
-        _anchors(x, names, m, (m / mu) * np.array([k_lo, k_hi, c_lo, c_hi]), dt, extent)
-        if complete
-        else []
+def _total_mass(total_mass: float | None, p: int, notes: list[str]) -> tuple[float, str]:
+    """(the total mass in kg, where it comes from): ``--total-mass``, else
+    :data:`MASS_PER_MARKER` per marker (noted: the forces then scale with it)."""
+    if total_mass is not None:
+        return float(total_mass), "--total-mass"
+    notes.append(
+        f"masses: {MASS_PER_MARKER:g} kg per marker (no --total-mass): every stiffness and "
+        "damping identified scales with the masses (markers alone cannot tell the force "
+        "scale); give --total-mass KG for forces in newtons"
     )
-    if complete:
-        notes.append(
-            f"candidates: every pair of the {p} markers and an anchor per marker (at most "
-            f"{COMPLETE_MAX} markers; --neighbours K for a neighbourhood graph)"
-        )
-    text = "\n".join(lines) + "\n" + "\n".join(bond_blocks + anchors) + "\n"
-    return Scaffold(
-        text=text,
-        particles=p,
-        bonds=len(pairs) + len(anchors),
-        contacts=contacts,
-        gravity=up_text,
-        notes=notes,
+    return p * MASS_PER_MARKER, f"{MASS_PER_MARKER:g} kg per marker (default)"
+
+
+def _placement(x: np.ndarray, mask: np.ndarray, t0: int, dt: float):
+    """(frame, velocities [P, D], how they were measured) of the placement: the first complete
+    frame ``t0``, its velocity by a backward (else forward) difference."""
+    f_count, p, d = x.shape
+    if t0 > 0 and mask[t0 - 1].all():
+        return t0, (x[t0] - x[t0 - 1]) / dt, "backward difference"
+    if t0 + 1 < f_count and mask[t0 + 1].all():
+        return t0, (x[t0 + 1] - x[t0]) / dt, "forward difference"
+    return t0, np.zeros((p, d)), "none measurable (no complete neighbour frame): zero"
+
+
+class _Graph:
+    """The candidate pairs: the pairs' distances over the frames where both are present
+    (``length`` [F, P, P], NaN where one is missing; their median ``med``) and the pairs
+    (i < j) with why each is one; every pair where ``complete``."""
+
+    def __init__(self, x: np.ndarray, k_nn: int, t0: int, complete: bool):
+        p = x.shape[1]
+        diff = x[:, :, None, :] - x[:, None, :, :]
+        self.length = np.sqrt(np.sum(diff**2, axis=-1))
+        self.complete = complete
+        with np.errstate(all="ignore"):
+            self.med = np.nanmedian(self.length, axis=0)
+            lo5, hi95 = np.nanpercentile(self.length, [5, 95], axis=0)
+            spread = (hi95 - lo5) / self.med
+        pairs = _pairs(self.med, np.nan_to_num(spread, nan=np.inf), k_nn, x[t0])
+        if complete:
+            every = f"every pair ({p} markers: the complete graph)"
+            pairs = {
+                (i, j): [every, *pairs.get((i, j), [])]
+                for i in range(p)
+                for j in range(i + 1, p)
+                if np.isfinite(self.med[i, j])
+            }
+        self.pairs = pairs
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """A spring-damper's search bounds for the reduced mass ``mu`` of a pair of equal masses,
+    from the recording's ``rate`` (Hz) and ``duration`` (s)."""
+
+    mu: float
+    rate: float
+    duration: float
+
+    @property
+    def k(self) -> tuple[float, float]:
+        mu = self.mu
+        return mu * (2 * math.pi / self.duration) ** 2 / 10, 10 * mu * (math.pi * self.rate) ** 2
+
+    @property
+    def c(self) -> tuple[float, float]:
+        return 2 * self.mu / (100 * self.duration), 20 * self.mu * self.rate
+
+
+def _pair_block(graph: _Graph, bounds: _Bounds, names, i: int, j: int, why, dt: float) -> str:
+    """The [[bond]] block of the candidate spring-damper between markers i and j."""
+    series = graph.length[:, i, j]
+    seen = np.isfinite(series)
+    dmin, dmax = float(np.nanmin(series)), float(np.nanmax(series))
+    l0 = float(graph.med[i, j])
+    half = 0.5 * (dmax - dmin)
+    rl_lo = max(0.0, min(dmin - half, (1 - REST_MARGIN) * l0))
+    rl_hi = max(dmax + half, (1 + REST_MARGIN) * l0)
+    rest_rule = f"widened by half the range and to +-{100 * REST_MARGIN:g} % of the median"
+    if graph.complete:
+        rl_lo, rl_hi = 0.0, REST_REACH * dmax
+        rest_rule = f"bounds 0 .. {REST_REACH:g} x the largest (a complete graph)"
+    stretch = series - l0
+    acc = (series[2:] - 2 * series[1:-1] + series[:-2]) / dt**2
+    acc = acc[np.isfinite(acc)]
+    rms_s = float(np.sqrt(np.nanmean(stretch**2)))
+    rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
+    mu, (k_lo, k_hi), (c_lo, c_hi) = bounds.mu, bounds.k, bounds.c
+    k0, c0 = _start_values(mu, rms_a, rms_s, (k_lo, k_hi), (c_lo, c_hi))
+    return "\n".join(
+        [
+            "",
+            f"# {names[i]}-{names[j]}: {'; '.join(why)}".replace(f"particle {i}", names[i]).replace(
+                f"particle {j}", names[j]
+            ),
+            "[[bond]]",
+            f"kind = {quoted(bonds.binary.KIND.name)}",
+            f"particles = [{quoted(names[i])}, {quoted(names[j])}]",
+            "optional = true",
+            f"rest_length = {searched(l0, rl_lo, rl_hi)}  # m: median distance over "
+            f"{int(seen.sum())} frames; observed {dmin:.4g}..{dmax:.4g}, {rest_rule}",
+            f"stiffness = {searched(k0, k_lo, k_hi)}  # N/m: mu {mu:.4g} kg x rms "
+            f"acceleration {rms_a:.3g} m/s^2 / rms stretch {1000 * rms_s:.3g} mm; "
+            f"bounds mu (2 pi / {bounds.duration:.4g} s)^2 / 10 .. 10 mu (pi {bounds.rate:g} Hz)^2",
+            f"damping = {searched(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
+            f"2 sqrt(k mu); bounds 2 mu / (100 T) .. 20 mu f",
+        ]
     )
 
 
@@ -515,97 +411,20 @@ def _anchors(x, names, m, limits, dt, extent) -> list[str]:
                     "",
                     f"# {n} anchored: a candidate of the complete graph",
                     "[[bond]]",
-                    f"kind = {_q(unary)}",
-                    f"particles = [{_q(n)}]",
+                    f"kind = {quoted(unary)}",
+                    f"particles = [{quoted(n)}]",
                     "optional = true",
-                    f"anchor = {{ value = {_vec(centre)}, min = {_vec(centre - reach)}, "
-                    f"max = {_vec(centre + reach)} }}  # m: the marker's median position, free "
+                    f"anchor = {{ value = {vector(centre)}, min = {vector(centre - reach)}, "
+                    f"max = {vector(centre + reach)} }}  # m: the marker's median position, free "
                     f"{ANCHOR_REACH:g} x the recording's extent {extent:.4g} m about it",
-                    f"stiffness = {_param(k0, k_lo, k_hi)}  # N/m: its mass {m:.4g} kg x rms "
+                    f"stiffness = {searched(k0, k_lo, k_hi)}  # N/m: its mass {m:.4g} kg x rms "
                     f"acceleration {rms_a:.3g} m/s^2 / rms distance from the median "
                     f"{1000 * rms_d:.3g} mm; bounds as a spring's, m for mu",
-                    f"damping = {_param(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
+                    f"damping = {searched(c0, c_lo, c_hi)}  # N s/m: 10 % of critical "
                     "2 sqrt(k m); bounds as a spring's, m for mu",
                 ]
             )
         )
-    return out
-
-
-def _contacts(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
-    """The ground contacts' [[bond]] blocks (the markers that reach the guessed ground)."""
-    h = sign * x[:, :, axis]  # [F, P] height along up, NaN where missing
-    ground = _ground(x, axis, sign)
-    # within reach above or below (False where missing: NaN compares False); a marker far
-    # below the ground (a dip, a swapped label) does not touch it
-    near = np.abs(h - ground) < CONTACT_REACH
-    share = near.sum(axis=0) / np.maximum(mask.sum(axis=0), 1)
-    touching = [i for i in range(len(names)) if share[i] >= CONTACT_SHARE]
-    if not touching:
-        notes.append(f"contacts: none (no marker within {CONTACT_REACH * 100:g} cm of the ground)")
-        return []
-    d = x.shape[2]
-    normal = [0.0] * d
-    normal[axis] = sign
-    # the belt: the contact markers' median velocity along the ground while on it
-    vel = (x[1:] - x[:-1]) / dt  # [F-1, P, D]
-    on = near[1:] & near[:-1]
-    tangential = [vel[on[:, i], i] for i in touching]
-    tangential = np.concatenate(tangential) if tangential else np.zeros((0, d))
-    body = np.nanmean(vel, axis=1)  # [F-1, D] the markers' mean velocity
-    with_body = [body[on[:, i]] for i in touching]
-    with_body = np.concatenate(with_body) if with_body else np.zeros((0, d))
-    belt = None
-    if len(tangential):
-        med = np.median(tangential, axis=0)
-        med[axis] = 0.0
-        along = np.median(with_body, axis=0)
-        along[axis] = 0.0
-        # a belt carries the feet, not the body: a body sliding with its feet rides none;
-        # and at one velocity: a low point swinging through (a pendulum's) rides none
-        spread = np.subtract(*np.percentile(tangential, [75, 25], axis=0))
-        spread[axis] = 0.0
-        if (
-            np.linalg.norm(med) > BELT_SPEED
-            and np.linalg.norm(med - along) > BELT_SPEED
-            and np.linalg.norm(spread) <= BELT_SPREAD * np.linalg.norm(med)
-        ):
-            belt = med
-    n = len(touching)
-    k = total * G / (n * PENETRATION)
-    c = 0.1 * 2 * math.sqrt(k * total / n)
-    height = sign * ground  # the plane's offset along the normal is the ground along up
-    contact = bonds.contact.KIND.name
-    notes.append(
-        f"contacts: {n} marker(s) within {CONTACT_REACH * 100:g} cm of the ground "
-        f"(at {ground:.4g} m along up) in at least {100 * CONTACT_SHARE:g} % of the frames"
-        + (f"; a treadmill belt at {_vec(belt)} m/s" if belt is not None else "")
-    )
-    out = []
-    for i in touching:
-        block = [
-            "",
-            f"# {names[i]} on the ground: within {CONTACT_REACH * 100:g} cm of it in "
-            f"{100 * share[i]:.3g} % of the frames",
-            "[[bond]]",
-            f"kind = {_q(contact)}",
-            'type = "ground"',
-            f"particles = [{_q(names[i])}]",
-            f"normal = {_vec(normal)}  # up, as guessed (or --up)",
-            f"height = {_param(height, height - HEIGHT_RANGE, height + HEIGHT_RANGE)}  # m: the "
-            f"5th percentile of the lowest foot of each frame, +-{HEIGHT_RANGE * 100:g} cm",
-            f"stiffness = {_param(k, k / 100, k * 100)}  # N/m: the weight {total:.4g} kg x g "
-            f"over {n} contacts at {PENETRATION * 1000:g} mm; bounds x/100 .. x100",
-            f"damping = {_param(c, c / 100, c * 100)}  # N s/m: 10 % of critical for "
-            f"{total / n:.4g} kg; bounds x/100 .. x100",
-            f"friction = {_param(*FRICTION)}  # Coulomb coefficient: a common guess",
-        ]
-        if belt is not None:
-            block.append(
-                f"surface_velocity = {_vec(belt)}  # m/s: the contact markers' median velocity "
-                "along the ground while on it (a treadmill belt)"
-            )
-        out.append("\n".join(block))
     return out
 
 
