@@ -102,7 +102,7 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
 
 @pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_too_many_candidates_are_kept_undecided(triangle, tmp_path, monkeypatch):
-    monkeypatch.setattr(pipeline, "MAX_DECIDED", 2)
+    monkeypatch.setattr(pipeline.structure, "MAX_DECIDED", 2)
     out = tmp_path / "out"
     proc = cli_in_process(
         "auto", triangle, "--out", out, "--no-gravity", "--generations", "5",
@@ -149,7 +149,7 @@ def test_a_folder_of_something_else_is_refused(triangle, tmp_path):
 def test_a_shot_model_is_kept_only_where_it_predicts_the_fitted_frames_better(
     triangle, tmp_path, monkeypatch, shot_mm, kept_name
 ):
-    """``_shoot`` compares the two runs' 10-frames-ahead RMS on their fitted frames (their
+    """``shoot`` compares the two runs' 10-frames-ahead RMS on their fitted frames (their
     baselines' records) and keeps the shot model only where it is lower."""
     from activebonds.identify.rundir import RunDir
 
@@ -164,10 +164,10 @@ def test_a_shot_model_is_kept_only_where_it_predicts_the_fitted_frames_better(
     write_run(folder.run, 50.0)
     shot = []
     monkeypatch.setattr(
-        pipeline, "_fit_into", lambda run, *a: shot.append(run) or write_run(run, shot_mm)
+        pipeline.refits, "fit_into", lambda run, *a: shot.append(run) or write_run(run, shot_mm)
     )
     said = []
-    kept, note = pipeline._shoot(
+    kept, note = pipeline.refits.shoot(
         folder,
         folder.run,
         triangle,

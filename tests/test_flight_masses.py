@@ -232,7 +232,7 @@ def test_the_flight_s_masses_are_kept_only_where_they_predict_the_fitted_frames_
         write_run(run, loads_model(Path(model_path).read_text()).spec, masses_mm)
         return 1.0
 
-    monkeypatch.setattr(pipeline, "_fit_into", fake_fit)
+    monkeypatch.setattr(pipeline.refits, "fit_into", fake_fit)
     x = heights(np.full(60, 0.5), np.full(60, 0.5))  # 60 frames in flight
     x[:, 1, 0] = 0.2  # B 0.2 m from A
     recording = Trajectory(
@@ -240,7 +240,7 @@ def test_the_flight_s_masses_are_kept_only_where_they_predict_the_fitted_frames_
     )
     split = pipeline.windows(60, (0, None), 0.2)
     said = []
-    kept, note = pipeline._masses(
+    kept, note = pipeline.refits.weigh_on_flight(
         folder, folder.run_ground, tmp_path / "rec.csv", recording, split,
         pipeline.fit_settings(pipeline.Options(), split), said.append, None,
     )  # fmt: skip

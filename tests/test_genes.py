@@ -282,6 +282,7 @@ NAME_READERS = [
     "identify/solvers/lsq.py",
     "identify/judge/uncertainty.py",
     "report/html.py",
+    "report/tables.py",
     "report/plots.py",
 ]
 

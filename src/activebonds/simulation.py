@@ -64,27 +64,10 @@ def simulate(
         first = None
         t0 = 0.0
     else:
-        data = start.select(list(model.markers))
-        if data.n_frames < 2 or not data.mask[:2].all():
-            raise InputError(start.source, "the first two frames must hold every model marker")
-        first = data.positions[0]
-        x0 = data.positions[1]
-        t0 = dt  # frame 1
-        if psi_first is not None:  # the phase of frame 1 tracked along the record
-            s = phase.recorded_signal(model.topology, data.positions[:2])
-            psi_second = phase.track(model.params, model.topology, s, dt, substeps)[1]
-        v0 = start_velocity(
-            model.params,
-            model.topology,
-            jnp.asarray(first),
-            jnp.asarray(x0),
-            dt,
-            substeps,
-            integrator,
-            t=t0,
-            psi=psi_first,
-            newton=True,
+        first, x0, v0, psi_second = _recorded_start(
+            model, start, dt, substeps, integrator, psi_first
         )
+        t0 = dt  # frame 1
     n_run = n_frames if first is None else n_frames - 1
     run = rollout(
         model.params,
@@ -109,6 +92,34 @@ def simulate(
         rate=rate,
         source_units="m",
     )
+
+
+def _recorded_start(model: Model, start: Trajectory, dt, substeps, integrator, psi_first):
+    """(frame 0, frame 1, the velocity at frame 1, the drive's phase there) of ``start``'s
+    first two frames, the run going on from frame 1 (time ``dt``); InputError where they miss
+    a model marker."""
+    data = start.select(list(model.markers))
+    if data.n_frames < 2 or not data.mask[:2].all():
+        raise InputError(start.source, "the first two frames must hold every model marker")
+    first = data.positions[0]
+    x0 = data.positions[1]
+    psi_second = None
+    if psi_first is not None:  # the phase of frame 1 tracked along the record
+        s = phase.recorded_signal(model.topology, data.positions[:2])
+        psi_second = phase.track(model.params, model.topology, s, dt, substeps)[1]
+    v0 = start_velocity(
+        model.params,
+        model.topology,
+        jnp.asarray(first),
+        jnp.asarray(x0),
+        dt,
+        substeps,
+        integrator,
+        t=dt,
+        psi=psi_first,
+        newton=True,
+    )
+    return first, x0, v0, psi_second
 
 
 def require_initial_state(model: Model, where="model") -> None:

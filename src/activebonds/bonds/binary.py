@@ -26,14 +26,15 @@ import numpy as np
 
 from .accumulate import accumulate, gather_table, spread_form
 from .kind import (
+    DAMPING,
     NON_NEGATIVE,
     POSITIVE,
+    STIFFNESS,
     BondKind,
     LinearPart,
     MujocoForm,
     Parameter,
     PopulationForm,
-    spread,
 )
 
 
@@ -232,6 +233,11 @@ def _population_forces(params, prepared, t0, n_p: int, dim: int):
     return jnp.einsum("spkd,spkn->spdn", ends, tension[:, bond])
 
 
+def _phase(key: str, field: str, **kw) -> Parameter:
+    """A phase (radians, 0 by default), searched linearly over (-pi, pi)."""
+    return Parameter(key, field, 0.0, lambda v: (-math.pi, math.pi), log=False, **kw)
+
+
 def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
     """The rhythmic drive's model-level numbers (``[drive]``), shared by every kind that reads
     the drive (one gene each whatever the kinds): its frequency, and an entrained drive's
@@ -263,14 +269,7 @@ def drive_parameters(when: str | None) -> tuple[Parameter, ...]:
             log=False,
             when=when,
         ),
-        Parameter(
-            "drive.coupling.start_phase",
-            "drive_start",
-            0.0,
-            lambda v: (-math.pi, math.pi),
-            log=False,
-            when=when,
-        ),
+        _phase("drive.coupling.start_phase", "drive_start", when=when),
     )
 
 
@@ -287,7 +286,7 @@ KIND = BondKind(
     name="binary",
     arity=2,
     parameters=(
-        Parameter("stiffness", "stiffness", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
+        STIFFNESS,
         Parameter(
             "rest_length",
             "rest_length",
@@ -295,7 +294,7 @@ KIND = BondKind(
             lambda v: (0.5 * v, 1.5 * v) if v > 0 else (0.0, 1.0),
             check=NON_NEGATIVE,
         ),
-        Parameter("damping", "damping", 0.0, spread(100, (0.0, 10.0)), check=NON_NEGATIVE),
+        DAMPING,
         Parameter("gain", "gain", 1.0, lambda v: (0.0, max(100.0, 2 * abs(v))), when=_NEURAL),
         Parameter("threshold", "threshold", 0.0, lambda v: (-5.0, 5.0), when=_NEURAL),
         Parameter(
@@ -313,15 +312,7 @@ KIND = BondKind(
             when=_NEURAL,
             needs="drive",
         ),
-        Parameter(
-            "drive_phase",
-            "drive_phase",
-            0.0,
-            lambda v: (-math.pi, math.pi),
-            log=False,
-            when=_NEURAL,
-            needs="drive",
-        ),
+        _phase("drive_phase", "drive_phase", when=_NEURAL, needs="drive"),
     ),
     shared=drive_parameters(_NEURAL),
     forces=forces,

@@ -73,6 +73,12 @@ class Parameter:
     needs: str | None = None  # a top-level table the model file must have (e.g. "drive")
 
 
+# a spring's stiffness and a damper's damping, as the spring kinds declare them (the search
+# from 100x below to 100x above the file's value; from 0 to 1e3 or 10 where it is 0)
+STIFFNESS = Parameter("stiffness", "stiffness", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE)
+DAMPING = Parameter("damping", "damping", 0.0, spread(100, (0.0, 10.0)), check=NON_NEGATIVE)
+
+
 @dataclass(frozen=True)
 class LinearPart:
     """How a kind enters the exact least squares (:mod:`activebonds.identify.solvers.lsq`).

@@ -11,7 +11,7 @@ import math
 import jax.numpy as jnp
 
 from .accumulate import accumulate
-from .kind import ANGLE, NON_NEGATIVE, BondKind, Parameter, spread
+from .kind import ANGLE, STIFFNESS, BondKind, Parameter
 
 
 def forces(params, topology, x, v):
@@ -34,7 +34,7 @@ KIND = BondKind(
     name="ternary",
     arity=3,
     parameters=(
-        Parameter("stiffness", "stiffness", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
+        STIFFNESS,
         Parameter(
             "rest_angle",
             "rest_angle",

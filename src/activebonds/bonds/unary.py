@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .accumulate import accumulate
-from .kind import NON_NEGATIVE, BondKind, LinearPart, MujocoForm, Parameter, spread
+from .kind import DAMPING, STIFFNESS, BondKind, LinearPart, MujocoForm, Parameter
 
 
 def forces(params, topology, x, v, t):
@@ -83,8 +83,8 @@ KIND = BondKind(
     name="unary",
     arity=1,
     parameters=(
-        Parameter("stiffness", "stiffness", 0.0, spread(100, (0.0, 1e3)), check=NON_NEGATIVE),
-        Parameter("damping", "damping", 0.0, spread(100, (0.0, 10.0)), check=NON_NEGATIVE),
+        STIFFNESS,
+        DAMPING,
         Parameter("anchor", "anchor", 0.0, lambda v: (v - 1.0, v + 1.0), form="vector"),
         Parameter(
             "anchor_velocity", "anchor_velocity", 0.0, lambda v: (v - 1.0, v + 1.0), form="vector"

@@ -56,21 +56,8 @@ def _verdict_cell(model_mm, base: dict | None):
     return Marked(word, v.text()) if v.better is False else word
 
 
-def _config_section(
-    name: str, exp, config: str, c: dict, folder: Path, n_seeds: int, base: dict | None = None
-) -> Section:
-    figs = folder / "figures"
-    series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
-    title = f"{name}: population {c['population']}, {c['generations']:,} generations"
-    refs = []
-    if base:
-        refs = [
-            ("zero force", base.get("zero_force_fit_rms_mm")),
-            ("exact least squares, standard", base.get("lsq_standard_fit_rms_mm")),
-            ("momentum floor", base.get("momentum_floor_mm")),
-        ]
-    conv = plots.convergence(series, figs / "convergence", title=title, references=refs)
-    figures = [Figure(conv[0])]
+def _series_rows(c: dict, base: dict | None) -> list[list]:
+    """A configuration's row per series: its medians over the seeds, the one-step verdict."""
     rows = []
     for s in SERIES:
         r = c["series"][s]
@@ -88,7 +75,25 @@ def _config_section(
                 f"{r['seconds']:.0f} s",
             ]
         )
-    rows += _baseline_rows(base)
+    return rows
+
+
+def _config_section(
+    name: str, exp, config: str, c: dict, folder: Path, n_seeds: int, base: dict | None = None
+) -> Section:
+    figs = folder / "figures"
+    series = [plots.Series(label=s, histories=_histories(folder, s)) for s in SERIES]
+    title = f"{name}: population {c['population']}, {c['generations']:,} generations"
+    refs = []
+    if base:
+        refs = [
+            ("zero force", base.get("zero_force_fit_rms_mm")),
+            ("exact least squares, standard", base.get("lsq_standard_fit_rms_mm")),
+            ("momentum floor", base.get("momentum_floor_mm")),
+        ]
+    conv = plots.convergence(series, figs / "convergence", title=title, references=refs)
+    figures = [Figure(conv[0])]
+    rows = _series_rows(c, base) + _baseline_rows(base)
     a, b = c["series"]["standard"]["test_frames"]
     floor = (
         ""

@@ -53,6 +53,7 @@ fixed anchor or none, and which of its bonds are refused); this module names no 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -163,59 +164,10 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
         raise InputError("--substeps", f"must be a whole number >= 1, got {substeps}")
     check_exportable(model, source)
     d = model.dimension
-    params = model.params
     x0, v0 = model.initial_state()
-    masses = np.asarray(params.mass, np.float64)
-    gravity = _pad3(np.asarray(params.gravity, np.float64))
-
-    # Per particle: the unary bonds' summed stiffness, k-weighted anchor and damping.
-    n = len(model.spec.particle)
-    k_sum = np.zeros(n)
-    ka_sum = np.zeros((n, d))
-    c_sum = np.zeros(n)
-    anchors: list[tuple[int, list[float]]] = []  # (bond index, anchor) for the world sites
-    tendons: list[tuple[int, str, str, float, float, float]] = []
-    contacts: list[tuple[int, int, np.ndarray, float, float, float, float]] = []
-    names = {p.name: i for i, p in enumerate(model.spec.particle)}
-    counters: dict[str, int] = {}
-    for i, b in enumerate(model.spec.bond):
-        pos = counters.get(b.kind, 0)
-        counters[b.kind] = pos + 1
-        if b.absent or b.kind in model.disabled:
-            continue
-        values = params.bonds[b.kind]
-        element = _form(b.kind).element
-        if element == "anchor":
-            p = names[b.particles[0]]
-            k = float(values["stiffness"][pos])
-            anchor = np.asarray(values["anchor"][pos], np.float64)
-            k_sum[p] += k
-            ka_sum[p] += k * anchor
-            c_sum[p] += float(values["damping"][pos])
-            anchors.append((i, _pad3(anchor)))
-        elif element == "pair":
-            normal = np.asarray(values["normal"][pos], np.float64)
-            contacts.append(
-                (
-                    i,
-                    names[b.particles[0]],
-                    normal / np.linalg.norm(normal),
-                    float(values["height"][pos]),
-                    float(values["stiffness"][pos]),
-                    float(values["damping"][pos]),
-                    float(values["friction"][pos]),
-                )
-            )
-        elif element == "tendon":
-            tendons.append(
-                (
-                    i,
-                    *b.particles,
-                    float(values["stiffness"][pos]),
-                    float(values["damping"][pos]),
-                    float(values["rest_length"][pos]),
-                )
-            )
+    masses = np.asarray(model.params.mass, np.float64)
+    gravity = _pad3(np.asarray(model.params.gravity, np.float64))
+    parts = _Parts.of(model)
 
     root = ET.Element("mujoco", model=model.name)
     root.append(
@@ -226,6 +178,97 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
         )
     )
     ET.SubElement(root, "compiler", angle="radian", inertiafromgeom="false")
+    _option(root, gravity, rate, substeps, parts.contacts)
+
+    world = ET.SubElement(root, "worldbody")
+    planes = _planes(world, parts.contacts)
+    for i, anchor in parts.anchors:
+        site = ET.SubElement(world, "site", pos=_vec(anchor), size=SITE_SIZE, rgba="1 0 0 1")
+        if f"bond{i}_anchor" not in parts.names:  # site names must not clash with the particles'
+            site.set("name", f"bond{i}_anchor")
+    for p, particle in enumerate(model.spec.particle):
+        _body(world, particle.name, p, _pad3(x0[p]), d, masses[p], parts)
+    _tendons(root, parts.tendons)
+    _pairs(root, parts.contacts, planes, masses, model.spec.particle)
+
+    keyframe = ET.SubElement(root, "keyframe")
+    ET.SubElement(
+        keyframe,
+        "key",
+        name="initial",
+        time="0",
+        qpos=_vec(x0.reshape(-1)),
+        qvel=_vec(v0.reshape(-1)),
+    )
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+@dataclass
+class _Parts:
+    """What the model's bonds become in MJCF: per particle, its unary bonds' summed stiffness,
+    k-weighted anchor and damping (its slide joints'); the anchors' world sites, the tendons
+    and the contact pairs, each with its bond's index."""
+
+    k_sum: np.ndarray
+    ka_sum: np.ndarray
+    c_sum: np.ndarray
+    anchors: list[tuple[int, list[float]]]  # (bond index, anchor) for the world sites
+    tendons: list[tuple[int, str, str, float, float, float]]
+    contacts: list[tuple[int, int, np.ndarray, float, float, float, float]]
+    names: dict[str, int]  # the particles' indices by name
+
+    @classmethod
+    def of(cls, model) -> _Parts:
+        d, params = model.dimension, model.params
+        n = len(model.spec.particle)
+        names = {p.name: i for i, p in enumerate(model.spec.particle)}
+        out = cls(np.zeros(n), np.zeros((n, d)), np.zeros(n), [], [], [], names)
+        counters: dict[str, int] = {}
+        for i, b in enumerate(model.spec.bond):
+            pos = counters.get(b.kind, 0)
+            counters[b.kind] = pos + 1
+            if b.absent or b.kind in model.disabled:
+                continue
+            values = params.bonds[b.kind]
+            element = _form(b.kind).element
+            if element == "anchor":
+                p = names[b.particles[0]]
+                k = float(values["stiffness"][pos])
+                anchor = np.asarray(values["anchor"][pos], np.float64)
+                out.k_sum[p] += k
+                out.ka_sum[p] += k * anchor
+                out.c_sum[p] += float(values["damping"][pos])
+                out.anchors.append((i, _pad3(anchor)))
+            elif element == "pair":
+                normal = np.asarray(values["normal"][pos], np.float64)
+                out.contacts.append(
+                    (
+                        i,
+                        names[b.particles[0]],
+                        normal / np.linalg.norm(normal),
+                        float(values["height"][pos]),
+                        float(values["stiffness"][pos]),
+                        float(values["damping"][pos]),
+                        float(values["friction"][pos]),
+                    )
+                )
+            elif element == "tendon":
+                out.tendons.append(
+                    (
+                        i,
+                        *b.particles,
+                        float(values["stiffness"][pos]),
+                        float(values["damping"][pos]),
+                        float(values["rest_length"][pos]),
+                    )
+                )
+        return out
+
+
+def _option(root, gravity, rate, substeps, contacts) -> None:
+    """``<option>``: Euler, the gravity, the timestep of ``rate`` and ``substeps``; with
+    contacts, Coulomb's cone and the no-slip solver."""
     option = ET.SubElement(root, "option", integrator="Euler", gravity=_vec(gravity))
     if rate is not None:
         option.set("timestep", _num(1.0 / (float(rate) * int(substeps))))
@@ -239,91 +282,82 @@ def to_mjcf(model, rate: float | None = None, substeps: int = 1, source: str = "
     else:
         ET.SubElement(option, "flag", eulerdamp="disable", contact="disable")
 
-    world = ET.SubElement(root, "worldbody")
-    planes = _planes(world, contacts)
-    for i, anchor in anchors:
-        site = ET.SubElement(world, "site", pos=_vec(anchor), size=SITE_SIZE, rgba="1 0 0 1")
-        if f"bond{i}_anchor" not in names:  # site names must not clash with the particles'
-            site.set("name", f"bond{i}_anchor")
-    for p, particle in enumerate(model.spec.particle):
-        start = _pad3(x0[p])
-        body = ET.SubElement(world, "body", name=particle.name, pos=_vec(start))
-        for ax in range(d):
-            axis = ["0", "0", "0"]
-            axis[ax] = "1"
-            joint = ET.SubElement(
-                body,
-                "joint",
-                name=f"{particle.name}_{AXES[ax].lower()}",
-                type="slide",
-                axis=" ".join(axis),
-                ref=_num(start[ax]),
-            )
-            if k_sum[p] > 0:
-                joint.set("stiffness", _num(k_sum[p]))
-                joint.set("springref", _num(ka_sum[p, ax] / k_sum[p]))
-            if c_sum[p] > 0:
-                joint.set("damping", _num(c_sum[p]))
-        ET.SubElement(
-            body, "inertial", pos="0 0 0", mass=_num(masses[p]), diaginertia=_vec([INERTIA] * 3)
+
+def _body(world, name: str, p: int, start: list[float], d: int, mass, parts: _Parts) -> None:
+    """Particle ``p``'s body at ``start``: a slide joint per axis (its unary bonds' spring and
+    damper), its inertial, its site and, where it has contacts, its sphere."""
+    body = ET.SubElement(world, "body", name=name, pos=_vec(start))
+    for ax in range(d):
+        axis = ["0", "0", "0"]
+        axis[ax] = "1"
+        joint = ET.SubElement(
+            body,
+            "joint",
+            name=f"{name}_{AXES[ax].lower()}",
+            type="slide",
+            axis=" ".join(axis),
+            ref=_num(start[ax]),
         )
-        ET.SubElement(body, "site", name=particle.name, pos="0 0 0", size=SITE_SIZE)
-        if any(c[1] == p for c in contacts):
-            ET.SubElement(
-                body,
-                "geom",
-                name=f"{particle.name}_sphere",
-                type="sphere",
-                size=_num(SPHERE),
-                contype="0",
-                conaffinity="0",
-                rgba="0.2 0.6 0.2 1",
-            )
+        if parts.k_sum[p] > 0:
+            joint.set("stiffness", _num(parts.k_sum[p]))
+            joint.set("springref", _num(parts.ka_sum[p, ax] / parts.k_sum[p]))
+        if parts.c_sum[p] > 0:
+            joint.set("damping", _num(parts.c_sum[p]))
+    ET.SubElement(body, "inertial", pos="0 0 0", mass=_num(mass), diaginertia=_vec([INERTIA] * 3))
+    ET.SubElement(body, "site", name=name, pos="0 0 0", size=SITE_SIZE)
+    if any(c[1] == p for c in parts.contacts):
+        ET.SubElement(
+            body,
+            "geom",
+            name=f"{name}_sphere",
+            type="sphere",
+            size=_num(SPHERE),
+            contype="0",
+            conaffinity="0",
+            rgba="0.2 0.6 0.2 1",
+        )
 
-    if tendons:
-        tendon = ET.SubElement(root, "tendon")
-        for i, a, b, k, c, l0 in tendons:
-            spatial = ET.SubElement(
-                tendon,
-                "spatial",
-                name=f"bond{i}",
-                stiffness=_num(k),
-                damping=_num(c),
-                springlength=_num(l0),
-                width="0.005",
-            )
-            ET.SubElement(spatial, "site", site=a)
-            ET.SubElement(spatial, "site", site=b)
 
-    if contacts:
-        pairs = ET.SubElement(root, MJCF_PAIRS)
-        for i, p, normal, height, k, c, mu in contacts:
-            m = float(masses[p])
-            pair = ET.SubElement(
-                pairs,
-                "pair",
-                name=f"bond{i}",
-                geom1=planes[(tuple(normal), height)],
-                geom2=f"{model.spec.particle[p].name}_sphere",
-                condim="3" if mu > 0 else "1",
-                friction=_vec([mu, mu, 0.0, 0.0, 0.0]),
-                solref=_vec([-k / m, -c / m]),
-                solreffriction=_vec([-k / m, -FRICTION_DAMPING]),
-                solimp=_vec([IMPEDANCE, IMPEDANCE, 0.001, 0.5, 2.0]),
-            )
-            pair.set("margin", "0")
+def _tendons(root, tendons) -> None:
+    """``<tendon>``: a spatial tendon between its two particles' sites per binary bond."""
+    if not tendons:
+        return
+    tendon = ET.SubElement(root, "tendon")
+    for i, a, b, k, c, l0 in tendons:
+        spatial = ET.SubElement(
+            tendon,
+            "spatial",
+            name=f"bond{i}",
+            stiffness=_num(k),
+            damping=_num(c),
+            springlength=_num(l0),
+            width="0.005",
+        )
+        ET.SubElement(spatial, "site", site=a)
+        ET.SubElement(spatial, "site", site=b)
 
-    keyframe = ET.SubElement(root, "keyframe")
-    ET.SubElement(
-        keyframe,
-        "key",
-        name="initial",
-        time="0",
-        qpos=_vec(x0.reshape(-1)),
-        qvel=_vec(v0.reshape(-1)),
-    )
-    ET.indent(root, space="  ")
-    return ET.tostring(root, encoding="unicode") + "\n"
+
+def _pairs(root, contacts, planes: dict, masses, particles) -> None:
+    """MJCF's explicit contact pairs: per contact bond, its plane (of ``planes``) against its
+    particle's sphere, its stiffness and damping per kg of the particle."""
+    if not contacts:
+        return
+    pairs = ET.SubElement(root, MJCF_PAIRS)
+    for i, p, normal, height, k, c, mu in contacts:
+        m = float(masses[p])
+        pair = ET.SubElement(
+            pairs,
+            "pair",
+            name=f"bond{i}",
+            geom1=planes[(tuple(normal), height)],
+            geom2=f"{particles[p].name}_sphere",
+            condim="3" if mu > 0 else "1",
+            friction=_vec([mu, mu, 0.0, 0.0, 0.0]),
+            solref=_vec([-k / m, -c / m]),
+            solreffriction=_vec([-k / m, -FRICTION_DAMPING]),
+            solimp=_vec([IMPEDANCE, IMPEDANCE, 0.001, 0.5, 2.0]),
+        )
+        pair.set("margin", "0")
 
 
 def _planes(world, contacts) -> dict:

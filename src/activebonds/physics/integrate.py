@@ -264,13 +264,7 @@ def start_velocity(
       coordinates: about P D + 1 times a step's cost per round, quadratic convergence), the
       substeps' kicks being linearly implicit in that kind's drag (:func:`advance`).
 
-    A solve has converged when its last residual is at most ``START_TOLERANCE`` of the
-    frame's displacement plus ``START_ATOL``. Where it has not, the velocity is NaN, so such
-    a candidate costs +inf and is counted as failed rather than silently biased; with a stiff
-    kind, whose landing map has kinks (a contact starting, ending or sticking within the
-    frame) where Newton's method can stall, it is the last iterate's (corrected to first
-    order by its residual, a few micrometres in such frames): the fit counts these starts
-    and says so (:func:`activebonds.identify.costs.windows.unsolved_starts`).
+    When a solve has converged, and what is returned where it has not: :func:`_solve_landing`.
 
     ``newton``: solve by Newton's method on the exact Jacobian for every kind (about P D + 1
     times a step's cost per round), differentiated implicitly (:func:`_landing_velocity`).
@@ -304,6 +298,27 @@ def start_velocity(
     t_prev = t - dt
     v = v_b - lag * dt * total_force(at_prev, topo, x_prev, v_b, t_prev) * inv_m
 
+    v_out, residual = _solve_landing(
+        params, topo, x_prev, x, v, dt, substeps, method, t_prev, psi, unroll, iterations, newton
+    )
+    return (v_out, residual) if with_residual else v_out
+
+
+def _solve_landing(
+    params, topo, x_prev, x, v, dt, substeps, method, t_prev, psi, unroll, iterations, newton
+):
+    """:func:`start_velocity`'s solve, from its estimate ``v`` at frame t - 1 (time
+    ``t_prev``): (the velocity the landing step ends with, corrected to first order by the
+    last residual; that residual where the solve has not converged, else 0).
+
+    A solve has converged when its last residual is at most ``START_TOLERANCE`` of the
+    frame's displacement plus ``START_ATOL``. Where it has not, the velocity is NaN, so such
+    a candidate costs +inf and is counted as failed rather than silently biased; with a stiff
+    kind, whose landing map has kinks (a contact starting, ending or sticking within the
+    frame) where Newton's method can stall, it is the last iterate's (corrected to first
+    order by its residual, a few micrometres in such frames): the fit counts these starts
+    and says so (:func:`activebonds.identify.costs.windows.unsolved_starts`)."""
+
     def land(v):
         return advance(params, topo, x_prev, v, dt, substeps, method, t_prev, psi, unroll)[:2]
 
@@ -335,7 +350,7 @@ def start_velocity(
     v_out = v_end + (x - x_end) / dt
     if not stiff(topo):
         v_out = jnp.where(converged, v_out, jnp.nan)
-    return (v_out, jnp.where(converged, 0.0, residual)) if with_residual else v_out
+    return v_out, jnp.where(converged, 0.0, residual)
 
 
 def rollout(

@@ -397,27 +397,9 @@ def write_animation(
     return Media(gif, video)
 
 
-def write_gif(
-    predictions: Sequence[tuple[str, Prediction]],
-    path: str | Path,
-    *,
-    fps: float = 12.0,
-    max_frames: int = 120,
-    axes: tuple[int, int] | None = None,
-    title: str = "",
-    first_frame: int = 0,
-    start_time: float = 0.0,
-) -> Path:
+def write_gif(predictions: Sequence[tuple[str, Prediction]], path: str | Path, **options) -> Path:
     """An animated GIF of the recording (black) and each model's one-step (circles, solid
-    bonds) and free-run (squares, dashed bonds) positions in the 2D projection."""
-    return write_animation(
-        predictions,
-        path,
-        mp4=False,
-        fps=fps,
-        max_frames=max_frames,
-        axes=axes,
-        title=title,
-        first_frame=first_frame,
-        start_time=start_time,
-    ).gif
+    bonds) and free-run (squares, dashed bonds) positions in the 2D projection; ``options``:
+    :func:`write_animation`'s (``fps``, ``max_frames``, ``axes``, ``title``, ``first_frame``,
+    ``start_time``)."""
+    return write_animation(predictions, path, mp4=False, **options).gif

@@ -37,7 +37,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..data import Trajectory
-from ..errors import InputError
+from ..errors import InputError, option_error
 from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
 from ..identify.judge.baselines import zero_force_predictions
 from ..identify.judge.metrics import (
@@ -184,9 +184,7 @@ def evaluate(
             integrator=integrator,
         )
     except ValidationError as e:  # as the command line's options: the first problem
-        first = e.errors()[0]
-        name = "--" + str(first["loc"][0]).replace("_", "-") if first["loc"] else "options"
-        raise InputError(name, first["msg"].removeprefix("Value error, ")) from None
+        raise option_error(e) from None
     if int(horizon) < 1:
         raise InputError("--horizon", f"must be at least 1, got {horizon}")
     start = settings.frames[0]

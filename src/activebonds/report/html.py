@@ -10,7 +10,6 @@ from __future__ import annotations
 import base64
 import html
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -21,39 +20,27 @@ import numpy as np
 from ..document import Figure, Marked, Section, Table
 from ..errors import InputError
 from ..identify import stages
-from ..identify.judge.ahead import DEFAULT_AHEAD
-from ..identify.judge.ahead import comparisons as ahead_comparisons
 from ..identify.judge.baselines import zero_force_predictions
-from ..identify.judge.metrics import FreeRunMetrics
-from ..identify.judge.predictions import rms_mm
-from ..identify.judge.verdict import Comparison, comparisons_from, free_run_advice, verdict
-from ..identify.judge.verdict import lines as verdict_lines
-from ..identify.stages import baselines, validation
-from ..model.names import NEAR_BOUND, parameter_rows
-from . import animation, plots
+from ..identify.stages import baselines
+from ..model.names import NEAR_BOUND
+from . import animation, gait_plots, plots
 from .files import check_replaceable, staged_directory, write_html
 from .predict import Prediction, default_frames, predict_run
 from .runs import RunRecord, load_run
+from .tables import (
+    Beyond,
+    beyond_scores,
+    errors_table,
+    fmt,
+    free_run_table,
+    neural_table,
+    parameters_table,
+    searched_model,
+    summary_table,
+    verdict_text,
+)
 
 PLAYER_IDS = ("canvas", "play", "frame", "frame-label", "mode", "zoom", "speed")
-
-
-_OPTIMIZERS = {"es": "the paper's evolution strategy (es)", "random": "random search (random)"}
-
-
-def fmt(x: object, digits: int = 4) -> str:
-    """Numbers to short text (NaN/None as an em dash); other values as str."""
-    if x is None:
-        return "—"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, int | np.integer):
-        return str(int(x))
-    if isinstance(x, float | np.floating):
-        if not math.isfinite(float(x)):
-            return "—" if math.isnan(float(x)) else ("∞" if x > 0 else "−∞")
-        return f"{float(x):.{digits}g}"
-    return str(x)
 
 
 def _asset(name: str) -> str:
@@ -198,224 +185,6 @@ def write_comparison_report(
 # ----------------------------------------------------------------------------- one run
 
 
-def _markers_text(pred: Prediction) -> str:
-    return ", ".join(
-        n if n == m else f"{n} ← {m}" for n, m in zip(pred.names, pred.markers, strict=True)
-    )
-
-
-def summary_table(record: RunRecord, pred: Prediction) -> Table:
-    """The run at a glance: inputs, settings, outcome, versions, wall time."""
-    meta, st, s = record.meta, record.status, record.settings
-    inputs = meta.get("inputs", {})
-    w = record.window
-    start = s.frames[0]
-    gens_done = int(st.get("generation", len(record.history.get("generation", []))))
-    per = ", ".join(
-        f"{n} {fmt(v, 3)}" for n, v in zip(pred.names, pred.one_step_rms_mm, strict=True)
-    )
-    versions = ", ".join(f"{k} {v}" for k, v in sorted(meta.get("versions", {}).items()))
-    be = meta.get("backend", {})
-    wall = st.get("wall_seconds")
-    rows = [
-        ("run", str(record.path)),
-        ("status", st.get("status", "unknown") + ("" if record.has_best else " (no best model)")),
-        ("model", f"{record.model.name} ({inputs.get('model', {}).get('path', 'in memory')})"),
-        ("bond variant", s.bonds),
-        ("mass scale fixed by", record.model.spec.mass_scale()),
-        ("data", inputs.get("data", {}).get("path", w.source or "in memory")),
-        ("markers (particle ← marker)", _markers_text(pred)),
-        (
-            "frames fitted",
-            f"{start}:{start + w.n_frames} ({w.n_frames} frames, {w.duration:.4g} s)",
-        ),
-        ("rate", f"{w.rate:g} Hz"),
-        ("optimizer", _OPTIMIZERS.get(s.optimizer, s.optimizer)),
-        ("population", s.population),
-        ("generations", f"{gens_done} of {s.generations}"),
-        ("seed", s.seed),
-        (
-            "cost",
-            f"horizon {s.es_horizon}, {s.es_integrator} with {s.es_substeps} substep(s), {s.precision}",
-        ),
-        ("refinement", _refinement_text(s)),
-        ("best RMS error (fit cost)", f"{fmt(st.get('best_rms_mm'))} mm"),
-        ("best RMS per particle (one-step)", f"{per} mm"),
-        ("failed evaluations", st.get("failed_evaluations", "—")),
-        (
-            "wall time (the run's, every session)",
-            "—" if wall is None else f"{float(wall):.4g} s",
-        ),
-        ("versions", versions),
-        ("backend", f"{be.get('backend', '?')} ({be.get('platform', '?')}), x64 {be.get('x64')}"),
-        ("created", meta.get("created", "—")),
-        ("command", meta.get("command", "—")),
-    ]
-    return Table(columns=("", ""), rows=rows, key_value=True, caption="Run")
-
-
-def _refinement_text(s) -> str:
-    if s.refine == "none":
-        return "none"
-    horizons = ", ".join(str(h) for h in s.horizon)
-    return f"Levenberg-Marquardt (optimistix), {s.cost} cost, horizons {horizons}"
-
-
-WORSE = "not better than zero force"
-
-
-def _judged(model_mm: float, zero_mm: float):
-    """The model's number, marked (red) where it does not beat zero force."""
-    v = verdict(model_mm, zero_mm)
-    return Marked(float(model_mm), v.text()) if v.better is False else model_mm
-
-
-def zero_force_one_step_mm(pred: Prediction) -> tuple[np.ndarray, np.ndarray | None]:
-    """The zero-force predictor's one-step RMS (mm) per particle on the terms of the model's
-    (:attr:`Prediction.one_step_rms_mm`), over the fitted frames and beyond them."""
-    one, _ = zero_force_predictions(pred.recorded, 1)
-    fit, n = pred.fit_frames, pred.n_frames
-    beyond = rms_mm(one, pred.recorded, slice(fit, n)) if n > fit else None
-    return rms_mm(one, pred.recorded, slice(0, fit)), beyond
-
-
-def errors_table(
-    pred: Prediction,
-    caption: str = "RMS position error per particle (mm)",
-    beyond: Beyond | None = None,
-) -> Table:
-    """Per particle, the model's one-step and free-run RMS beside zero force's one-step RMS,
-    on the fitted frames and beyond them; red where the model is not better. With ``beyond``
-    (the frames beyond scored as ``evaluate`` scores them), its one step and K frames ahead
-    beyond the fit, each beside zero force's."""
-    zero_fit, zero_beyond = zero_force_one_step_mm(pred)
-    cols = ["particle", "marker", "one-step (fit)", "zero force (fit)", "free run (fit)"]
-    scored = beyond.comparisons if beyond is not None and pred.extended else ()
-    if pred.extended:
-        cols += ["one-step (beyond)", "zero force (beyond)", "free run (beyond)"]
-    for c in scored[1:]:
-        cols += [f"{c.horizon} ahead (beyond)", f"zero force {c.horizon} ahead (beyond)"]
-    rows = []
-    for p, (n, m) in enumerate(zip(pred.names, pred.markers, strict=True)):
-        one = float(pred.one_step_rms_mm[p])
-        row = [n, m, _judged(one, zero_fit[p]), float(zero_fit[p]), float(pred.free_run_rms_mm[p])]
-        if pred.extended:
-            one, zero = float(pred.one_step_rms_mm_beyond[p]), float(zero_beyond[p])
-            if scored:  # evaluate's terms, as the verdict beyond
-                one, zero = scored[0].model_per_marker[p], scored[0].zero_force_per_marker[p]
-            row += [_judged(one, zero), zero, float(pred.free_run_rms_mm_beyond[p])]
-        for c in scored[1:]:
-            row += [
-                _judged(c.model_per_marker[p], c.zero_force_per_marker[p]),
-                c.zero_force_per_marker[p],
-            ]
-        rows.append(row)
-    caption += f"; red: {WORSE} (the constant-velocity predictor, same terms)"
-    if pred.extended:
-        caption += (
-            "; beyond: the frames after the fitted ones as a window of their own, as "
-            "evaluate --frames scores them (the free run from their first two frames"
-            + (
-                ", the one-step and K-ahead predictions from their third frame on)"
-                if scored
-                else ")"
-            )
-        )
-    return Table(columns=cols, rows=rows, caption=caption)
-
-
-@dataclass(frozen=True)
-class Beyond:
-    """The frames beyond the fit scored as ``evaluate --frames START:STOP --horizon K`` scores
-    them (:func:`~activebonds.identify.judge.ahead.comparisons`): their frames [start, stop) of the
-    recording and the comparisons, one step then K frames ahead, overall and per marker."""
-
-    frames: tuple[int, int]
-    comparisons: tuple[Comparison, ...]
-
-    @classmethod
-    def from_record(cls, record: dict) -> Beyond:
-        """From an evaluation's record (:meth:`.evaluate.Evaluation.record`, as ``auto``'s
-        evaluation.json keeps its held-out one)."""
-        a, b = record["frames"]
-        return cls((int(a), int(b)), tuple(comparisons_from(record["comparisons"])))
-
-    def lines(self) -> list[str]:
-        a, b = self.frames
-        return verdict_lines(f"frames beyond the fit {a}:{b}", self.comparisons)
-
-
-def beyond_scores(record: RunRecord, pred: Prediction, horizon: int = DEFAULT_AHEAD) -> Beyond:
-    """The frames the report predicts beyond the fitted window, scored by ``evaluate``'s code
-    as ``evaluate RUN/best_model.toml DATA --frames START:STOP --horizon HORIZON`` scores them:
-    a window of their own (the first prediction from their first two frames; the model's time
-    starting at their first frame), the run's substeps and integrator."""
-    from ..data import Trajectory
-
-    s, fit = record.settings, pred.fit_frames
-    rec = pred.recorded[fit:]
-    window = Trajectory(rec, np.isfinite(rec).all(axis=-1), pred.markers, 1.0 / pred.dt)
-    found = ahead_comparisons(
-        record.model, window, horizon, substeps=s.substeps, method=s.integrator
-    )
-    start = int(s.frames[0])
-    return Beyond((start + fit, start + pred.n_frames), tuple(found))
-
-
-def verdict_text(record: RunRecord, pred: Prediction, beyond: Beyond | None = None) -> list[str]:
-    """The verdicts in words (:mod:`activebonds.identify.judge.verdict`): on the fitted frames and,
-    after ``fit --validate``, the validation frames (one step and K frames ahead, overall and
-    per marker, as ``fit`` printed them), and on the frames beyond the fitted window
-    (``beyond``: one step and K frames ahead, as ``evaluate`` scores them)."""
-    out = []
-    fitted = record.records.get(baselines.NAME, {})
-    out += verdict_lines("fitted frames", comparisons_from(fitted.get("judged")))
-    if "fitted" in fitted:
-        run = FreeRunMetrics.from_dict(fitted["fitted"]["model"]).free_run_rms_mm
-        out += [a for a in (free_run_advice(run, fitted.get("holds")),) if a is not None]
-    held = record.records.get(validation.NAME)
-    if held is not None and "judged" in held:
-        a, b = held["frames"]
-        out += verdict_lines(f"validation frames {a}:{b}", comparisons_from(held["judged"]))
-    if beyond is not None:
-        out += beyond.lines()
-    return out
-
-
-def free_run_table(record: RunRecord) -> Table | None:
-    """One-step RMS, free-run RMS and frames within the threshold
-    (:func:`activebonds.identify.judge.metrics.free_run_metrics`) of the model and the zero-force
-    predictor on the fitted frames and, after ``fit --validate``, on the validation frames,
-    as the baselines and validation stages recorded them."""
-    s = record.settings
-    start = s.frames[0]
-    fitted = record.records.get(baselines.NAME, {}).get("fitted")
-    if fitted is None:
-        return None
-    rows = baselines.free_run_rows(f"fitted {start}:{start + record.window.n_frames}", fitted)
-    held = record.records.get(validation.NAME)
-    if held is not None:
-        frames = held["frames"]
-        rows += baselines.free_run_rows(f"validation {frames[0]}:{frames[1]}", held)
-    threshold = FreeRunMetrics.from_dict(fitted["model"]).threshold_mm
-    return Table(
-        (
-            "",
-            "frames",
-            "one-step RMS (mm)",
-            "free-run RMS (mm)",
-            f"frames within {threshold:g} mm (median)",
-            "starts",
-        ),
-        rows,
-        "Free run. Free-run RMS: one run from the window's first two frames. Frames within "
-        f"{threshold:g} mm: free runs from several start frames (spread over the window's "
-        "first half), each counted until its worst marker is first off by more than "
-        f"{threshold:g} mm; the median over starts, '>=' when runs reached the window's end "
-        "first (censored). Zero force: constant velocity from the two start frames.",
-    )
-
-
 def gait_section(record: RunRecord, pred: Prediction, fig_dir: Path) -> Section | None:
     """The gait of the model's free runs (:mod:`activebonds.report.gait_runs`), when the
     model puts particles in contact with a surface (its feet) or has a rhythmic drive (its
@@ -452,8 +221,8 @@ def gait_section(record: RunRecord, pred: Prediction, fig_dir: Path) -> Section 
         )
     except InputError:
         return None
-    heights = plots.gait_heights(found, fig_dir / "gait_heights", first_frame=first)
-    cycle = plots.gait_cycle(found, fig_dir / "gait_cycle")
+    heights = gait_plots.gait_heights(found, fig_dir / "gait_heights", first_frame=first)
+    cycle = gait_plots.gait_cycle(found, fig_dir / "gait_cycle")
     rows = [
         [Marked(c, "misses the target") if c == "FAIL" else c for c in row] for row in found.rows()
     ]
@@ -493,37 +262,6 @@ def stage_sections(record: RunRecord, pred: Prediction) -> list[Section]:
         if stage.name in record.records
         for section in stage.sections(record.records[stage.name], view)
     ]
-
-
-def searched_model(record: RunRecord):
-    """The model whose bounds the fit searched: the run's input model (a best model written
-    without min/max derives new bounds around its values); the best model if it is gone."""
-    from ..identify.problem import variant
-    from ..identify.rundir import RunDir
-
-    try:
-        return variant(RunDir(record.path).input_model(), record.settings.bonds)
-    except (InputError, ValueError):
-        return None
-
-
-def parameters_table(record: RunRecord, searched=None) -> Table:
-    """Each free parameter by its readable name, its value, search bounds, and "near min" or
-    "near max" within 1 % of a bound (names.NEAR_BOUND); the machine key last."""
-    rows = [
-        (r.name, r.value, r.lower, r.upper, r.log, r.bound_text(), r.key)
-        for r in parameter_rows(record.model, bounds=searched)
-    ]
-    columns = ("parameter", "value", "min", "max", "log search", "at a bound", "key")
-    return Table(columns, rows, "Identified parameters")
-
-
-def neural_table(pred: Prediction, labels: Sequence[str]) -> Table:
-    rows = [("saturated samples (|a| > 0.95) along the free run", pred.saturated_share)]
-    for b in np.flatnonzero(pred.neural):
-        rows.append((f"  neuron {labels[b]}", float(pred.saturated_per_neuron[b])))
-    rows.append(("near-zero weights (|w| < 1 % of the weight range)", pred.near_zero_weight_share))
-    return Table(("", ""), rows, "Neurons", key_value=True)
 
 
 def _report_paths(run: Path, out: str | Path | None) -> tuple[Path, Path]:
@@ -606,116 +344,23 @@ def run_sections(
     params = plots.parameters(model, fig_dir / "parameters", bounds=searched)
     variants = plots.variant_success(record.history, fig_dir / "variants")
     media = animation.write_animation([(record.label, pred)], fig_dir / "animation.gif", **frame_at)
-    extra = []
-    if not pred.extended:
-        extra.append(
-            "Only the fitted window is shown: the original recording is gone, has changed or "
-            "holds no later frame, or no more frames were asked for."
-        )
-    if pred.diverged_at is not None:
-        extra.append(f"The free run went non-finite at frame {first + pred.diverged_at}.")
     sections = [
-        Section(
-            "Summary",
-            text=verdict_text(record, pred, beyond),
-            tables=[
-                t
-                for t in (
-                    summary_table(record, pred),
-                    free_run_table(record),
-                    errors_table(pred, beyond=beyond),
-                )
-                if t is not None
-            ],
-            anchor="summary",
-        ),
+        _summary_section(record, pred, beyond),
         *stage_sections(record, pred),
         Section(
             "Convergence",
             figures=[Figure(conv[0], "Best and population-median cost as RMS position error.")],
             anchor="convergence",
         ),
-        Section(
-            "Recorded vs model",
-            text=[
-                f"Frames {first}–{first + pred.fit_frames - 1} of the recording were fitted"
-                + (
-                    f"; frames {first + pred.fit_frames}–{first + pred.n_frames - 1} test "
-                    "generalisation."
-                    if pred.extended
-                    else "."
-                )
-            ],
-            animation=animation.payload(
-                [(record.label, pred)], title="recorded vs model", **frame_at
-            ),
-            figures=[
-                Figure(
-                    traj[0],
-                    "Positions against the recording's frame number (time on top): recorded, "
-                    "one-step predictions, free run.",
-                ),
-                Figure(
-                    errors[0],
-                    "Each frame's one-step error (RMS over the markers), the model's beside "
-                    "zero force's, on a log scale; red where the model is worse. Where it "
-                    "rises far above the markers' noise in some frames only, the model misses "
-                    "forces there (a contact, an impact).",
-                ),
-                *(
-                    [Figure(media.mp4, f"The animation as a video ({media.mp4.name}).")]
-                    if media.mp4
-                    else []
-                ),
-            ],
-            notes=[
-                *extra,
-                f"The same animation is saved as {media.gif.name}"
-                + (f" and {media.mp4.name}" if media.mp4 else "")
-                + " in the figures folder.",
-                *([media.note] if media.note else []),
-            ],
-            anchor="animation",
-        ),
-        Section(
-            "Parameters",
-            text=[
-                "Each parameter is named by its bond's kind and particles (or its type); the "
-                "key column is its name in uncertainty.csv and the run's files. 'near min' or "
-                f"'near max': the value is within {NEAR_BOUND * 100:g} % of the search range from "
-                "that bound (of the log range for a log-searched parameter), where the "
-                "search stopped rather than where the data put it: widen the bound and fit "
-                "again. Free masses under total_mass are never flagged (their weights' "
-                "common scale changes nothing)."
-            ],
-            figures=[
-                Figure(params[0], "Identified parameters within their bounds (search space).")
-            ],
-            tables=[parameters_table(record, searched)],
-            anchor="parameters",
-        ),
+        _animation_section(record, pred, frame_at, traj[0], errors[0], media),
+        _parameters_section(record, params[0], searched),
     ]
     gait = gait_section(record, pred, fig_dir)
     if gait is not None:  # after the animation
         at = next(i for i, sec in enumerate(sections) if sec.anchor == "animation") + 1
         sections.insert(at, gait)
     if pred.neural.any():
-        heat = plots.weight_heatmap(model, fig_dir / "weights")
-        act = plots.activations(pred, labels, fig_dir / "activations", **frame_at)
-        sections.append(
-            Section(
-                "Neurons",
-                figures=[
-                    Figure(
-                        heat[0],
-                        "Input weights of each neuron (length and rate of the other bonds).",
-                    ),
-                    Figure(act[0], "Activations along the free run."),
-                ],
-                tables=[neural_table(pred, labels)],
-                anchor="neurons",
-            )
-        )
+        sections.append(_neurons_section(pred, model, labels, fig_dir, frame_at))
     sections.append(
         Section(
             "Mutation variants",
@@ -724,3 +369,111 @@ def run_sections(
         )
     )
     return sections
+
+
+def _summary_section(record: RunRecord, pred: Prediction, beyond: Beyond | None) -> Section:
+    """The verdicts in words and the run's tables: at a glance, free runs, errors."""
+    return Section(
+        "Summary",
+        text=verdict_text(record, pred, beyond),
+        tables=[
+            t
+            for t in (
+                summary_table(record, pred),
+                free_run_table(record),
+                errors_table(pred, beyond=beyond),
+            )
+            if t is not None
+        ],
+        anchor="summary",
+    )
+
+
+def _animation_section(
+    record: RunRecord, pred: Prediction, frame_at: dict, traj: Path, errors: Path, media
+) -> Section:
+    """Recorded vs model: the player, the trajectories' and the one-step errors' figures
+    (``traj``, ``errors``), the animation's video and files (``media``)."""
+    first = frame_at["first_frame"]
+    extra = []
+    if not pred.extended:
+        extra.append(
+            "Only the fitted window is shown: the original recording is gone, has changed or "
+            "holds no later frame, or no more frames were asked for."
+        )
+    if pred.diverged_at is not None:
+        extra.append(f"The free run went non-finite at frame {first + pred.diverged_at}.")
+    return Section(
+        "Recorded vs model",
+        text=[
+            f"Frames {first}–{first + pred.fit_frames - 1} of the recording were fitted"
+            + (
+                f"; frames {first + pred.fit_frames}–{first + pred.n_frames - 1} test "
+                "generalisation."
+                if pred.extended
+                else "."
+            )
+        ],
+        animation=animation.payload([(record.label, pred)], title="recorded vs model", **frame_at),
+        figures=[
+            Figure(
+                traj,
+                "Positions against the recording's frame number (time on top): recorded, "
+                "one-step predictions, free run.",
+            ),
+            Figure(
+                errors,
+                "Each frame's one-step error (RMS over the markers), the model's beside "
+                "zero force's, on a log scale; red where the model is worse. Where it "
+                "rises far above the markers' noise in some frames only, the model misses "
+                "forces there (a contact, an impact).",
+            ),
+            *(
+                [Figure(media.mp4, f"The animation as a video ({media.mp4.name}).")]
+                if media.mp4
+                else []
+            ),
+        ],
+        notes=[
+            *extra,
+            f"The same animation is saved as {media.gif.name}"
+            + (f" and {media.mp4.name}" if media.mp4 else "")
+            + " in the figures folder.",
+            *([media.note] if media.note else []),
+        ],
+        anchor="animation",
+    )
+
+
+def _parameters_section(record: RunRecord, figure: Path, searched) -> Section:
+    """The identified parameters: their figure within the bounds ``searched`` and table."""
+    return Section(
+        "Parameters",
+        text=[
+            "Each parameter is named by its bond's kind and particles (or its type); the "
+            "key column is its name in uncertainty.csv and the run's files. 'near min' or "
+            f"'near max': the value is within {NEAR_BOUND * 100:g} % of the search range from "
+            "that bound (of the log range for a log-searched parameter), where the "
+            "search stopped rather than where the data put it: widen the bound and fit "
+            "again. Free masses under total_mass are never flagged (their weights' "
+            "common scale changes nothing)."
+        ],
+        figures=[Figure(figure, "Identified parameters within their bounds (search space).")],
+        tables=[parameters_table(record, searched)],
+        anchor="parameters",
+    )
+
+
+def _neurons_section(pred: Prediction, model, labels, fig_dir: Path, frame_at: dict) -> Section:
+    """The neurons: their input weights, their activations along the free run, saturation."""
+    heat = plots.weight_heatmap(model, fig_dir / "weights")
+    act = plots.activations(pred, labels, fig_dir / "activations", **frame_at)
+    return Section(
+        "Neurons",
+        figures=[
+            Figure(heat[0], "Input weights of each neuron (length and rate of the other bonds)."),
+            Figure(act[0], "Activations along the free run."),
+        ],
+        tables=[neural_table(pred, labels)],
+        anchor="neurons",
+    )

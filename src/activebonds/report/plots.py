@@ -129,72 +129,11 @@ def convergence_figure(
         band = any(len(s.histories) > 1 for s in series)
     drawn = False
     for i, s in enumerate(series):
-        color = colors[i % len(colors)]
-        rms = [history_rms_mm(h) for h in s.histories]
-        if not rms or all(len(r["best"]) == 0 for r in rms):
-            continue
-        best, median = _stack([r["best"] for r in rms]), _stack([r["median"] for r in rms])
-        gens = np.arange(1, best.shape[1] + 1)
-        n = len(rms)
-        if band and n > 1:
-            q = _nanpercentile(best, [25, 50, 75])
-            ax.fill_between(gens, q[0], q[2], color=color, alpha=0.25, linewidth=0)
-            ax.plot(gens, q[1], color=color, lw=1.8, label=f"{s.label}: best (median of {n}, IQR)")
-            finals.append(_last(gens, q[1], color))
-            ax.plot(
-                gens,
-                _nanpercentile(median, [50])[0],
-                color=color,
-                lw=1,
-                ls="--",
-                label=f"{s.label}: population median",
-            )
-        else:
-            for k in range(n):
-                lab = s.label if n == 1 else f"{s.label} #{k + 1}"
-                ax.plot(gens, best[k], color=color, lw=1.6, label=f"{lab}: best")
-                finals.append(_last(gens, best[k], color))
-                ax.plot(
-                    gens, median[k], color=color, lw=1, ls="--", label=f"{lab}: population median"
-                )
-        drawn = True
+        drawn |= _series_lines(ax, s, colors[i % len(colors)], band, finals)
     if drawn:
         ax.set_yscale("log")
-        lo, hi = ax.get_ylim()
-        styles = [":", "-.", (0, (5, 2, 1, 2)), (0, (1, 3))]
-        for k, (label, value) in enumerate(references):
-            if value is None or not np.isfinite(value) or not lo / 100 <= value <= hi * 100:
-                continue
-            ax.axhline(
-                value, color="0.35", lw=1.1, ls=styles[k % len(styles)],
-                label=f"{label}: {value:.4g} mm",
-            )  # fmt: skip
-        marked = [f for f in finals if f is not None]
-        values = [v for _, v, _ in marked]
-        if values:  # the decades around each final value are in view (labelled ticks)
-            lo, hi = ax.get_ylim()
-            below = 10.0 ** math.floor(math.log10(min(values)))
-            above = 10.0 ** math.ceil(math.log10(max(values)))
-            ax.set_ylim(min(lo, below / 1.15), max(hi, above * 1.15))
-        lo, hi = ax.get_ylim()
-        ax.yaxis.set_major_locator(mticker.FixedLocator(_decade_ticks(lo, hi, values)))
-        plain = mticker.FuncFormatter(lambda v, _: f"{v:g}")
-        ax.yaxis.set_major_formatter(plain)
-        ax.yaxis.set_minor_formatter(plain if hi / lo < 30 else mticker.NullFormatter())
-        for gen, value, color in marked:
-            ax.plot([gen], [value], "o", color=color, ms=4)
-            ax.annotate(
-                f"{value:.3g} mm",
-                (gen, value),
-                xytext=(-4, -9),
-                textcoords="offset points",
-                ha="right",
-                va="top",
-                fontsize=8,
-                color=color,
-                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
-            )
-        fig.activebonds_final = values
+        _reference_lines(ax, references)
+        fig.activebonds_final = _mark_finals(ax, [f for f in finals if f is not None])
         ax.legend(fontsize=8, loc="upper right")
     else:
         ax.text(
@@ -205,6 +144,82 @@ def convergence_figure(
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     return fig
+
+
+def _series_lines(ax, s: Series, color, band: bool, finals: list) -> bool:
+    """One series' best (solid) and population-median (dashed) lines in ``color``: medians
+    across its runs with the best cost's interquartile range shaded where ``band`` and it has
+    several, else each run's; the last point of each best line appended to ``finals``. False
+    where it has no generation."""
+    rms = [history_rms_mm(h) for h in s.histories]
+    if not rms or all(len(r["best"]) == 0 for r in rms):
+        return False
+    best, median = _stack([r["best"] for r in rms]), _stack([r["median"] for r in rms])
+    gens = np.arange(1, best.shape[1] + 1)
+    n = len(rms)
+    if band and n > 1:
+        q = _nanpercentile(best, [25, 50, 75])
+        ax.fill_between(gens, q[0], q[2], color=color, alpha=0.25, linewidth=0)
+        ax.plot(gens, q[1], color=color, lw=1.8, label=f"{s.label}: best (median of {n}, IQR)")
+        finals.append(_last(gens, q[1], color))
+        ax.plot(
+            gens,
+            _nanpercentile(median, [50])[0],
+            color=color,
+            lw=1,
+            ls="--",
+            label=f"{s.label}: population median",
+        )
+    else:
+        for k in range(n):
+            lab = s.label if n == 1 else f"{s.label} #{k + 1}"
+            ax.plot(gens, best[k], color=color, lw=1.6, label=f"{lab}: best")
+            finals.append(_last(gens, best[k], color))
+            ax.plot(gens, median[k], color=color, lw=1, ls="--", label=f"{lab}: population median")
+    return True
+
+
+def _reference_lines(ax, references: Sequence[tuple[str, float | None]]) -> None:
+    """(label, RMS mm) as horizontal lines, those within 100x of the log axis' range."""
+    lo, hi = ax.get_ylim()
+    styles = [":", "-.", (0, (5, 2, 1, 2)), (0, (1, 3))]
+    for k, (label, value) in enumerate(references):
+        if value is None or not np.isfinite(value) or not lo / 100 <= value <= hi * 100:
+            continue
+        ax.axhline(
+            value, color="0.35", lw=1.1, ls=styles[k % len(styles)],
+            label=f"{label}: {value:.4g} mm",
+        )  # fmt: skip
+
+
+def _mark_finals(ax, marked: list[tuple[float, float, str]]) -> list[float]:
+    """Each final best value (generation, value, colour) marked and written beside its point,
+    the log axis' labelled ticks (powers of ten) bracketing them; returns the values."""
+    values = [v for _, v, _ in marked]
+    if values:  # the decades around each final value are in view (labelled ticks)
+        lo, hi = ax.get_ylim()
+        below = 10.0 ** math.floor(math.log10(min(values)))
+        above = 10.0 ** math.ceil(math.log10(max(values)))
+        ax.set_ylim(min(lo, below / 1.15), max(hi, above * 1.15))
+    lo, hi = ax.get_ylim()
+    ax.yaxis.set_major_locator(mticker.FixedLocator(_decade_ticks(lo, hi, values)))
+    plain = mticker.FuncFormatter(lambda v, _: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain if hi / lo < 30 else mticker.NullFormatter())
+    for gen, value, color in marked:
+        ax.plot([gen], [value], "o", color=color, ms=4)
+        ax.annotate(
+            f"{value:.3g} mm",
+            (gen, value),
+            xytext=(-4, -9),
+            textcoords="offset points",
+            ha="right",
+            va="top",
+            fontsize=8,
+            color=color,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+        )
+    return values
 
 
 def _last(gens: np.ndarray, values: np.ndarray, color) -> tuple[float, float, str] | None:
@@ -527,110 +542,4 @@ def activations(
     if pred.neural.any():
         ax.legend(fontsize=7, loc="lower right")
     ax.grid(True, alpha=0.3)
-    return save(fig, stem)
-
-
-def gait_heights(found, stem: str | Path, *, first_frame: int = 0) -> list[Path]:
-    """The feet's heights (mm, along up) against the recording's frame number: the recorded
-    window (black) and each free run of the model (orange, from its start frame, past the
-    window's end where it runs on). ``found``: a
-    :class:`~activebonds.report.gait_runs.GaitEvaluation`; the y range follows the
-    recording."""
-    from . import gait as g
-
-    ref = found.recording
-    rec = g.vertical(found.recorded, ref.up)
-    feet = list(ref.feet)
-    fig, axes = _subplots(
-        len(feet),
-        1,
-        figsize=(9.0, 1.6 * len(feet) + 0.9),
-        sharex=True,
-        squeeze=False,
-        layout="constrained",
-    )
-    t0 = int(first_frame)
-    for row, (foot, name) in enumerate(zip(feet, found.feet, strict=True)):
-        ax = axes[row, 0]
-        h = to_mm(rec[:, foot])
-        ax.plot(t0 + np.arange(len(h)), h, color=RECORDED, lw=1.5, label="recorded")
-        for i, (s, run) in enumerate(zip(found.starts, found.model_runs, strict=True)):
-            frames = t0 + s + 1 + np.arange(run.shape[0])
-            ax.plot(
-                frames,
-                to_mm(g.vertical(run, ref.up)[:, foot]),
-                color=FREE_RUN,
-                lw=0.9,
-                alpha=0.6,
-                label="model's free runs" if i == 0 else None,
-            )
-        if np.isfinite(h).any():
-            ax.set_ylim(*_limits(h))
-        ax.set_ylabel(f"{name} (mm)", fontsize=9)
-        ax.tick_params(labelsize=7)
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("frame (of the recording)", fontsize=8)
-    fig.suptitle(
-        f"Feet heights: recorded vs {len(found.starts)} free runs of {found.run_frames} frames",
-        fontsize=10,
-    )
-    return save(fig, stem)
-
-
-def gait_cycle(found, stem: str | Path) -> list[Path]:
-    """One panel per particle: its height (mm, along up) over one stride (phase 0-1) in the
-    recording's mean gait (black) and each free run's cycle average after its best phase
-    shift (orange), as (iv) compares them."""
-    from . import gait as g
-
-    ref = found.recording
-    names = found.particles
-    phase = np.arange(g.PHASE_BINS) / g.PHASE_BINS
-    mean_h = to_mm(g.vertical(ref.gait, ref.up))  # [bins, P]
-    n = len(names)
-    cols = min(n, 4)
-    rows = math.ceil(n / cols)
-    fig, axes = _subplots(
-        rows,
-        cols,
-        figsize=(2.6 * cols + 0.6, 2.0 * rows + 0.9),
-        squeeze=False,
-        layout="constrained",
-    )
-    averages = []
-    for run, score in zip(found.model_runs, found.model.runs, strict=True):
-        if not np.isfinite(run).all():
-            continue
-        t = score.period_frames if np.isfinite(score.period_frames) else ref.period_frames
-        avg = g.cycle_average(run, t)
-        if np.isfinite(avg).all():
-            averages.append(np.roll(avg, g.best_shift(avg, ref.gait)[0], axis=0))
-    for p in range(rows * cols):
-        ax = axes[p // cols, p % cols]
-        if p >= n:
-            ax.set_visible(False)
-            continue
-        for i, avg in enumerate(averages):
-            ax.plot(
-                phase,
-                to_mm(g.vertical(avg, ref.up)[:, p]),
-                color=FREE_RUN,
-                lw=0.9,
-                alpha=0.6,
-                label="model's cycle averages" if i == 0 else None,
-            )
-        ax.plot(phase, mean_h[:, p], color=RECORDED, lw=1.8, label="recorded mean gait")
-        if np.isfinite(mean_h[:, p]).any():
-            ax.set_ylim(*_limits(mean_h[:, p]))
-        ax.set_title(names[p], fontsize=9)
-        ax.tick_params(labelsize=7)
-        if p % cols == 0:
-            ax.set_ylabel("height (mm)", fontsize=8)
-        if p // cols == rows - 1:
-            ax.set_xlabel("phase (strides)", fontsize=8)
-    axes[0, 0].legend(fontsize=6, loc="best")
-    fig.suptitle(
-        "One stride: the recorded mean gait and the free runs' cycle averages (best phase)",
-        fontsize=10,
-    )
     return save(fig, stem)

@@ -159,24 +159,36 @@ def levenberg_marquardt(
         system, grad = linearize(y, r)
         if scaling is not None:  # MINPACK's rule: D never shrinks (More 1978)
             scaling = jax.tree.map(jnp.maximum, scaling, diagonal(system))
-        variance = 2.0 * loss / dof  # sigma^2
-        trusted = linear_enough is None or linear_enough(y)
-        if scale is not None and -change < 0.5 * variance and trusted:
-            jitter = JITTER * float(scale(system))
-            if scaling is not None:  # as a diagonal: the step's program compiled once
-                jitter = _times(jitter, jax.tree.map(jnp.ones_like, scaling))
-            gauss_newton = step(system, jitter)
-            distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
-            if distance < precision**2:
-                return (
-                    y,
-                    steps,
-                    (
-                        f"converged to {precision:g} of a standard deviation "
-                        "(a Gauss-Newton step would move the estimate less)"
-                    ),
-                )
+        if _precise(
+            y, loss, change, dof, system, grad, scaling, step, scale, linear_enough, precision
+        ):
+            return (
+                y,
+                steps,
+                (
+                    f"converged to {precision:g} of a standard deviation "
+                    "(a Gauss-Newton step would move the estimate less)"
+                ),
+            )
     return y, steps, f"stopped at the step limit ({max_steps}) before converging"
+
+
+def _precise(y, loss, change, dof, system, grad, scaling, step, scale, linear_enough, precision):
+    """:func:`levenberg_marquardt`'s precision test at an accepted point ``y`` (its ``loss``,
+    the step's ``change`` of it, the linearisation ``system`` and ``grad``): where the step
+    lowered the cost by less than half the residuals' variance and the Gauss-Newton model is
+    trusted there, whether a Gauss-Newton step would move the estimate less than
+    ``precision`` of a standard deviation (False without ``scale``)."""
+    variance = 2.0 * loss / dof  # sigma^2
+    trusted = linear_enough is None or linear_enough(y)
+    if not (scale is not None and -change < 0.5 * variance and trusted):
+        return False
+    jitter = JITTER * float(scale(system))
+    if scaling is not None:  # as a diagonal: the step's program compiled once
+        jitter = _times(jitter, jax.tree.map(jnp.ones_like, scaling))
+    gauss_newton = step(system, jitter)
+    distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
+    return distance < precision**2
 
 
 @jax.jit

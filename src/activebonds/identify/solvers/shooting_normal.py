@@ -86,26 +86,7 @@ def make_normal(
         measured = jnp.where(wt > 0, wt * (pos - tgt).ravel(), 0.0)
         return measured, jnp.concatenate([xs[-1].ravel(), vs[-1].ravel()])
 
-    jac = jax.jacfwd(window, argnums=(0, 1))
-
-    def blocks(args):
-        u, s, s_next, t, tgt, wt, ck, *k = args  # k: the window's index (entrained drive)
-        rm, end = window(u, s, t, tgt, wt, *k)
-        (bm, am), (be, ae) = jac(u, s, t, tgt, wt, *k)
-        rg = ck * scale * (end - s_next)
-        gs = ck * scale[:, None] * ae  # d defect / d s_k
-        gu = ck * scale[:, None] * be  # d defect / d u
-        return (
-            am.T @ am + gs.T @ gs,
-            -ck * gs.T * scale[None, :],  # T_k,k+1 = G_s^T (-c_k diag(scale))
-            am.T @ bm + gs.T @ gu,
-            -ck * scale[:, None] * gu,  # the defect's part of Y_k+1
-            bm.T @ bm + gu.T @ gu,
-            am.T @ rm + gs.T @ rg,
-            -ck * scale * rg,  # its part of g_s,k+1
-            bm.T @ rm + gu.T @ rg,
-            ck**2 * scale**2,  # its part of diag(T_k+1,k+1)
-        )
+    blocks = _window_blocks(window, scale)
 
     def normal(u, states):
         n, p = states.shape[1], u.shape[0]
@@ -137,6 +118,36 @@ def make_normal(
         )
 
     return normal
+
+
+def _window_blocks(window, scale):
+    """``args -> blocks``: window k's contributions to the normal equations (its diagonal
+    block and the one to window k + 1, the cross terms with the parameters, the gradients,
+    each with its continuity defect's part), from ``window`` (``(u, s, t, target, weight,
+    *k) -> (measured residual, end state)``) and its Jacobian in u and s; ``scale``: of a
+    state's defect."""
+    jac = jax.jacfwd(window, argnums=(0, 1))
+
+    def blocks(args):
+        u, s, s_next, t, tgt, wt, ck, *k = args  # k: the window's index (entrained drive)
+        rm, end = window(u, s, t, tgt, wt, *k)
+        (bm, am), (be, ae) = jac(u, s, t, tgt, wt, *k)
+        rg = ck * scale * (end - s_next)
+        gs = ck * scale[:, None] * ae  # d defect / d s_k
+        gu = ck * scale[:, None] * be  # d defect / d u
+        return (
+            am.T @ am + gs.T @ gs,
+            -ck * gs.T * scale[None, :],  # T_k,k+1 = G_s^T (-c_k diag(scale))
+            am.T @ bm + gs.T @ gu,
+            -ck * scale[:, None] * gu,  # the defect's part of Y_k+1
+            bm.T @ bm + gu.T @ gu,
+            am.T @ rm + gs.T @ rg,
+            -ck * scale * rg,  # its part of g_s,k+1
+            bm.T @ rm + gu.T @ rg,
+            ck**2 * scale**2,  # its part of diag(T_k+1,k+1)
+        )
+
+    return blocks
 
 
 def _batches(n_windows: int, most: int) -> tuple[int, int]:
