@@ -263,36 +263,13 @@ def fit(
     from ..identify.driver import compiling_text
     from ..identify.prepare import prepare
     from ..identify.rundir import RunWriteError
-    from .options import settings_from_options
     from .preflight import check_output_folder, write_failure_line
 
     interrupts.expect_run(out_dir)
     try:
         check_order("fit", model, traj)
         check_cost(cost)
-        settings = settings_from_options(
-            markers=parse_markers(markers),
-            frames=parse_option_frames(frames, parse_frames),
-            bonds=bonds,
-            population=population,
-            generations=generations,
-            seed=seed,
-            horizon=parse_horizons(horizon or ",".join(map(str, DEFAULT["horizon"]))),
-            refine=refine,
-            max_steps=max_steps,
-            cost=cost,
-            smooth=smooth,
-            substeps=substeps,
-            integrator=integrator,
-            checkpoint_every=checkpoint_every,
-            precision=precision,
-            adapt_variants=adapt_variants,
-            init=init,
-            optimizer=optimizer,
-            validation=parse_option_frames(validate, parse_frames, "--validate")
-            if validate
-            else None,
-        )
+        settings = _fit_settings(locals())
         check_output_folder(out_dir, overwrite)  # before any computation
         prepared = prepare(
             model,
@@ -321,6 +298,23 @@ def fit(
     except KeyboardInterrupt:
         interrupts.stop(_interrupted_fit(out_dir))
     _summary(result)
+
+
+def _fit_settings(options: dict) -> FitSettings:
+    """The fit's settings from its command's options (named as the settings' fields, but for
+    the texts parsed here), or a one-line error naming the option."""
+    from .options import settings_from_options
+
+    parsed = ("markers", "frames", "horizon")
+    given = {k: v for k, v in options.items() if k in FitSettings.model_fields and k not in parsed}
+    horizon, validate = options["horizon"], options["validate"]
+    return settings_from_options(
+        **given,
+        markers=parse_markers(options["markers"]),
+        frames=parse_option_frames(options["frames"], parse_frames),
+        horizon=parse_horizons(horizon or ",".join(map(str, DEFAULT["horizon"]))),
+        validation=parse_option_frames(validate, parse_frames, "--validate") if validate else None,
+    )
 
 
 def check_cost(cost: str) -> None:

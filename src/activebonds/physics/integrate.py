@@ -247,9 +247,8 @@ def start_velocity(
     ``v_b`` to any other scheme makes every identified force come out inflated (about
     ``2N/(N+1)`` with N Euler substeps, about 2 with Verlet). So:
 
-    * Euler, one substep: ``v_b`` (exact);
-    * Verlet, one substep: ``v_b + dt/2 a(x, v_b)`` (exact: ``v_b`` is the step's half-step
-      velocity, and the step closes with ``+ dt/2 a(x_t, v_half)``);
+    * one Euler substep (:attr:`~.integrators.Integrator.exact_backward`): ``v_b`` (exact);
+    * one Verlet substep: ``v_b + dt/2 a(x, v_b)`` (exact: ``v_b`` is its half-step velocity);
     * otherwise: the state at t - 1 whose step lands on ``x`` is solved for its velocity,
       started from the constant-acceleration estimate, and the velocity that step ends with
       is returned (corrected to first order by the last residual). The solve is a
@@ -272,7 +271,7 @@ def start_velocity(
     diverges beyond: on a 41-marker spring body fitted to a real walk (2 Verlet substeps at
     60 Hz) it contracts by 0.67 a round, and its 12 rounds leave every start unsolved. The
     callers with one parameter vector try the fixed point first and take Newton's method
-    where it failed (:meth:`activebonds.identify.solvers.refine.Refinement._to_newton`,
+    where it failed (:meth:`activebonds.identify.solvers.refine.Refinement.to_newton`,
     :func:`activebonds.identify.judge.predictions.solved`); a population keeps the fixed point.
 
     ``with_residual``: also return the last residual where the solve has not converged (m;

@@ -80,17 +80,9 @@ class ShootingCost:
         r.check_ahead(1, y0[0])
         trajectory.run = ahead(trajectory.run, y0[0], (y0[1], y0[2]))  # last needed, last
         # interrupted: the stage's start
-        warm = RESTART.stage(r, horizon, genome, min(max_steps, lm.WARM_STEPS), "warm start")
-        if warm.accepted:
-            genome = np.asarray(warm.genome)
-            # the restart cost's optimum at this horizon (its RMS already measured by the
-            # warm start): shooting cannot do better there
-            unfit = r.versus_constant_velocity(genome, (horizon,), warm.end_rms_mm)
-            if unfit:
-                return self._one_step_instead(
-                    r, f"not shot: the model's best {unfit[4:]}", original
-                )
-            y0 = (jnp.asarray(r.bounded.from_genome(genome)), y0[1], y0[2])
+        warm, y0 = self._warm_start(r, horizon, genome, max_steps, y0)
+        if isinstance(warm, str):  # the model's best on the restart cost loses: not shot
+            return self._one_step_instead(r, warm, original)
         start_tree = residual(y0)
         stopped = None
         if r.solver == "dense":
@@ -138,6 +130,19 @@ class ShootingCost:
             stage.continuity_mm = gap / CONTINUITY_WEIGHT * 1000.0
             r.states = trajectory(to_genome(y[0]), (y[1], y[2]))
         return stage
+
+    def _warm_start(self, r, horizon, genome, max_steps, y0):
+        """(the warm start's stage, the unknowns from its genes), or (why not to shoot, y0):
+        its result, the restart cost's optimum at this horizon (its RMS already measured),
+        loses to constant velocity there, and shooting cannot do better."""
+        warm = RESTART.stage(r, horizon, genome, min(max_steps, lm.WARM_STEPS), "warm start")
+        if not warm.accepted:
+            return warm, y0
+        genome = np.asarray(warm.genome)
+        unfit = r.versus_constant_velocity(genome, (horizon,), warm.end_rms_mm)
+        if unfit:
+            return f"not shot: the model's best {unfit[4:]}", y0
+        return warm, (jnp.asarray(r.bounded.from_genome(genome)), y0[1], y0[2])
 
     def _programs(self, r, windows, y0):
         """(normal equations, damped step) of a shooting stage, compiled in the background
