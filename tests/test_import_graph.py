@@ -26,6 +26,7 @@ LAYERS = (
         "document",
         "lazy",
         "notebook",
+        "registry",
     ),  # foundation: no module of the package below them
     ("bonds",),  # the force laws, one module per bond kind, and their registry
     ("model",),  # model files, topology, parameters, genome layout

@@ -5,46 +5,12 @@ The order is the order in which kinds' forces are summed and their topology is l
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
+from ..registry import Registry
 from .kind import BondKind
 
-_KINDS: dict[str, BondKind] = {}
-
-
-def register(kind: BondKind) -> BondKind:
-    """Add a kind (after the ones registered before it)."""
-    if kind.name in _KINDS:
-        raise ValueError(f"bond kind '{kind.name}' is already registered")
-    _KINDS[kind.name] = kind
-    return kind
-
-
-def unregister(name: str) -> None:
-    del _KINDS[name]
-
-
-@contextmanager
-def registered(kind: BondKind) -> Iterator[BondKind]:
-    """The kind registered inside the ``with`` block only."""
-    register(kind)
-    try:
-        yield kind
-    finally:
-        unregister(kind.name)
-
-
-def get(name: str) -> BondKind:
-    return _KINDS[name]
-
-
-def names() -> tuple[str, ...]:
-    return tuple(_KINDS)
-
-
-def kinds() -> tuple[BondKind, ...]:
-    return tuple(_KINDS.values())
+KINDS: Registry[BondKind] = Registry("bond kind")
+register, unregister, registered = KINDS.register, KINDS.unregister, KINDS.registered
+get, names, kinds = KINDS.get, KINDS.names, KINDS.entries
 
 
 def listing(words: list[str] | tuple[str, ...], last: str = "or") -> str:

@@ -130,22 +130,15 @@ class FitSettings(BaseModel):
             raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
         return v
 
-    @field_validator("cost")
+    @field_validator("cost", "integrator")
     @classmethod
-    def _cost_name(cls, v):
-        from .costs import names
+    def _registered(cls, v, info):
+        """A cost's or an integration scheme's registered name (a cost may be ``auto``)."""
+        from ..physics.integrators import SCHEMES
+        from .costs import COSTS
 
-        if v != AUTO and v not in names():
-            raise ValueError(f"unknown cost {v!r}; choose one of {', '.join((*names(), AUTO))}")
-        return v
-
-    @field_validator("integrator")
-    @classmethod
-    def _integrator(cls, v):
-        from ..physics.integrators import names
-
-        if v not in names():
-            raise ValueError(f"unknown integrator {v!r}; choose one of {', '.join(names())}")
+        if not (info.field_name == "cost" and v == AUTO):
+            (COSTS if info.field_name == "cost" else SCHEMES).find(v)
         return v
 
     @field_validator("optimizer")

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..registry import Registry
+
 
 @dataclass(frozen=True)
 class Scheme:
@@ -34,22 +36,9 @@ class Scheme:
 
 EULER = Scheme("euler", 1, True, False, "semi-implicit Euler")
 VERLET = Scheme("verlet", 2, False, True, "velocity Verlet")
-SCHEMES: dict[str, Scheme] = {s.name: s for s in (EULER, VERLET)}
+SCHEMES: Registry[Scheme] = Registry("integrator", (EULER, VERLET))
 DEFAULT = EULER.name
-
-
-def names() -> tuple[str, ...]:
-    return tuple(SCHEMES)
-
-
-def scheme(name: str) -> Scheme:
-    """The scheme called ``name``; a ValueError naming the known ones otherwise."""
-    try:
-        return SCHEMES[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown integrator {name!r}; choose one of {', '.join(SCHEMES)}"
-        ) from None
+names, scheme = SCHEMES.names, SCHEMES.find
 
 
 @dataclass(frozen=True)
