@@ -41,15 +41,22 @@ def variant(model: Model, bonds: str) -> Model:
     return model
 
 
-def select_data(model: Model, traj: Trajectory, settings: FitSettings) -> Trajectory:
-    """The trajectory cut to the model's markers (or ``settings.markers``) and frame window."""
-    markers = settings.markers or model.markers
+def particle_markers(model: Model, markers: Sequence[str] | None) -> tuple[str, ...]:
+    """The markers the model's particles follow, in order: ``markers`` (the model's own
+    without them), one per particle, or an InputError naming ``--markers``."""
+    markers = tuple(markers or model.markers)
     if len(markers) != len(model.particle_names):
         raise InputError(
             "--markers",
             f"{len(markers)} markers given for a model of {len(model.particle_names)} particles "
             f"({', '.join(model.particle_names)}); give one marker per particle, in order",
         )
+    return markers
+
+
+def select_data(model: Model, traj: Trajectory, settings: FitSettings) -> Trajectory:
+    """The trajectory cut to the model's markers (or ``settings.markers``) and frame window."""
+    markers = particle_markers(model, settings.markers)
     data = traj.select(list(markers))
     start, stop = settings.frames
     data = data.window(start, stop if stop is not None else data.n_frames)

@@ -18,7 +18,13 @@ from ...data.fill import FilledSample, FillPlan, apply_fill, plan_fill, record_c
 from ...data.writers import WRITERS, atomic_write
 from ...errors import InputError
 from ...model import load_model
+from ..problem import particle_markers
 from .settings import FillSettings
+
+# the settings the model's fill takes, by the names of :func:`.fill.model_fill`'s options
+MODEL_FILL_OPTIONS = {
+    "context", "horizon", "substeps", "integrator", "denoise", "continuity", "max_steps", "prior"
+}  # fmt: skip
 
 
 def record_path(out: Path) -> Path:
@@ -101,13 +107,7 @@ def fill_file(
     check_output_path(out)
     check_output_path(sidecar)
     m = load_model(model)
-    chosen = settings.markers or m.markers
-    if len(chosen) != len(m.particle_names):
-        raise InputError(
-            "--markers",
-            f"{len(chosen)} markers given for a model of {len(m.particle_names)} particles "
-            f"({', '.join(m.particle_names)}); give one marker per particle, in order",
-        )
+    chosen = particle_markers(m, settings.markers)
     data = read_trajectory(recording)
     if data.dimension != m.dimension:
         raise InputError(
@@ -128,18 +128,7 @@ def _fill_values(m, plan: FillPlan, s: FillSettings):
     if s.method == "model":
         from .fill import model_fill
 
-        found = model_fill(
-            m,
-            plan,
-            context=s.context,
-            horizon=s.horizon,
-            substeps=s.substeps,
-            integrator=s.integrator,
-            denoise=s.denoise,
-            continuity=s.continuity,
-            max_steps=s.max_steps,
-            prior=s.prior,
-        )
+        found = model_fill(m, plan, **s.model_dump(include=MODEL_FILL_OPTIONS))
         return found.values, found.uncertainty, found.note()
     from ...data.fill import baseline_uncertainty, fill_baseline
 

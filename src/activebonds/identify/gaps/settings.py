@@ -11,7 +11,6 @@ from ..settings import parse_frames, parse_markers
 
 METHODS = ("model", "spline", "linear", "pca")
 PRIORS = ("pca",)
-INTEGRATORS = ("euler", "verlet")
 MAX_STEPS = 200  # Levenberg-Marquardt steps per fitted stretch, at most
 
 
@@ -48,21 +47,14 @@ class FillSettings(BaseModel):
             raise ValueError(f"expected {', '.join(METHODS)}, got '{v}'")
         return v
 
-    @field_validator("denoise")
+    @field_validator("denoise", "prior")
     @classmethod
-    def _denoise(cls, v, info: ValidationInfo):
-        method = info.data.get("method")
-        if v and method is not None and method != "model":
-            raise ValueError(f"needs --method model, not {method}")
-        return v
-
-    @field_validator("prior")
-    @classmethod
-    def _prior(cls, v, info: ValidationInfo):
-        if v is not None and v not in PRIORS:
+    def _model_only(cls, v, info: ValidationInfo):
+        """Options of the model's fill alone (a prior also one of :data:`PRIORS`)."""
+        if info.field_name == "prior" and v is not None and v not in PRIORS:
             raise ValueError(f"expected {', '.join(PRIORS)}, got '{v}'")
         method = info.data.get("method")
-        if v is not None and method is not None and method != "model":
+        if v not in (None, False) and method is not None and method != "model":
             raise ValueError(f"needs --method model, not {method}")
         return v
 
@@ -76,8 +68,10 @@ class FillSettings(BaseModel):
     @field_validator("integrator")
     @classmethod
     def _integrator(cls, v):
-        if v not in INTEGRATORS:
-            raise ValueError(f"expected euler or verlet, got '{v}'")
+        from ...physics import integrators
+
+        if v not in integrators.names():
+            raise ValueError(f"expected {' or '.join(integrators.names())}, got '{v}'")
         return v
 
     @field_validator("markers", mode="before")
