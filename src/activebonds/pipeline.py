@@ -176,7 +176,7 @@ def prepare(out: Path, recording_path: Path, options: Options, overwrite: bool) 
     """The state of an earlier run of the same recording and options in ``out`` (to continue
     it), or None to start anew; InputError for a folder this cannot use. With ``overwrite``,
     an earlier ``auto`` folder is replaced (any other folder is refused)."""
-    from .identify.rundir import sha256_file
+    from .identify.rundir import RunDir
 
     folder = Folder(out)
     if not out.exists():
@@ -192,7 +192,7 @@ def prepare(out: Path, recording_path: Path, options: Options, overwrite: bool) 
                 out, "exists and is not a folder of activebonds auto; choose another --out"
             )
         return None
-    same = state.get("sha256") == sha256_file(recording_path) and state.get(
+    same = state.get("sha256") == RunDir.sha256(recording_path) and state.get(
         "options"
     ) == json.loads(json.dumps(options.record()))
     if overwrite:
@@ -311,7 +311,7 @@ def run(
     written."""
     from .data import read_trajectory
     from .identify.discover.scaffold import scaffold
-    from .identify.rundir import sha256_file
+    from .identify.rundir import RunDir
 
     recording = read_trajectory(recording_path)
     if options.ahead < 1:
@@ -337,7 +337,7 @@ def run(
         out.mkdir(exist_ok=True)
         state = {
             "recording": str(recording_path),
-            "sha256": sha256_file(recording_path),
+            "sha256": RunDir.sha256(recording_path),
             "options": options.record(),
             "fitted_frames": list(split.fitted),
             "held_out_frames": list(split.held_out),
@@ -803,9 +803,9 @@ def _shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> t
 def _ahead_mm(run: Path) -> float:
     """A run's RMS (mm) :data:`SHOOTING`'s horizon frames ahead on its fitted frames (its
     baselines' ``judged`` comparisons; inf where it has none)."""
-    from .identify.rundir import read_record
+    from .identify.rundir import RunDir
 
-    record = read_record(run, "baselines") or {}
+    record = RunDir(run).record("baselines") or {}
     h = SHOOTING["horizon"][0]
     found = [c["model_mm"] for c in record.get("judged", []) if c.get("horizon") == h]
     return float(found[0]) if found and math.isfinite(found[0]) else math.inf
@@ -818,14 +818,14 @@ def _fit_into(run_path, model_path, recording_path, settings, say, fit_progress)
     from contextlib import nullcontext
 
     from .identify.driver import fit, resume
-    from .identify.rundir import RunDir, newest_checkpoint, read_status
+    from .identify.rundir import RunDir
 
     run_dir = RunDir(run_path)
     progress = fit_progress or (lambda total, starting: nullcontext(None))
-    status = read_status(run_path).get("status") if run_dir.is_run() else None
+    status = run_dir.status().get("status") if run_dir.is_run() else None
     with progress(settings.generations, "compiling") as bar:
         hooks = {"progress": bar, "status": bar.status} if bar is not None else {}
-        if status is not None and newest_checkpoint(run_path) is not None:
+        if status is not None and run_dir.newest_checkpoint() is not None:
             say(f"      resuming the fit in {run_path} ({status})")
             result = resume(run_path, **hooks)
         else:
