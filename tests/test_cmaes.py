@@ -17,8 +17,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from activebonds.identify import fit, resume, rundir
+from activebonds.identify import fit, resume
 from activebonds.identify.costs.windows import Display
+from activebonds.identify.rundir import RunDir
 from activebonds.identify.search import evolve
 from activebonds.identify.search.cmaes import CMAES
 from activebonds.identify.search.strategy import Problem
@@ -86,8 +87,8 @@ def test_the_state_round_trips_through_the_checkpoint_flattening():
         problem = _bowl()
         strategy = CMAES(problem, population=12, sigma_init=0.2, dtype=jnp.float64)
         loop, init_key, state, _ = _run(problem, strategy, 7)
-        flat = rundir.flatten_state(state)
-        back = rundir.unflatten_state(flat, loop.template(init_key))
+        flat = RunDir.flatten_state(state)
+        back = RunDir.unflatten_state(flat, loop.template(init_key))
     assert {"es.mean", "es.C", "es.std", "es.generation_counter", "genes", "cost"} <= set(flat)
     assert flat["es.generation_counter"].dtype == np.int32 and flat["es.C"].dtype == np.float64
     for a, b in zip(jax.tree.leaves(state), jax.tree.leaves(back), strict=True):

@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from activebonds.identify import rundir
 from activebonds.identify.rundir import RunDir
 from reliability_runner import ACTIVEBONDS, complete_checkpoints, env, workspace
 
@@ -184,10 +183,10 @@ def resume_refusals(run: Path) -> list[str]:
     if not run.is_dir():
         return ["no run directory"]
     try:
-        meta = rundir.read_meta(run)
+        meta = RunDir(run).meta()
         RunDir(run).check_unchanged(meta)
-        rundir.read_windows(run)
-        rundir.read_input_model(run)
+        RunDir(run).windows()
+        RunDir(run).input_model()
     except Exception as err:  # noqa: BLE001 - any refusal is the finding
         return [f"resume refuses it: {err}"]
     files = sorted((run / "checkpoints").glob("gen-*.npz"))

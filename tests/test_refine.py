@@ -9,8 +9,8 @@ from typer.testing import CliRunner
 
 import activebonds
 from activebonds.data import Trajectory
-from activebonds.identify import rundir
 from activebonds.identify.costs.shooting import shooting_windows
+from activebonds.identify.rundir import RunDir
 from activebonds.identify.solvers import refine as refine_mod
 from activebonds.identify.solvers import stage as stage_mod
 from activebonds.identify.solvers.refine import Bounded
@@ -126,7 +126,7 @@ def test_a_divergent_refinement_keeps_the_es_result_and_resume_works(
     assert not stage.accepted
     assert stage.message == "the refinement diverged (non-finite cost); kept the previous result"
     np.testing.assert_array_equal(result.genome, result.es_genome)
-    best = rundir.read_best_model(run)
+    best = RunDir(run).best_model()
     np.testing.assert_allclose(
         best.layout.natural(best.layout.initial()),
         model.layout.natural(result.es_genome),
@@ -187,14 +187,14 @@ def test_an_interrupted_refinement_resumes_to_the_same_result(triangle, tmp_path
     with pytest.raises(KeyboardInterrupt):
         activebonds.fit(model_path, data, out=run, **options)
     assert (
-        rundir.read_status(run)["status"] == "interrupted"
+        RunDir(run).status()["status"] == "interrupted"
     )  # Ctrl-C in the refinement: saved, resumable
-    assert len(rundir.read_record(run, "refine")["stages"]) == 1
+    assert len(RunDir(run).record("refine")["stages"]) == 1
     monkeypatch.undo()
     resumed = activebonds.resume(run)
     assert [s.horizon for s in resumed.refinement] == [2, 6]
     np.testing.assert_array_equal(resumed.genome, whole.genome)
-    assert rundir.read_status(run)["status"] == "completed"
+    assert RunDir(run).status()["status"] == "completed"
 
 
 @pytest.mark.parametrize(

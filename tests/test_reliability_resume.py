@@ -38,7 +38,8 @@ import numpy as np
 import pytest
 
 from activebonds.errors import InputError
-from activebonds.identify import driver, rundir
+from activebonds.identify import driver
+from activebonds.identify.rundir import RunDir
 from reliability_runner import (
     ACTIVEBONDS,
     FIT,
@@ -253,7 +254,7 @@ def _corrupt(data: bytes, rng: np.random.Generator) -> tuple[str, bytes]:
 def _damage_and_load(run, newest_name, older_name, newest, good, shapes, rng, trial, outcomes):
     kind, damaged = _corrupt(newest, rng)
     (run / "checkpoints" / newest_name).write_bytes(damaged)
-    state, history, skipped = rundir.load_checkpoint(run, shapes)
+    state, history, skipped = RunDir(run).load_checkpoint(shapes)
     assert state is not None, (trial, kind, skipped)
     loaded = {f"state_{k}": v for k, v in state.items()}
     loaded |= {f"history_{k}": v for k, v in history.items()}
@@ -281,7 +282,7 @@ def test_torn_or_truncated_checkpoints_are_never_loaded(tmp_path, tmp_path_facto
     rng = np.random.default_rng(7)
     outcomes: Counter = Counter()
     with warnings.catch_warnings():
-        # rundir.load_checkpoint leaks the handle of a corrupt archive (reported; see
+        # RunDir.load_checkpoint leaks the handle of a corrupt archive (reported; see
         # test_a_corrupt_checkpoint_does_not_leak_its_file_handle)
         warnings.simplefilter("ignore", ResourceWarning)
         for trial in range(300):
@@ -326,7 +327,7 @@ def test_a_corrupt_checkpoint_does_not_leak_its_file_handle(tmp_path, tmp_path_f
     shapes = _shapes(checkpoint_arrays(ref / "checkpoints" / LAST))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        state, _, skipped = rundir.load_checkpoint(run, shapes)
+        state, _, skipped = RunDir(run).load_checkpoint(shapes)
         gc.collect()
     assert skipped and state is not None
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)]
@@ -349,7 +350,7 @@ def test_resume_removes_leftovers_in_the_run_folder(tmp_path, tmp_path_factory):
 def test_resume_of_a_run_killed_before_its_first_checkpoint(tmp_path, tmp_path_factory):
     ref = reference(tmp_path_factory)
     run = copy_run(ref, tmp_path / "run")
-    # the state of RUN/ between rundir.create (+ data.npz) and the first checkpoint
+    # the state of RUN/ between RunDir.create (+ data.npz) and the first checkpoint
     for p in (run / "checkpoints").iterdir():
         p.unlink()
     for name in ("status.json", "history.csv", "best_model.toml"):

@@ -28,7 +28,8 @@ import pytest
 
 import activebonds.identify.driver as driver
 from activebonds.errors import InputError
-from activebonds.identify import FitSettings, rundir
+from activebonds.identify import FitSettings
+from activebonds.identify.rundir import RunDir
 from reliability_runner import (
     EXAMPLES,
     FIT,
@@ -105,7 +106,7 @@ def test_planted_pickles_are_never_unpickled(tmp_path, tmp_path_factory):
     for name, data in planted.items():
         (run / "checkpoints" / name).write_bytes(data)
 
-    state, _, skipped = rundir.load_checkpoint(run, _shapes(like))
+    state, _, skipped = RunDir(run).load_checkpoint(_shapes(like))
     assert int(state["generation"]) == FIT["generations"] - FIT["checkpoint_every"]
     assert sorted(s.split(":")[0] for s in skipped) == sorted(planted)
     assert not marker.exists()
@@ -134,7 +135,7 @@ def test_foreign_checkpoint_files_do_not_evict_real_ones(tmp_path, tmp_path_fact
         (run / "checkpoints" / name).write_bytes(data)
     state = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
     history = {k[8:]: v for k, v in arrays.items() if k.startswith("history_")}
-    rundir.save_checkpoint(run, state, history)
+    RunDir(run).save_checkpoint(state, history)
     assert FIT["generations"] in complete_checkpoints(run)
 
 
@@ -256,9 +257,9 @@ def test_overwrite_only_replaces_a_run_directory(tmp_path, kind):
         (target / "chapter1.tex").write_text("precious")
     else:
         target.write_text("precious")
-    meta = {"format": rundir.FORMAT}
+    meta = {"format": RunDir.FORMAT}
     with pytest.raises(InputError):
-        rundir.create(target, {"model.toml": b""}, meta, overwrite=True)
+        RunDir.create(target, {"model.toml": b""}, meta, overwrite=True)
     assert (target / "chapter1.tex" if kind == "folder" else target).read_text() == "precious"
 
 

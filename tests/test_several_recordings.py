@@ -10,8 +10,8 @@ import pytest
 import activebonds
 from activebonds.data import Trajectory, write_trajectory
 from activebonds.errors import InputError
-from activebonds.identify import rundir
 from activebonds.identify.problem import identification
+from activebonds.identify.rundir import RunDir
 from activebonds.identify.settings import FitSettings
 from activebonds.model import load_model, loads_model
 from helpers import EXAMPLES, cli
@@ -92,9 +92,9 @@ def test_the_run_keeps_every_recording_and_resume_checks_them(trials, tmp_path):
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert "fitted on 2 recordings at once" in res.stdout
-    windows = rundir.read_windows(run)
+    windows = RunDir(run).windows()
     assert [w.n_frames for w in windows] == [40, 30]
-    meta = rundir.read_meta(run)
+    meta = RunDir(run).meta()
     assert set(meta["inputs"]) == {"model", "data", "data-2"}
     again = activebonds.resume(run)
     assert len(again.identification.all_data) == 2

@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from activebonds.atomic import staged_directory
 from activebonds.cli.main import app
-from activebonds.identify import rundir
+from activebonds.identify.rundir import RunDir
 from activebonds.sweep import load_manifest
 from helpers import ACTIVEBONDS, EXAMPLES
 
@@ -313,7 +313,7 @@ def test_a_killed_create_leaves_staging_folders_that_remove_partial_removes(tmp_
     others = [tmp_path / ".fit-b.partial-x", tmp_path / "fit-a.partial-x", tmp_path / "fit-b"]
     for folder in others:
         folder.mkdir()
-    rundir.remove_partial(run)
+    RunDir(run).remove_partial()
     assert not kept.exists() and not run.exists()
     assert all(folder.is_dir() for folder in others)
 

@@ -31,7 +31,7 @@ from typer.testing import CliRunner
 import activebonds.atomic
 import activebonds.identify
 from activebonds.cli.main import app
-from activebonds.identify import rundir
+from activebonds.identify.rundir import RunDir
 from reliability_runner import ACTIVEBONDS, complete_checkpoints, env, leftovers, workspace
 
 pytestmark = pytest.mark.timeout(600)
@@ -223,12 +223,12 @@ def test_the_space_estimate_covers_what_a_run_writes(tmp_path, inputs):
 
     settings = FitSettings(population=12, generations=60, checkpoint_every=20, refine="none")
     result = fit(*inputs, settings, out=tmp_path / "RUN")
-    meta = rundir.read_meta(result.run)
-    shapes = rundir.state_shapes(_template(result))
-    need = rundir.expected_bytes(
-        rundir.state_bytes(shapes), len(meta["history"]["columns"]), settings.generations
+    meta = RunDir(result.run).meta()
+    shapes = RunDir.state_shapes(_template(result))
+    need = RunDir.expected_bytes(
+        RunDir.state_bytes(shapes), len(meta["history"]["columns"]), settings.generations
     )
-    held = rundir.used_bytes(result.run)
+    held = RunDir(result.run).used_bytes()
     assert held < need < 40 * held, (held, need)
 
 
@@ -345,7 +345,7 @@ def test_a_full_disk_while_creating_the_run_leaves_nothing(tmp_path, inputs, mon
 
 def test_resume_refuses_too_little_space_and_changes_nothing(tmp_path, uninterrupted, monkeypatch):
     run = shutil.copytree(uninterrupted, tmp_path / "RUN")
-    rundir.write_status(run, **{**rundir.read_status(run), "status": "interrupted"})
+    RunDir(run).write_status(**{**RunDir(run).status(), "status": "interrupted"})
     (run / "checkpoints" / "gen-000000060.npz").unlink()  # back to generation 40
     before = {p.name: p.read_bytes() for p in run.rglob("*") if p.is_file()}
     monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9, 0))

@@ -350,11 +350,11 @@ def resume(
 ):
     """Continue an interrupted fit exactly where its last checkpoint stopped."""
     from ..identify import resume as run_resume
-    from ..identify.rundir import RunWriteError, read_meta
+    from ..identify.rundir import RunDir, RunWriteError
     from .preflight import write_failure_line
 
     try:
-        total = generations or read_meta(run)["settings"]["generations"]
+        total = generations or RunDir(run).meta()["settings"]["generations"]
         interrupts.resuming(run)
         with _progress(total, "loading the run and compiling") as progress:
             result = run_resume(

@@ -23,7 +23,7 @@ from ..data.writers import render_npz
 from ..errors import InputError
 from ..model import Model, dumps_model
 from ..runtime import keep_compiled
-from . import rundir, stages
+from . import stages
 from .costs.windows import Display
 from .prepare import Prepared, prepare, validation_frames
 from .problem import Identification, identification
@@ -245,18 +245,18 @@ def _create_run(
     ]
     for name, path in named:
         if path is not None:
-            inputs[name] = {"path": str(path.resolve()), "sha256": rundir.sha256_file(path)}
+            inputs[name] = {"path": str(path.resolve()), "sha256": RunDir.sha256(path)}
     strategy = strategies.make(settings.optimizer, ident.problem, settings, _dtype(settings))
     display = Display(ident.windows.n_terms)
-    meta = rundir.new_meta(
+    meta = RunDir.new_meta(
         settings, inputs, strategy.name, history_columns(strategy, display), display, command
     )
     files = {"model.toml": model_text}
     for i, d in enumerate(ident.all_data):
-        files[rundir.data_name(i)] = render_npz(d, Path(rundir.data_name(i)))
+        files[RunDir.data_name(i)] = render_npz(d, Path(RunDir.data_name(i)))
     n_particles = len(ident.model.particle_names)
     state = _state_bytes(strategy, n_particles, _dtype(settings))
-    need = rundir.expected_bytes(state, len(meta["history"]["columns"]), settings.generations)
+    need = RunDir.expected_bytes(state, len(meta["history"]["columns"]), settings.generations)
     need += 2 * sum(len(v) for k, v in files.items() if k != "model.toml")  # refinement states
     return RunDir.create(out, files, meta, overwrite, need_bytes=need, held_out=held_out)
 
@@ -350,15 +350,15 @@ def _evolve(
     saved = None
     if resuming:
         template = loop.template(init_key)
-        shapes = rundir.state_shapes(template)
+        shapes = RunDir.state_shapes(template)
         saved = run.load_checkpoint(shapes)
         if saved[0] is None and saved[2]:
             raise InputError(run.path, "no complete checkpoint to resume from" + _skipped(saved[2]))
         _check_space_to_resume(run, shapes, len(loop.columns), total)
     if saved is not None and saved[0] is not None:
         arrays, history, _ = saved
-        history = rundir.upgrade_history(history, run.meta())
-        state = rundir.unflatten_state(arrays, template)
+        history = RunDir.upgrade_history(history, run.meta())
+        state = RunDir.unflatten_state(arrays, template)
     else:  # a new run, or one stopped before its first checkpoint: start afresh
         state = loop.start(init_key)
         history = {c.name: np.zeros(0) for c in loop.columns}
@@ -420,10 +420,10 @@ def _check_space_to_resume(run: RunDir, shapes: dict, columns: int, total: int) 
     """Refuse (one line) to resume in a folder without the space the rest of the run needs:
     what the run writes in all, less what it holds now (replaced as it goes), and at least
     one more checkpoint beside the kept ones."""
-    state = rundir.state_bytes(shapes)
-    need = rundir.expected_bytes(state, columns, total) - run.used_bytes()
+    state = RunDir.state_bytes(shapes)
+    need = RunDir.expected_bytes(state, columns, total) - run.used_bytes()
     one = state + total * columns * 8
-    rundir.check_space(run.path, run.path, max(need, one), "resuming writes")
+    run.check_space(max(need, one), "resuming writes")
 
 
 def compiling_text(optimizer: str) -> str:
@@ -446,7 +446,7 @@ def _best(strategy, state) -> tuple[np.ndarray, float, np.ndarray]:
 
 
 def _checkpoint(run, ident, settings, strategy, state, history, integer, status, clock=None):
-    run.save_checkpoint(rundir.flatten_state(state), history)
+    run.save_checkpoint(RunDir.flatten_state(state), history)
     run.write_history(history, integer)
     genome, cost, _ = _best(strategy, state)
     display = Display(ident.windows.n_terms)

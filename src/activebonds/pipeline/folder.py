@@ -110,7 +110,7 @@ def prepare(out: Path, recording_path: Path, options: Options, overwrite: bool) 
     """The state of an earlier run of the same recording and options in ``out`` (to continue
     it), or None to start anew; InputError for a folder this cannot use. With ``overwrite``,
     an earlier ``auto`` folder is replaced (any other folder is refused)."""
-    from ..identify.rundir import sha256_file
+    from ..identify.rundir import RunDir
 
     folder = Folder(out)
     if not out.exists():
@@ -126,7 +126,7 @@ def prepare(out: Path, recording_path: Path, options: Options, overwrite: bool) 
                 out, "exists and is not a folder of activebonds auto; choose another --out"
             )
         return None
-    same = state.get("sha256") == sha256_file(recording_path) and state.get(
+    same = state.get("sha256") == RunDir.sha256(recording_path) and state.get(
         "options"
     ) == json.loads(json.dumps(options.record()))
     if overwrite:

@@ -248,9 +248,9 @@ def shoot(folder, kept: Path, recording_path, settings, say, fit_progress) -> tu
 def ahead_mm(run: Path) -> float:
     """A run's RMS (mm) :data:`SHOOTING`'s horizon frames ahead on its fitted frames (its
     baselines' ``judged`` comparisons; inf where it has none)."""
-    from ..identify.rundir import read_record
+    from ..identify.rundir import RunDir
 
-    record = read_record(run, "baselines") or {}
+    record = RunDir(run).record("baselines") or {}
     h = SHOOTING["horizon"][0]
     found = [c["model_mm"] for c in record.get("judged", []) if c.get("horizon") == h]
     return float(found[0]) if found and math.isfinite(found[0]) else math.inf
@@ -263,14 +263,14 @@ def fit_into(run_path, model_path, recording_path, settings, say, fit_progress) 
     from contextlib import nullcontext
 
     from ..identify.driver import fit, resume
-    from ..identify.rundir import RunDir, newest_checkpoint, read_status
+    from ..identify.rundir import RunDir
 
     run_dir = RunDir(run_path)
     progress = fit_progress or (lambda total, starting: nullcontext(None))
-    status = read_status(run_path).get("status") if run_dir.is_run() else None
+    status = run_dir.status().get("status") if run_dir.is_run() else None
     with progress(settings.generations, "compiling") as bar:
         hooks = {"progress": bar, "status": bar.status} if bar is not None else {}
-        if status is not None and newest_checkpoint(run_path) is not None:
+        if status is not None and run_dir.newest_checkpoint() is not None:
             say(f"      resuming the fit in {run_path} ({status})")
             result = resume(run_path, **hooks)
         else:

@@ -28,7 +28,7 @@ def begin(
     """The run's state: ``state`` (:func:`~.folder.prepare`'s, an earlier run's, continued) or,
     where it is None, a new one written in the folder (made, or emptied with ``overwrite``);
     the frames and the marker ``noise`` said."""
-    from ..identify.rundir import sha256_file
+    from ..identify.rundir import RunDir
 
     out = folder.path
     if state is None:
@@ -37,7 +37,7 @@ def begin(
         out.mkdir(exist_ok=True)
         state = {
             "recording": str(recording_path),
-            "sha256": sha256_file(recording_path),
+            "sha256": RunDir.sha256(recording_path),
             "options": options.record(),
             "fitted_frames": list(split.fitted),
             "held_out_frames": list(split.held_out),

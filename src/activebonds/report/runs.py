@@ -50,11 +50,12 @@ class RunRecord:
 
     def _repr_html_(self) -> str:
         """A small table for notebooks (as the run directory's)."""
-        from ..identify.rundir import run_rows
         from ..notebook import html_table
 
         settings = self.settings.model_dump()
-        rows = run_rows(self.status, settings, self.records, self.model if self.has_best else None)
+        rows = RunDir.notebook_rows(
+            self.status, settings, self.records, self.model if self.has_best else None
+        )
         return html_table(f"RunRecord {str(self.path)!r}", rows)
 
 

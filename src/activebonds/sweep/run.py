@@ -21,7 +21,7 @@ import warnings
 from pathlib import Path
 
 from ..errors import InputError
-from ..identify import fit, resume, rundir
+from ..identify import fit, resume
 from ..identify.rundir import RunDir
 from .manifest import Job
 from .outcome import Done, Outcome
@@ -45,7 +45,7 @@ def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outc
     pid_file = _mark_running(out, job.name)
     try:
         action = _advance(job, run, command)
-        status, message = rundir.read_status(run).get("status", "unknown"), ""
+        status, message = RunDir(run).status().get("status", "unknown"), ""
     except InputError as err:
         action, status, message = "error", "error", err.line()
     except Exception as err:  # noqa: BLE001 - one fit's failure does not stop the sweep
@@ -63,7 +63,7 @@ def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outc
 def _advance(job: Job, run: Path, command: list[str] | None) -> str:
     planned = job.settings.generations
     if RunDir(run).is_run():
-        st = rundir.read_status(run)
+        st = RunDir(run).status()
         # failed: not one finite candidate to start from, which more generations do not change
         if st.get("status") == "failed" or (
             st.get("status") == "completed" and st.get("generations") == planned
@@ -72,7 +72,7 @@ def _advance(job: Job, run: Path, command: list[str] | None) -> str:
         # a checkpoint to continue from (or none yet: resume then starts afresh)
         resume(run, generations=planned)
         return "resumed"
-    rundir.remove_partial(run)  # a create that was killed
+    RunDir(run).remove_partial()  # a create that was killed
     fit(job.model, job.data_arg, job.settings, out=run, command=command)
     return "ran"
 
@@ -105,7 +105,7 @@ def check_out(jobs: list[Job], out: str | Path) -> None:
             raise InputError(
                 run, "exists and is not a run directory; move it away or choose another --out"
             )
-        _check_run(job, run, rundir.read_meta(run))
+        _check_run(job, run, RunDir(run).meta())
 
 
 def _check_run(job: Job, run: Path, meta: dict) -> None:
@@ -118,7 +118,7 @@ def _check_run(job: Job, run: Path, meta: dict) -> None:
             run,
             f"holds a run of other settings ({detail}); move it away or choose another --out",
         )
-    total = int(rundir.read_status(run).get("generations", recorded.generations))
+    total = int(RunDir(run).status().get("generations", recorded.generations))
     if total > job.settings.generations:
         raise InputError(
             run,
@@ -131,7 +131,7 @@ def _check_run(job: Job, run: Path, meta: dict) -> None:
     inputs = meta.get("inputs", {})
     for name, path in named:
         rec = inputs.get(name, {})
-        if rec.get("path") != str(path) or rec.get("sha256") != rundir.sha256_file(path):
+        if rec.get("path") != str(path) or rec.get("sha256") != RunDir.sha256(path):
             raise InputError(
                 run,
                 f"holds a run of another {name} file ({rec.get('path', 'none')}, not {path} "
