@@ -66,3 +66,28 @@ def test_up_and_no_gravity_together_are_refused():
     data = simulate(load_model(TRIANGLE), 20, 100.0)
     with pytest.raises(InputError, match="--up Z names gravity's vertical and --no-gravity"):
         scaffold(data, up="Z", gravity=False)
+
+
+def test_frames_beyond_the_recording_are_refused_as_fit_evaluate_and_fill_refuse_them(tmp_path):
+    """`auto --frames 1100:5000` on a 1,200-frame file ran on 1100:1199 and exited 0; now one
+    rule (data.trajectory.frame_window) refuses it for every command, in one line, and nothing
+    is written."""
+    from activebonds.data import write_trajectory
+    from activebonds.pipeline.folder import windows
+    from helpers import cli_in_process
+
+    with pytest.raises(InputError, match=r"window stop 5000 is out of range for 1200 frames"):
+        windows(1200, (1100, 5000), 0.2)
+    split = windows(1200, (1100, None), 0.2)
+    assert (split.fitted, split.held_out) == ((1100, 1180), (1180, 1200))
+    data = tmp_path / "tri.csv"
+    write_trajectory(simulate(load_model(TRIANGLE), 40, 100.0), data)
+    out = tmp_path / "out"
+    for argv in (
+        ("auto", data, "--out", out, "--frames", "10:500"),
+        ("evaluate", TRIANGLE, data, "--frames", "10:500"),
+    ):
+        done = cli_in_process(*argv)
+        assert done.returncode == 2, done.stderr
+        assert "window stop 500 is out of range for 40 frames (0..40)" in done.stderr
+    assert not out.exists()

@@ -188,27 +188,7 @@ class Trajectory:
         Indices beyond the trajectory (|index| > n_frames) and empty windows are InputError.
         ``start_time`` moves to the first kept frame.
         """
-        src = self.source or "trajectory"
-        n = self.n_frames
-        bounds = []
-        for label, value in (("start", start), ("stop", stop)):
-            if value is None:
-                bounds.append(None)
-                continue
-            try:
-                value = operator.index(value)
-            except TypeError:
-                raise InputError(
-                    src, f"window {label} {value!r} must be an integer frame"
-                ) from None
-            if not -n <= value <= n:
-                raise InputError(
-                    src, f"window {label} {value} is out of range for {n} frames (0..{n})"
-                )
-            bounds.append(value)
-        frames = range(n)[slice(*bounds)]
-        if len(frames) == 0:
-            raise InputError(src, f"window [{start}:{stop}] is empty for {n} frames")
+        frames = frame_window(self.n_frames, start, stop, self.source or "trajectory")
         sl = slice(frames.start, frames.stop)
         return dataclasses.replace(
             self,
@@ -264,3 +244,27 @@ def check_marker_names(src: str, markers, where: str | None = None) -> None:
                 src, f"marker name {name!r} appears twice; names must be unique", where
             )
         seen.add(name)
+
+
+def frame_window(n: int, start: int | None, stop: int | None, source: str) -> range:
+    """The frames ``start:stop`` of ``n`` (Python slice semantics, negative indices allowed):
+    the one rule of every command's ``--frames``. An index beyond the frames (|index| > n)
+    or an empty window is an InputError naming ``source``."""
+    bounds = []
+    for label, value in (("start", start), ("stop", stop)):
+        if value is None:
+            bounds.append(None)
+            continue
+        try:
+            value = operator.index(value)
+        except TypeError:
+            raise InputError(source, f"window {label} {value!r} must be an integer frame") from None
+        if not -n <= value <= n:
+            raise InputError(
+                source, f"window {label} {value} is out of range for {n} frames (0..{n})"
+            )
+        bounds.append(value)
+    frames = range(n)[slice(*bounds)]
+    if len(frames) == 0:
+        raise InputError(source, f"window [{start}:{stop}] is empty for {n} frames")
+    return frames

@@ -8,6 +8,7 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..data.trajectory import frame_window
 from ..errors import InputError, option_error
 
 HELD_OUT = 0.2  # the share of the frames held out at the end of the window
@@ -58,10 +59,8 @@ def windows(n_frames: int, frames: tuple[int, int | None], held_out: float) -> W
     have fewer than :data:`MIN_FRAMES`."""
     if not (isinstance(held_out, int | float) and 0 < held_out < 1):
         raise InputError("--held-out", f"must be a share of the frames in (0, 1), got {held_out}")
-    a, b = frames
-    b = n_frames if b is None else min(b, n_frames)
-    if a >= b:
-        raise InputError("--frames", f"{a}:{b} holds no frame of the {n_frames}")
+    window = frame_window(n_frames, *frames, "--frames")  # the rule of fit, evaluate, fill
+    a, b = window.start, window.stop
     split = b - max(1, round(held_out * (b - a)))
     if split - a < MIN_FRAMES or b - split < MIN_FRAMES:
         raise InputError(
