@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from activebonds.errors import InputError
@@ -91,3 +92,19 @@ def test_frames_beyond_the_recording_are_refused_as_fit_evaluate_and_fill_refuse
         assert done.returncode == 2, done.stderr
         assert "window stop 500 is out of range for 40 frames (0..40)" in done.stderr
     assert not out.exists()
+
+
+def test_markers_never_present_in_the_held_out_tail_are_said_before_fitting():
+    from activebonds.pipeline.notes import absent_note
+
+    data = simulate(load_model(TRIANGLE), 60, 100.0)
+    positions = data.positions.copy()
+    positions[45:, 1] = np.nan  # the second marker gone from frame 45 on
+    cut = data.with_positions(positions)
+    markers = list(data.markers)
+    assert absent_note(data, markers, (48, 60)) is None
+    line = absent_note(cut, markers, (48, 60))
+    assert line.startswith(
+        f"note: 1 of 3 markers never present in the held-out frames 48:60 ({markers[1]})"
+    )
+    assert absent_note(cut, markers, (40, 60)) is None  # present in 40:44

@@ -75,7 +75,16 @@ from .folder import (
     prepare,
     windows,
 )
-from .notes import NOISY_ONE_STEP, STILL, Outcome, Scored, fixed_masses_note, noise_line, still_note
+from .notes import (
+    NOISY_ONE_STEP,
+    STILL,
+    Outcome,
+    Scored,
+    absent_note,
+    fixed_masses_note,
+    noise_line,
+    still_note,
+)
 from .refits import MAX_SHOT, SHOOTING, fit_step
 from .steps import Steps, begin, evaluations, how_made, write_evaluation, write_html, write_scaffold
 from .structure import MAX_DECIDED, noise_of_fitted, recording_name, smoothed, structure_step
@@ -126,6 +135,7 @@ def run(
     written."""
     from ..data import read_trajectory
     from ..identify.discover.scaffold import scaffold
+    from ..model import loads_model
 
     recording = read_trajectory(recording_path)
     if options.ahead < 1:
@@ -146,6 +156,9 @@ def run(
     state = prepare(out, recording_path, options, overwrite)
     folder = Folder(out)
     state = begin(folder, state, recording_path, options, split, noise, overwrite, say)
+    absent = absent_note(recording, loads_model(found.text).markers, split.held_out)
+    if absent:
+        say(absent)
     steps = state["steps"]
     a, s = split.fitted
     b = split.held_out[1]

@@ -132,3 +132,18 @@ class Scored:
         a, b = self.frames
         out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
         return out + ([self._advice] if self._advice else [])
+
+
+def absent_note(recording, markers, held_out: tuple[int, int]) -> str | None:
+    """The line that says, before anything is fitted, which of ``markers`` are never present
+    in the held-out frames (their held-out scores cannot be formed), or None."""
+    a, b = held_out
+    present = recording.select(list(markers)).window(a, b).mask.any(axis=0)
+    absent = [m for m, seen in zip(markers, present, strict=True) if not seen]
+    if not absent:
+        return None
+    return (
+        f"note: {len(absent)} of {len(markers)} markers never present in the held-out frames "
+        f"{a}:{b} ({', '.join(absent)}): the held-out verdict cannot judge them (a longer "
+        "--held-out or other --frames can)"
+    )
