@@ -399,3 +399,42 @@ def test_a_body_at_rest_most_of_the_time_takes_its_vertical_from_its_flight():
     assert model["gravity"] == [0.0, 0.0, -9.81]
     feet = {b["particles"][0] for b in model["bond"] if b["kind"] == "contact"}
     assert feet == {"HeelL", "ToeL"}
+
+
+def _walker(scale: float, frames: int = 400, rate: float = 100.0) -> np.ndarray:
+    """Two feet that alternate stance (on the ground, 0.1 mm of noise) and swing (up to 30 %
+    of the hip's height), a hip, a back and a head, all at ``scale`` times a 0.8 m body,
+    walking along X: positions [F, 5, 3]."""
+    rng = np.random.default_rng(0)
+    t = np.arange(frames) / rate
+    x = np.zeros((frames, 5, 3))
+    for i, shift in enumerate((0.0, np.pi)):
+        lift = np.maximum(np.sin(2 * np.pi * t + shift), 0.0)
+        x[:, i, 2] = 0.3 * 0.5 * scale * lift
+        x[:, i, 1] = (i - 0.5) * 0.2 * scale
+    for i, height in ((2, 0.5), (3, 0.6), (4, 0.8)):
+        x[:, i, 2] = height * scale * (1.0 + 0.02 * np.sin(4 * np.pi * t))
+    x[:, :, 0] = 0.5 * scale * t[:, None]
+    return x + rng.normal(0.0, 1e-4 * scale, x.shape)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.04])  # a 0.8 m body and a 3.2 cm one (a mouse's)
+def test_ground_contacts_reach_scales_with_the_body(scale, monkeypatch):
+    """A fixed 2 cm put a mouse's hip on the ground (a 3.2 cm body's hip is 1.6 cm above it);
+    the reach scales with the body's height, so at both sizes only the two feet touch."""
+    from activebonds.identify.discover.gravity import contact_blocks, contact_reach
+
+    x = _walker(scale)
+    mask = np.ones(x.shape[:2], bool)
+    names = ["LF", "RF", "Hip", "Back", "Head"]
+    notes: list[str] = []
+    blocks = contact_blocks(x, mask, names, 2, 1.0, 0.04 * scale**3 * 1000, 0.01, notes)
+    touching = re.findall(r'particles = \["(\w+)"\]', "\n".join(blocks))
+    assert touching == ["LF", "RF"], notes
+    reach = contact_reach(x[:, :, 2], 0.0)
+    assert reach == pytest.approx(min(0.02, 0.03 * np.percentile(x[:, :, 2], 95)), rel=0.05)
+    if scale < 0.1:  # the fixed 2 cm of before put the mouse's hip on the ground
+        monkeypatch.setattr("activebonds.identify.discover.gravity.CONTACT_REACH_SHARE", 1.0)
+        blocks = contact_blocks(x, mask, names, 2, 1.0, 0.04 * scale**3 * 1000, 0.01, [])
+        fixed = re.findall(r'particles = \["(\w+)"\]', "\n".join(blocks))
+        assert fixed[:3] == ["LF", "RF", "Hip"]

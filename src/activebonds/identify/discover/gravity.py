@@ -15,7 +15,11 @@ from .model_text import quoted, searched, vector
 
 G = 9.81  # m/s^2
 FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
-CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it
+CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it, at most ...
+# ... and at most this share of the body's height (the 95th percentile of the markers' height
+# above the ground): 2 cm for a body of 0.67 m and taller (a human, a horse), 1.5 mm for a
+# mouse of 5 cm, whose hips and back a fixed 2 cm would put on the ground
+CONTACT_REACH_SHARE = 0.03
 CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at least this often
 HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
 PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
@@ -131,17 +135,26 @@ def _ground(x: np.ndarray, axis: int, sign: float) -> float:
     return ground_level(sign * x[:, :, axis])
 
 
+def contact_reach(h: np.ndarray, ground: float) -> float:
+    """How close to the ground a marker touches it (m): :data:`CONTACT_REACH`, or
+    :data:`CONTACT_REACH_SHARE` of the body's height above the ground where that is less
+    (``h``: the markers' heights along up [F, P], NaN where missing)."""
+    height = float(np.nanpercentile(h - ground, 95))
+    return min(CONTACT_REACH, CONTACT_REACH_SHARE * max(height, 0.0))
+
+
 def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     """The ground contacts' [[bond]] blocks (the markers that reach the guessed ground)."""
     h = sign * x[:, :, axis]  # [F, P] height along up, NaN where missing
     ground = _ground(x, axis, sign)
     # within reach above or below (False where missing: NaN compares False); a marker far
     # below the ground (a dip, a swapped label) does not touch it
-    near = np.abs(h - ground) < CONTACT_REACH
+    reach = contact_reach(h, ground)
+    near = np.abs(h - ground) < reach
     share = near.sum(axis=0) / np.maximum(mask.sum(axis=0), 1)
     touching = [i for i in range(len(names)) if share[i] >= CONTACT_SHARE]
     if not touching:
-        notes.append(f"contacts: none (no marker within {CONTACT_REACH * 100:g} cm of the ground)")
+        notes.append(f"contacts: none (no marker within {reach * 100:.3g} cm of the ground)")
         return []
     d = x.shape[2]
     normal = [0.0] * d
@@ -176,7 +189,7 @@ def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     height = sign * ground  # the plane's offset along the normal is the ground along up
     contact = bonds.contact.KIND.name
     notes.append(
-        f"contacts: {n} marker(s) within {CONTACT_REACH * 100:g} cm of the ground "
+        f"contacts: {n} marker(s) within {reach * 100:.3g} cm of the ground "
         f"(at {ground:.4g} m along up) in at least {100 * CONTACT_SHARE:g} % of the frames"
         + (f"; a treadmill belt at {vector(belt)} m/s" if belt is not None else "")
     )
@@ -184,7 +197,7 @@ def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     for i in touching:
         block = [
             "",
-            f"# {names[i]} on the ground: within {CONTACT_REACH * 100:g} cm of it in "
+            f"# {names[i]} on the ground: within {reach * 100:.3g} cm of it in "
             f"{100 * share[i]:.3g} % of the frames",
             "[[bond]]",
             f"kind = {quoted(contact)}",
