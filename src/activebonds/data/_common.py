@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from activebonds.data.trajectory import Trajectory
 from activebonds.errors import InputError
 
 #: Length units understood in trajectory files: how many of them make a metre.
@@ -166,6 +167,32 @@ def check_time_column(
             where=where,
         )
     return estimate, float(times[0])
+
+
+def declared_rates(
+    source: str | Path, rate: object | None, *in_file: tuple[str, float]
+) -> list[tuple[str, float]]:
+    """The rates a reader checks against each other: the ``rate`` given to it (``"sample
+    rate"``, checked by :func:`positive_rate`) if any, first, then the file's own ``in_file``
+    (description, rate) pairs."""
+    given = [] if rate is None else [("sample rate", positive_rate(rate, source, "sample rate"))]
+    return given + list(in_file)
+
+
+def units_of(
+    source: str | Path,
+    option: str | None,
+    in_file: object | None = None,
+    where: str | None = None,
+    default: str = "mm",
+) -> str:
+    """The canonical length unit of a file: the ``units`` option's if given, else the file's
+    own (``in_file``, found at ``where``) if it has one, else ``default``."""
+    if option is not None:
+        return canonical_units(source, option, where="units option")
+    if in_file is not None:
+        return canonical_units(source, in_file, where=where)
+    return default
 
 
 def reconcile_rates(source: str | Path, declared: list[tuple[str, float]]) -> float | None:
@@ -408,7 +435,7 @@ def warn_incomplete_row(source: str | Path, line: int, what: str, kept: int) -> 
             f"last row {what}: truncated file (an interrupted export?); dropped that row "
             f"and read the {kept} row{'s' if kept != 1 else ''} before it",
         ),
-        stacklevel=4,
+        stacklevel=5,  # the reader's caller: read_trajectory's
     )
 
 
@@ -544,3 +571,50 @@ def resolve_rate(
         return rate, float(times[0])
     estimate, start = check_time_column(times, resolution, source, declared, lines)
     return (rate if rate is not None else estimate), start
+
+
+def table_trajectory(
+    source: Path,
+    rows: list[tuple[int, list[str]]],
+    parsed: tuple[np.ndarray, list[str]],
+    declared: list[tuple[str, float]],
+    markers: list[str] | tuple[str, ...],
+    dim: int,
+    units: str,
+    dropped: tuple[str | None, int],
+) -> Trajectory:
+    """The trajectory of a text table's data ``rows``, ``parsed`` by :func:`parse_rows`: its
+    rate and start time from the ``declared`` rates and the time column
+    (:func:`resolve_rate`), its positions in metres (:func:`masked_positions`); then the
+    warning of an incomplete last row dropped (``dropped``: what
+    :func:`incomplete_last_row` found, or None, and that row's line)."""
+    values, time_strings = parsed
+    rate, start_time = resolve_rate(source, declared, time_strings, [n for n, _ in rows])
+    positions, mask = masked_positions(values, len(markers), dim, units)
+    trajectory = file_trajectory(source, positions, mask, markers, rate, start_time, units)
+    what, line = dropped
+    if what is not None:
+        warn_incomplete_row(source, line, what, len(rows))
+    return trajectory
+
+
+def file_trajectory(
+    source: Path,
+    positions: np.ndarray,
+    mask: np.ndarray,
+    markers: list[str] | tuple[str, ...],
+    rate: float,
+    start_time: float,
+    units: str,
+) -> Trajectory:
+    """The :class:`Trajectory` a reader returns: ``positions`` in metres, read from the file
+    ``source`` written in ``units``."""
+    return Trajectory(
+        positions=positions,
+        mask=mask,
+        markers=tuple(markers),
+        rate=rate,
+        start_time=start_time,
+        source_units=units,
+        source=str(source),
+    )

@@ -37,16 +37,15 @@ import re
 from pathlib import Path
 
 from activebonds.data._common import (
-    canonical_units,
     data_lines,
+    declared_rates,
     drop_incomplete_row,
     incomplete_last_row,
-    masked_positions,
     parse_rows,
     positive_rate,
     read_text,
-    resolve_rate,
-    warn_incomplete_row,
+    table_trajectory,
+    units_of,
     warn_small_span,
 )
 from activebonds.data._common import (
@@ -185,15 +184,9 @@ def read_csv(
     last_line = rows[-1][0]
     rows = drop_incomplete_row(path, rows, what, strict)
 
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    elif "units" in meta:
-        unit = canonical_units(path, meta["units"][0], where=f"line {meta['units'][1]}")
-    else:
-        unit = "mm"
-    declared = []
-    if rate is not None:
-        declared.append(("sample rate", positive_rate(rate, path, "sample rate")))
+    in_file, units_line = meta.get("units", (None, 0))
+    unit = units_of(path, units, in_file, f"line {units_line}")
+    declared = declared_rates(path, rate)
     if "rate" in meta:
         rate_text, line_no = meta["rate"]
         declared.append(
@@ -206,21 +199,8 @@ def read_csv(
     start_col = len(columns) - len(names) * dim
     coord_cols = list(range(start_col, len(columns)))
     ended = final_newline or what is not None  # the rows before a dropped one all ended
-    values, time_strings = parse_rows(path, rows, columns, coord_cols, time_col, frame_col, ended)
-    line_numbers = [line_no for line_no, _ in rows]
-    sample_rate, start_time = resolve_rate(path, declared, time_strings, line_numbers)
-    positions, mask = masked_positions(values, len(names), dim, unit)
-    trajectory = Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(names),
-        rate=sample_rate,
-        start_time=start_time,
-        source_units=unit,
-        source=str(path),
-    )
-    if what is not None:
-        warn_incomplete_row(path, last_line, what, len(rows))
+    parsed = parse_rows(path, rows, columns, coord_cols, time_col, frame_col, ended)
+    trajectory = table_trajectory(path, rows, parsed, declared, names, dim, unit, (what, last_line))
     if units is None and "units" not in meta:
-        warn_small_span(path, positions)
+        warn_small_span(path, trajectory.positions)
     return trajectory

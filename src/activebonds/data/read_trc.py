@@ -39,16 +39,15 @@ import re
 from pathlib import Path
 
 from activebonds.data._common import (
-    canonical_units,
     data_lines,
+    declared_rates,
     drop_incomplete_row,
     incomplete_last_row,
-    masked_positions,
     parse_rows,
     positive_rate,
     read_text,
-    resolve_rate,
-    warn_incomplete_row,
+    table_trajectory,
+    units_of,
 )
 from activebonds.data._common import (
     ends_with_line_break as _ends_line,
@@ -158,10 +157,7 @@ def read_trc(
     data_rate = positive_rate(meta["DataRate"], path, "line 3: DataRate")
     n_frames = _count(path, meta, "NumFrames")
     n_markers = _count(path, meta, "NumMarkers")
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    else:
-        unit = canonical_units(path, meta["Units"], where="line 3: Units")
+    unit = units_of(path, units, meta["Units"], "line 3: Units")
     names = _marker_names(path, lines[3], n_markers)
     axes = _words(lines[4])
     if len(axes) != 3 * n_markers:
@@ -194,21 +190,6 @@ def read_trc(
     rows = drop_incomplete_row(path, rows, what, strict)
     coord_cols = list(range(2, len(columns)))
     ended = final_newline or what is not None  # the rows before a dropped one all ended
-    values_, time_strings = parse_rows(path, rows, columns, coord_cols, 1, 0, ended)
-    declared = [("DataRate", data_rate)]
-    if rate is not None:
-        declared.insert(0, ("sample rate", positive_rate(rate, path, "sample rate")))
-    sample_rate, start_time = resolve_rate(path, declared, time_strings, [n for n, _ in rows])
-    positions, mask = masked_positions(values_, n_markers, 3, unit)
-    trajectory = Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(names),
-        rate=sample_rate,
-        start_time=start_time,
-        source_units=unit,
-        source=str(path),
-    )
-    if what is not None:
-        warn_incomplete_row(path, last_line, what, len(rows))
-    return trajectory
+    parsed = parse_rows(path, rows, columns, coord_cols, 1, 0, ended)
+    declared = declared_rates(path, rate, ("DataRate", data_rate))
+    return table_trajectory(path, rows, parsed, declared, names, 3, unit, (what, last_line))
