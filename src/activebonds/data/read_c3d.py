@@ -22,10 +22,9 @@ import numpy as np
 
 from activebonds.data._common import (
     RATE_TOLERANCE,
-    declared_rates,
+    agreed_rate,
     file_trajectory,
     read_bytes,
-    reconcile_rates,
     to_metres,
     units_of,
 )
@@ -139,9 +138,7 @@ def read_c3d(path: Path, rate: float | None = None, units: str | None = None) ->
             path, f"not a readable C3D file ({type(exc).__name__}: {detail})"
         ) from None
     check_marker_names(str(path), labels, where="POINT:LABELS")
-    sample_rate = reconcile_rates(
-        path, declared_rates(path, rate, ("header point rate", file_rate))
-    )
+    sample_rate = agreed_rate(path, rate, ("header point rate", file_rate))
     unit = units_of(path, units, file_units, "POINT:UNITS")
     mask = (points[:, :, 3] >= 0) & np.all(np.isfinite(points[:, :, :3]), axis=-1)
     positions = to_metres(points[:, :, :3].copy(), unit)

@@ -37,19 +37,17 @@ import re
 from pathlib import Path
 
 from activebonds.data._common import (
-    data_lines,
     declared_rates,
-    drop_incomplete_row,
-    incomplete_last_row,
-    parse_rows,
     positive_rate,
-    read_text,
-    table_trajectory,
     units_of,
     warn_small_span,
 )
-from activebonds.data._common import (
-    ends_with_line_break as _ends_line,
+from activebonds.data._table import (
+    drop_incomplete_row,
+    incomplete_last_row,
+    parse_rows,
+    read_lines,
+    table_trajectory,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -149,8 +147,7 @@ def read_csv(
     path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
 ) -> Trajectory:
     """Read a wide CSV marker file (see the module docstring for the conventions)."""
-    text = read_text(path)
-    lines = data_lines(text)
+    lines, final_newline = read_lines(path)
     meta: dict[str, tuple[str, int]] = {}
     i = 0
     while i < len(lines) and (
@@ -179,7 +176,6 @@ def read_csv(
         raise InputError(path, f"malformed CSV ({exc})") from None
     if not rows:
         raise InputError(path, "no data rows after the header", where=f"line {i + 1}")
-    final_newline = _ends_line(text)
     what = incomplete_last_row(rows, len(columns), final_newline)
     last_line = rows[-1][0]
     rows = drop_incomplete_row(path, rows, what, strict)

@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from activebonds.data._common import (
-    declared_rates,
+    agreed_rate,
     file_trajectory,
     positive_rate,
     read_bytes,
-    reconcile_rates,
     to_metres,
     units_of,
 )
@@ -112,7 +111,7 @@ def read_npz(path: Path, rate: float | None = None, units: str | None = None) ->
         raise InputError(path, "marker names are not valid UTF-8", where="markers") from None
     check_marker_names(str(path), names, where="markers")
     file_rate = positive_rate(_scalar(path, rate_value, "rate", "fiu"), path, "rate")
-    sample_rate = reconcile_rates(path, declared_rates(path, rate, ("rate in the file", file_rate)))
+    sample_rate = agreed_rate(path, rate, ("rate in the file", file_rate))
     if units is None and units_value is not None:  # the file's, checked only when it is read
         units_value = _scalar(path, units_value, "units", "US")
     unit = units_of(path, units, units_value, "units", default="m")

@@ -38,19 +38,13 @@ import math
 import re
 from pathlib import Path
 
-from activebonds.data._common import (
-    data_lines,
-    declared_rates,
+from activebonds.data._common import declared_rates, positive_rate, units_of
+from activebonds.data._table import (
     drop_incomplete_row,
     incomplete_last_row,
     parse_rows,
-    positive_rate,
-    read_text,
+    read_lines,
     table_trajectory,
-    units_of,
-)
-from activebonds.data._common import (
-    ends_with_line_break as _ends_line,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -141,9 +135,8 @@ def read_trc(
     path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
 ) -> Trajectory:
     """Read an OpenSim TRC file (see the module docstring)."""
-    text = read_text(path)
-    lines = data_lines(text)
-    if not text.strip():
+    lines, final_newline = read_lines(path)
+    if not any(line.strip() for line in lines):
         raise InputError(path, "file is empty; expected an OpenSim TRC file")
     if len(lines) < 5:
         raise InputError(path, f"only {len(lines)} lines; a TRC file has 5 header lines and data")
@@ -171,7 +164,6 @@ def read_trc(
     rows = [
         (j + 1, _fields(lines[j], len(columns))) for j in range(5, len(lines)) if lines[j].strip()
     ]
-    final_newline = _ends_line(text)
     what = incomplete_last_row(rows, len(columns), final_newline)
     if what is None and len(rows) != n_frames:
         raise InputError(

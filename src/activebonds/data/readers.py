@@ -20,7 +20,7 @@ a disagreement of more than 1 % is an error.  ``units`` overrides the file's uni
 
 An interrupted export leaves a CSV or TRC file with an incomplete last row: it is dropped
 with a :class:`TruncatedRowWarning` (one line: file, line number, what is missing), and
-``strict=True`` refuses the file instead (see :func:`.incomplete_last_row`).  Binary
+``strict=True`` refuses the file instead (see :func:`._table.incomplete_last_row`).  Binary
 formats are read whole or refused.
 """
 
