@@ -10,11 +10,22 @@ import typer
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .shared_options import (
+    AllMarkers,
+    Frames,
+    Generations,
+    Gravity,
+    Population,
+    Recording,
+    Seed,
+    TotalMass,
+    Up,
+)
 
 
 @app.command()
 def auto(
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    traj: Recording,
     out_dir: Annotated[
         Path,
         typer.Option(
@@ -23,32 +34,18 @@ def auto(
             "evaluation.json, report.html, auto.json.",
         ),
     ] = ...,
-    markers: Annotated[
-        str | None, typer.Option(help="Markers to model, in order: A,B,C (default: all).")
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    markers: AllMarkers = None,
+    frames: Frames = "0:",
     held_out: Annotated[
         float,
         typer.Option(help="Share of the window's frames held out at its end, never fitted."),
     ] = 0.2,
-    total_mass: Annotated[
-        float | None,
-        typer.Option(help="Total mass in kg, split equally (default: 1 kg per marker)."),
-    ] = None,
-    up: Annotated[
-        str | None,
-        typer.Option(help="The vertical axis, e.g. Z or -Y: gravity along minus it."),
-    ] = None,
-    gravity: Annotated[
-        bool | None,
-        typer.Option(
-            "--gravity/--no-gravity",
-            help="Gravity and ground contacts (default: where the vertical is confident).",
-        ),
-    ] = None,
-    population: Annotated[int, typer.Option(help="The fit's population size.")] = 40,
-    generations: Annotated[int, typer.Option(help="The fit's generations.")] = 200,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    total_mass: TotalMass = None,
+    up: Up = None,
+    gravity: Gravity = None,
+    population: Population = 40,
+    generations: Generations = 200,
+    seed: Seed = 0,
     ahead: Annotated[
         int, typer.Option(help="Frames ahead of the multi-step verdict (evaluate --horizon).")
     ] = 10,

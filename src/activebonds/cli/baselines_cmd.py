@@ -3,27 +3,23 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
-from typing import Annotated
 
-import typer
 from rich.table import Table
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
 from .arguments import check_order
+from .shared_options import AsJson, Bonds, Frames, ModelFile, ModelMarkers, Recording
 
 
 @app.command()
 def baselines(
-    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
-    markers: Annotated[
-        str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
-    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = "model",
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    model: ModelFile,
+    traj: Recording,
+    markers: ModelMarkers = None,
+    frames: Frames = "0:",
+    bonds: Bonds = "model",
+    as_json: AsJson = False,
 ):
     """One-step RMS errors (mm) on the frames: the zero-force (constant-velocity) predictor,
     the momentum floor of internal-force models, and the exact bounded least-squares optimum of

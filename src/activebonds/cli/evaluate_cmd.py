@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -13,22 +12,15 @@ from rich.text import Text
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
 from .arguments import check_order
+from .shared_options import AsJson, FittedModel, Frames, ModelMarkers, Recording
 
 
 @app.command()
 def evaluate(
-    model: Annotated[
-        Path,
-        typer.Argument(help="Model file (TOML), e.g. a fit's RUN/best_model.toml."),
-    ],
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
-    markers: Annotated[
-        str | None,
-        typer.Option(
-            help="Markers followed by the particles, in order: A,B,C (default: the model's)."
-        ),
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    model: FittedModel,
+    traj: Recording,
+    markers: ModelMarkers = None,
+    frames: Frames = "0:",
     substeps: Annotated[
         int | None,
         typer.Option(
@@ -92,36 +84,30 @@ def evaluate(
             "(default: the window's first frame)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    as_json: AsJson = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
     free run stays within 50 mm (as fit's summary and --validate), the RMS error HORIZON
     frames ahead, for the model and the zero-force (constant-velocity) predictor, overall and
     per particle (mm), each with its verdict (better than zero force by X %, or worse)."""
-    from ..data import read_trajectory
-    from ..data.orientation import parse_up
     from ..identify.settings import parse_frames, parse_markers
-    from ..model import load_model
-    from ..report.evaluate import evaluate as run_evaluate
+    from ..report.evaluate_inputs import evaluate_from_options, run_integration
 
     try:
         check_order("evaluate", model, [traj])
-        substeps, integrator = _integration(model, substeps, integrator)
-        window = parse_option_frames(frames, parse_frames)
-        chosen = parse_markers(markers)
-        loaded = load_model(model)
-        found = run_evaluate(
-            loaded,
-            read_trajectory(traj),
-            markers=chosen,
-            frames=window,
+        substeps, integrator = run_integration(model, substeps, integrator)
+        found = evaluate_from_options(
+            model,
+            traj,
+            frames=parse_option_frames(frames, parse_frames),
+            markers=parse_markers(markers),
             substeps=substeps,
             integrator=integrator,
             horizon=horizon,
             gait=gait,
-            feet=[f.strip() for f in feet.split(",") if f.strip()] if feet else None,
-            up=parse_up(up, loaded.dimension, numbers=True) if up else None,
-            body=[b.strip() for b in body.split(",") if b.strip()] if body else None,
+            feet=feet,
+            up=up,
+            body=body,
             origin=origin,
         )
     except InputError as e:
@@ -129,10 +115,20 @@ def evaluate(
     if as_json:
         print(json.dumps({"model_file": str(model), **found.record()}, indent=2))
         return
+    out.print(_overall_table(found, f"{model} on {traj}"))
+    out.print(_particle_table(found))
+    for line in found.lines():
+        out.print(line, markup=False, highlight=False, emoji=False)
+    if found.gait is not None:
+        _print_gait(found.gait)
+
+
+def _overall_table(found, title: str) -> Table:
+    """The model's and zero force's numbers over every particle (and over --body's)."""
     m, z = found.model, found.zero_force
     a, b = found.frames
     how = f"{found.substeps} {found.integrator} substep{'s' * (found.substeps > 1)} per frame"
-    table = Table(title=f"{model} on {traj}, frames {a}:{b} ({how})")
+    table = Table(title=f"{title}, frames {a}:{b} ({how})")
     table.add_column("")
     table.add_column("model", justify="right")
     table.add_column("zero force", justify="right")
@@ -167,7 +163,11 @@ def evaluate(
             bz.frames_text(),
             "",
         )
-    out.print(table)
+    return table
+
+
+def _particle_table(found) -> Table:
+    """Each particle's RMS errors, the model's beside zero force's, red where not better."""
     per = Table(title="per particle (RMS error, mm; red: not better than zero force)")
     for col in ("particle", "marker"):
         per.add_column(col)
@@ -184,26 +184,7 @@ def evaluate(
             cells += [_judged(c.model_per_marker[i], v[i]), _mm(c.zero_force_per_marker[i])]
         cells += [_mm(p.free_run_rms_mm), _mm(p.zero_force_free_run_rms_mm)]
         per.add_row(*cells)
-    out.print(per)
-    for line in found.lines():
-        out.print(line, markup=False, highlight=False, emoji=False)
-    if found.gait is not None:
-        _print_gait(found.gait)
-
-
-def _integration(model: Path, substeps: int | None, integrator: str | None):
-    """(substeps, integrator): as given, else the run's where ``model`` is a fit's
-    RUN/best_model.toml (so that evaluate scores it as the fit and its report did), else 1
-    and euler."""
-    if substeps is None or integrator is None:
-        from ..identify.rundir import RunDir
-
-        run = RunDir(model.parent)
-        if model.name == "best_model.toml" and run.is_run():
-            settings = run.settings()
-            substeps = settings.substeps if substeps is None else substeps
-            integrator = settings.integrator if integrator is None else integrator
-    return (1 if substeps is None else substeps), (integrator or "euler")
+    return per
 
 
 def _print_gait(found) -> None:

@@ -10,11 +10,12 @@ import typer
 from ..errors import InputError
 from .app import app, fail, out
 from .arguments import check_order
+from .shared_options import ModelFile, Substeps
 
 
 @app.command()
 def export(
-    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    model: ModelFile,
     fmt: Annotated[str, typer.Option("--format", help="Output format: mjcf (MuJoCo XML).")] = (
         "mjcf"
     ),
@@ -26,7 +27,7 @@ def export(
             "'simulate --rate --substeps' does (default: MuJoCo's 2 ms)."
         ),
     ] = None,
-    substeps: Annotated[int, typer.Option(min=1, help="Integration steps per frame.")] = 1,
+    substeps: Substeps = 1,
     start: Annotated[
         Path | None,
         typer.Option(

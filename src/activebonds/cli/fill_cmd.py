@@ -12,14 +12,12 @@ from ..errors import InputError
 from ..identify.gaps.settings import MAX_STEPS
 from .app import app, fail, say
 from .arguments import check_order
+from .shared_options import FittedModel
 
 
 @app.command()
 def fill(
-    model: Annotated[
-        Path,
-        typer.Argument(help="Model file (TOML), e.g. a fit's RUN/best_model.toml."),
-    ],
+    model: FittedModel,
     traj: Annotated[Path, typer.Argument(help="Recorded trajectory with gaps.")],
     out_path: Annotated[
         Path,

@@ -31,20 +31,26 @@ from ..identify.settings import (  # noqa: E402
 from .app import app, fail, out, parse_option_frames, say  # noqa: E402
 from .arguments import check_order  # noqa: E402
 from .progress_bar import run_progress as _progress  # noqa: E402
+from .shared_options import (  # noqa: E402
+    AsJson,
+    Bonds,
+    Frames,
+    Generations,
+    Integrator,
+    ModelFile,
+    ModelMarkers,
+    Population,
+    Seed,
+    Strict,
+    Substeps,
+)
 
 
 @app.command()
 def info(
     traj: Annotated[Path, typer.Argument(help="Trajectory file (.csv, .trc, .c3d, .mat, .npz).")],
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
-    strict: Annotated[
-        bool,
-        typer.Option(
-            "--strict",
-            help="Refuse a CSV or TRC file whose last row is incomplete (an interrupted "
-            "export) instead of dropping that row with a warning.",
-        ),
-    ] = False,
+    as_json: AsJson = False,
+    strict: Strict = False,
     markers: Annotated[
         str | None,
         typer.Option(
@@ -117,7 +123,7 @@ def _windows_text(record: dict) -> str:
 
 @app.command()
 def simulate(
-    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    model: ModelFile,
     frames: Annotated[
         int, typer.Option("--n-frames", help="Number of frames to write.", min=2)
     ] = ...,
@@ -127,8 +133,8 @@ def simulate(
         Path | None,
         typer.Option("--from", help="Start from the first two frames of this recording."),
     ] = None,
-    substeps: Annotated[int, typer.Option(min=1, help="Integration steps per frame.")] = 1,
-    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = "euler",
+    substeps: Substeps = 1,
+    integrator: Integrator = "euler",
 ):
     """Free-run a model from its particles' initial state (or a recording's first two frames)."""
     from ..simulation import simulate_to_file
@@ -149,7 +155,7 @@ DEFAULT = {name: f.default for name, f in FitSettings.model_fields.items()}
 
 @app.command()
 def fit(
-    model: Annotated[Path, typer.Argument(help="Model file (TOML).")],
+    model: ModelFile,
     traj: Annotated[
         list[Path],
         typer.Argument(
@@ -158,16 +164,12 @@ def fit(
         ),
     ],
     out_dir: Annotated[Path, typer.Option("--out", help="Run directory to create.")] = ...,
-    markers: Annotated[
-        str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = frames_text(
-        DEFAULT["frames"]
-    ),
-    bonds: Annotated[str, typer.Option(help="model, standard or neural.")] = DEFAULT["bonds"],
-    population: Annotated[int, typer.Option(help="Population size.")] = DEFAULT["population"],
-    generations: Annotated[int, typer.Option(help="Generations.")] = DEFAULT["generations"],
-    seed: Annotated[int, typer.Option(help="Random seed.")] = DEFAULT["seed"],
+    markers: ModelMarkers = None,
+    frames: Frames = frames_text(DEFAULT["frames"]),
+    bonds: Bonds = DEFAULT["bonds"],
+    population: Population = DEFAULT["population"],
+    generations: Generations = DEFAULT["generations"],
+    seed: Seed = DEFAULT["seed"],
     horizon: Annotated[
         str | None,
         typer.Option(
@@ -212,7 +214,7 @@ def fit(
     substeps: Annotated[int, typer.Option(help="Integration steps per frame.")] = DEFAULT[
         "substeps"
     ],
-    integrator: Annotated[str, typer.Option(help="euler or verlet.")] = DEFAULT["integrator"],
+    integrator: Integrator = DEFAULT["integrator"],
     checkpoint_every: Annotated[
         int, typer.Option(help="Generations between checkpoints.")
     ] = DEFAULT["checkpoint_every"],
@@ -249,14 +251,7 @@ def fit(
             "one-step RMS, free-run RMS and frames within 50 mm there (RUN/validation.json)."
         ),
     ] = None,
-    strict: Annotated[
-        bool,
-        typer.Option(
-            "--strict",
-            help="Refuse a CSV or TRC recording whose last row is incomplete (an "
-            "interrupted export) instead of dropping that row with a warning.",
-        ),
-    ] = False,
+    strict: Strict = False,
 ):
     """Identify the model's free parameters from a recorded trajectory; writes RUN/."""
     from ..identify import fit as run_fit

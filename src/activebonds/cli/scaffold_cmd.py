@@ -9,33 +9,20 @@ import typer
 
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
+from .shared_options import AllMarkers, Frames, Gravity, Overwrite, Recording, TotalMass, Up
 
 
 @app.command()
 def scaffold(
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    traj: Recording,
     out_file: Annotated[
         Path, typer.Option("--out", help="The candidate model file to write (TOML).")
     ] = Path("model.toml"),
-    markers: Annotated[
-        str | None, typer.Option(help="Markers to model, in order: A,B,C (default: all).")
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
-    total_mass: Annotated[
-        float | None,
-        typer.Option(help="Total mass in kg, split equally (default: 1 kg per marker)."),
-    ] = None,
-    up: Annotated[
-        str | None,
-        typer.Option(help="The vertical axis, e.g. Z or -Y: gravity along minus it."),
-    ] = None,
-    gravity: Annotated[
-        bool | None,
-        typer.Option(
-            "--gravity/--no-gravity",
-            help="Gravity and ground contacts (default: where the vertical is confident).",
-        ),
-    ] = None,
+    markers: AllMarkers = None,
+    frames: Frames = "0:",
+    total_mass: TotalMass = None,
+    up: Up = None,
+    gravity: Gravity = None,
     neighbours: Annotated[
         int | None,
         typer.Option(help="Nearest neighbours bonded per marker (default 4 in 3D, 3 in 2D)."),
@@ -47,7 +34,7 @@ def scaffold(
             "mechanical-neural bonds, the absent ones dropped."
         ),
     ] = None,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
+    overwrite: Overwrite = False,
 ):
     """Write a candidate model of a recording: a particle per marker, candidate springs
     (near-rigid pairs, nearest neighbours, Delaunay edges; every one optional for 'structure'), gravity and

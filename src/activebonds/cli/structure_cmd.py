@@ -12,24 +12,23 @@ from rich.table import Table
 from ..errors import InputError
 from .app import app, fail, out, parse_option_frames
 from .arguments import check_order
+from .shared_options import AsJson, Frames, ModelMarkers, Overwrite, Recording
 
 
 @app.command()
 def structure(
     model: Annotated[Path, typer.Argument(help="Model file (TOML) with optional bonds.")],
-    traj: Annotated[Path, typer.Argument(help="Recorded trajectory.")],
+    traj: Recording,
     out_file: Annotated[
         Path, typer.Option("--out", help="The identified model file to write (TOML).")
     ],
-    markers: Annotated[
-        str | None, typer.Option(help="Markers followed by the particles, in order: A,B,C.")
-    ] = None,
-    frames: Annotated[str, typer.Option(help="Frame window START:STOP.")] = "0:",
+    markers: ModelMarkers = None,
+    frames: Frames = "0:",
     smooth: Annotated[
         int, typer.Option(help="Savitzky-Golay window (frames) applied to the data first; 0: off.")
     ] = 0,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing --out file.")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    overwrite: Overwrite = False,
+    as_json: AsJson = False,
 ):
     """Decide which optional bonds are present: backward elimination under the BIC on the
     exact one-step least squares. Writes every candidate with present = true or false and the

@@ -21,7 +21,6 @@ from activebonds.data.orientation import (
 from activebonds.data.readers import read_trajectory
 from activebonds.data.trajectory import Trajectory
 from activebonds.data.writers import write_trajectory
-from activebonds.errors import InputError
 
 __all__ = ["Trajectory", "describe", "read_trajectory", "write_trajectory"]
 
@@ -40,13 +39,7 @@ def describe(traj: Trajectory, markers: list[str] | None = None) -> dict:
     (:func:`activebonds.data.coverage.coverage`; ``chosen`` for the names in ``markers``).
     """
     if markers is not None:
-        unknown = [m for m in markers if m not in traj.markers]
-        if unknown:
-            raise InputError(
-                "--markers",
-                f"marker {unknown[0]!r} not found in {traj.source or 'the trajectory'}; "
-                f"available: {', '.join(traj.markers)}",
-            )
+        traj.check_markers(markers, "the trajectory")
     missing = np.count_nonzero(~traj.mask, axis=0)
     ground = guess_ground(traj)
     gravity = guess_gravity(traj)

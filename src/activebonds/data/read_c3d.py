@@ -22,11 +22,11 @@ import numpy as np
 
 from activebonds.data._common import (
     RATE_TOLERANCE,
-    canonical_units,
-    positive_rate,
+    agreed_rate,
+    file_trajectory,
     read_bytes,
-    reconcile_rates,
     to_metres,
+    units_of,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -138,25 +138,12 @@ def read_c3d(path: Path, rate: float | None = None, units: str | None = None) ->
             path, f"not a readable C3D file ({type(exc).__name__}: {detail})"
         ) from None
     check_marker_names(str(path), labels, where="POINT:LABELS")
-    declared = [("header point rate", file_rate)]
-    if rate is not None:
-        declared.insert(0, ("sample rate", positive_rate(rate, path, "sample rate")))
-    sample_rate = reconcile_rates(path, declared)
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    else:
-        unit = canonical_units(path, file_units, where="POINT:UNITS")
+    sample_rate = agreed_rate(path, rate, ("header point rate", file_rate))
+    unit = units_of(path, units, file_units, "POINT:UNITS")
     mask = (points[:, :, 3] >= 0) & np.all(np.isfinite(points[:, :, :3]), axis=-1)
     positions = to_metres(points[:, :, :3].copy(), unit)
     positions[~mask] = np.nan
     if not np.all(np.isfinite(positions[mask])):
         raise InputError(path, "point coordinates overflow when converted to metres")
-    return Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(labels),
-        rate=sample_rate,
-        start_time=(first - 1) / sample_rate,
-        source_units=unit,
-        source=str(path),
-    )
+    start = (first - 1) / sample_rate
+    return file_trajectory(path, positions, mask, labels, sample_rate, start, unit)

@@ -37,20 +37,17 @@ import re
 from pathlib import Path
 
 from activebonds.data._common import (
-    canonical_units,
-    data_lines,
-    drop_incomplete_row,
-    incomplete_last_row,
-    masked_positions,
-    parse_rows,
+    declared_rates,
     positive_rate,
-    read_text,
-    resolve_rate,
-    warn_incomplete_row,
+    units_of,
     warn_small_span,
 )
-from activebonds.data._common import (
-    ends_with_line_break as _ends_line,
+from activebonds.data._table import (
+    drop_incomplete_row,
+    incomplete_last_row,
+    parse_rows,
+    read_lines,
+    table_trajectory,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -150,8 +147,7 @@ def read_csv(
     path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
 ) -> Trajectory:
     """Read a wide CSV marker file (see the module docstring for the conventions)."""
-    text = read_text(path)
-    lines = data_lines(text)
+    lines, final_newline = read_lines(path)
     meta: dict[str, tuple[str, int]] = {}
     i = 0
     while i < len(lines) and (
@@ -180,20 +176,13 @@ def read_csv(
         raise InputError(path, f"malformed CSV ({exc})") from None
     if not rows:
         raise InputError(path, "no data rows after the header", where=f"line {i + 1}")
-    final_newline = _ends_line(text)
     what = incomplete_last_row(rows, len(columns), final_newline)
     last_line = rows[-1][0]
     rows = drop_incomplete_row(path, rows, what, strict)
 
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    elif "units" in meta:
-        unit = canonical_units(path, meta["units"][0], where=f"line {meta['units'][1]}")
-    else:
-        unit = "mm"
-    declared = []
-    if rate is not None:
-        declared.append(("sample rate", positive_rate(rate, path, "sample rate")))
+    in_file, units_line = meta.get("units", (None, 0))
+    unit = units_of(path, units, in_file, f"line {units_line}")
+    declared = declared_rates(path, rate)
     if "rate" in meta:
         rate_text, line_no = meta["rate"]
         declared.append(
@@ -206,21 +195,8 @@ def read_csv(
     start_col = len(columns) - len(names) * dim
     coord_cols = list(range(start_col, len(columns)))
     ended = final_newline or what is not None  # the rows before a dropped one all ended
-    values, time_strings = parse_rows(path, rows, columns, coord_cols, time_col, frame_col, ended)
-    line_numbers = [line_no for line_no, _ in rows]
-    sample_rate, start_time = resolve_rate(path, declared, time_strings, line_numbers)
-    positions, mask = masked_positions(values, len(names), dim, unit)
-    trajectory = Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(names),
-        rate=sample_rate,
-        start_time=start_time,
-        source_units=unit,
-        source=str(path),
-    )
-    if what is not None:
-        warn_incomplete_row(path, last_line, what, len(rows))
+    parsed = parse_rows(path, rows, columns, coord_cols, time_col, frame_col, ended)
+    trajectory = table_trajectory(path, rows, parsed, declared, names, dim, unit, (what, last_line))
     if units is None and "units" not in meta:
-        warn_small_span(path, positions)
+        warn_small_span(path, trajectory.positions)
     return trajectory

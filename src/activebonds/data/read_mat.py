@@ -37,11 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from activebonds.data._common import (
-    canonical_units,
+    declared_rates,
+    file_trajectory,
     positive_rate,
     read_bytes,
     reconcile_rates,
     to_metres,
+    units_of,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -321,9 +323,7 @@ def read_mat(
     except Exception as exc:  # h5py/scipy on a corrupt file raise anything
         raise InputError(path, f"corrupt MAT file ({_detail(exc)}); {_EXPECTED}") from None
     check_marker_names(str(path), labels, where=where.replace(".Data", ".Labels"))
-    declared = []
-    if rate is not None:
-        declared.append(("sample rate", positive_rate(rate, path, "sample rate")))
+    declared = declared_rates(path, rate)
     if file_rate is not None:
         declared.append((file_rate[1], positive_rate(file_rate[0], path, file_rate[1])))
     sample_rate = reconcile_rates(path, declared)
@@ -335,7 +335,7 @@ def read_mat(
         if not (np.isfinite(first) and first == int(first)):
             raise InputError(path, f"expected a whole frame number, got {first!r}", start_where)
         start = (first - 1) / sample_rate
-    unit = canonical_units(path, units if units is not None else "mm", where="units option")
+    unit = units_of(path, units)
     xyz = points[:, :3, :].transpose(2, 0, 1)  # [frames, markers, 3]
     mask = np.all(np.isfinite(xyz), axis=-1)
     if points.shape[1] == 4:
@@ -344,12 +344,4 @@ def read_mat(
     positions[~mask] = np.nan
     if not np.all(np.isfinite(positions[mask])):
         raise InputError(path, "coordinates overflow when converted to metres", where=where)
-    return Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(labels),
-        rate=sample_rate,
-        start_time=start,
-        source_units=unit,
-        source=str(path),
-    )
+    return file_trajectory(path, positions, mask, labels, sample_rate, start, unit)

@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from activebonds.data._common import (
-    canonical_units,
+    agreed_rate,
+    file_trajectory,
     positive_rate,
     read_bytes,
-    reconcile_rates,
     to_metres,
+    units_of,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -110,16 +111,10 @@ def read_npz(path: Path, rate: float | None = None, units: str | None = None) ->
         raise InputError(path, "marker names are not valid UTF-8", where="markers") from None
     check_marker_names(str(path), names, where="markers")
     file_rate = positive_rate(_scalar(path, rate_value, "rate", "fiu"), path, "rate")
-    declared = [("rate in the file", file_rate)]
-    if rate is not None:
-        declared.insert(0, ("sample rate", positive_rate(rate, path, "sample rate")))
-    sample_rate = reconcile_rates(path, declared)
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    elif units_value is not None:
-        unit = canonical_units(path, _scalar(path, units_value, "units", "US"), where="units")
-    else:
-        unit = "m"
+    sample_rate = agreed_rate(path, rate, ("rate in the file", file_rate))
+    if units is None and units_value is not None:  # the file's, checked only when it is read
+        units_value = _scalar(path, units_value, "units", "US")
+    unit = units_of(path, units, units_value, "units", default="m")
     start = 0.0
     if start_value is not None:
         start = float(_scalar(path, start_value, "start_time", "fiu"))
@@ -145,12 +140,4 @@ def read_npz(path: Path, rate: float | None = None, units: str | None = None) ->
     if not np.all(np.isfinite(values[present])):
         raise InputError(path, "values overflow when converted to metres", where="positions")
     values[~present] = np.nan
-    return Trajectory(
-        positions=values,
-        mask=present,
-        markers=names,
-        rate=sample_rate,
-        start_time=start,
-        source_units=unit,
-        source=str(path),
-    )
+    return file_trajectory(path, values, present, names, sample_rate, start, unit)

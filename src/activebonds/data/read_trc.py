@@ -38,20 +38,13 @@ import math
 import re
 from pathlib import Path
 
-from activebonds.data._common import (
-    canonical_units,
-    data_lines,
+from activebonds.data._common import declared_rates, positive_rate, units_of
+from activebonds.data._table import (
     drop_incomplete_row,
     incomplete_last_row,
-    masked_positions,
     parse_rows,
-    positive_rate,
-    read_text,
-    resolve_rate,
-    warn_incomplete_row,
-)
-from activebonds.data._common import (
-    ends_with_line_break as _ends_line,
+    read_lines,
+    table_trajectory,
 )
 from activebonds.data.trajectory import Trajectory, check_marker_names
 from activebonds.errors import InputError
@@ -142,9 +135,8 @@ def read_trc(
     path: Path, rate: float | None = None, units: str | None = None, strict: bool = False
 ) -> Trajectory:
     """Read an OpenSim TRC file (see the module docstring)."""
-    text = read_text(path)
-    lines = data_lines(text)
-    if not text.strip():
+    lines, final_newline = read_lines(path)
+    if not any(line.strip() for line in lines):
         raise InputError(path, "file is empty; expected an OpenSim TRC file")
     if len(lines) < 5:
         raise InputError(path, f"only {len(lines)} lines; a TRC file has 5 header lines and data")
@@ -158,10 +150,7 @@ def read_trc(
     data_rate = positive_rate(meta["DataRate"], path, "line 3: DataRate")
     n_frames = _count(path, meta, "NumFrames")
     n_markers = _count(path, meta, "NumMarkers")
-    if units is not None:
-        unit = canonical_units(path, units, where="units option")
-    else:
-        unit = canonical_units(path, meta["Units"], where="line 3: Units")
+    unit = units_of(path, units, meta["Units"], "line 3: Units")
     names = _marker_names(path, lines[3], n_markers)
     axes = _words(lines[4])
     if len(axes) != 3 * n_markers:
@@ -175,7 +164,6 @@ def read_trc(
     rows = [
         (j + 1, _fields(lines[j], len(columns))) for j in range(5, len(lines)) if lines[j].strip()
     ]
-    final_newline = _ends_line(text)
     what = incomplete_last_row(rows, len(columns), final_newline)
     if what is None and len(rows) != n_frames:
         raise InputError(
@@ -194,21 +182,6 @@ def read_trc(
     rows = drop_incomplete_row(path, rows, what, strict)
     coord_cols = list(range(2, len(columns)))
     ended = final_newline or what is not None  # the rows before a dropped one all ended
-    values_, time_strings = parse_rows(path, rows, columns, coord_cols, 1, 0, ended)
-    declared = [("DataRate", data_rate)]
-    if rate is not None:
-        declared.insert(0, ("sample rate", positive_rate(rate, path, "sample rate")))
-    sample_rate, start_time = resolve_rate(path, declared, time_strings, [n for n, _ in rows])
-    positions, mask = masked_positions(values_, n_markers, 3, unit)
-    trajectory = Trajectory(
-        positions=positions,
-        mask=mask,
-        markers=tuple(names),
-        rate=sample_rate,
-        start_time=start_time,
-        source_units=unit,
-        source=str(path),
-    )
-    if what is not None:
-        warn_incomplete_row(path, last_line, what, len(rows))
-    return trajectory
+    parsed = parse_rows(path, rows, columns, coord_cols, 1, 0, ended)
+    declared = declared_rates(path, rate, ("DataRate", data_rate))
+    return table_trajectory(path, rows, parsed, declared, names, 3, unit, (what, last_line))

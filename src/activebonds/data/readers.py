@@ -20,7 +20,7 @@ a disagreement of more than 1 % is an error.  ``units`` overrides the file's uni
 
 An interrupted export leaves a CSV or TRC file with an incomplete last row: it is dropped
 with a :class:`TruncatedRowWarning` (one line: file, line number, what is missing), and
-``strict=True`` refuses the file instead (see :func:`.incomplete_last_row`).  Binary
+``strict=True`` refuses the file instead (see :func:`._table.incomplete_last_row`).  Binary
 formats are read whole or refused.
 """
 
@@ -29,14 +29,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from activebonds.data._common import TruncatedRowWarning
+from activebonds.data._common import TruncatedRowWarning, by_extension
 from activebonds.data.read_c3d import read_c3d
 from activebonds.data.read_csv import read_csv
 from activebonds.data.read_mat import read_mat
 from activebonds.data.read_npz import read_npz
 from activebonds.data.read_trc import read_trc
 from activebonds.data.trajectory import Trajectory
-from activebonds.errors import InputError
+from activebonds.errors import InputError  # what read_trajectory raises, for its callers
 
 READERS: dict[str, Callable[..., Trajectory]] = {
     ".csv": read_csv,
@@ -48,7 +48,7 @@ READERS: dict[str, Callable[..., Trajectory]] = {
 #: The readers that take ``strict`` (the others read a file whole or refuse it).
 _STRICT_READERS = (read_csv, read_trc, read_mat)
 
-__all__ = ["READERS", "TruncatedRowWarning", "read_trajectory"]
+__all__ = ["READERS", "InputError", "TruncatedRowWarning", "read_trajectory"]
 
 
 def read_trajectory(
@@ -69,13 +69,7 @@ def read_trajectory(
         InputError: unknown extension, unreadable or malformed file.
     """
     path = Path(path)
-    reader = READERS.get(path.suffix.lower())
-    if reader is None:
-        raise InputError(
-            path,
-            f"unknown trajectory file extension {path.suffix or '(none)'!r}; "
-            f"expected one of {', '.join(READERS)}",
-        )
+    reader = by_extension(READERS, path)
     if reader in _STRICT_READERS:
         return reader(path, rate=rate, units=units, strict=strict)
     return reader(path, rate=rate, units=units)

@@ -163,6 +163,17 @@ class Trajectory:
             mask = np.all(np.isfinite(positions), axis=-1) if positions.ndim == 3 else None
         return dataclasses.replace(self, positions=positions, mask=mask, **changes)
 
+    def check_markers(self, markers, unnamed: str = "the recording") -> None:
+        """Refuse (an :class:`InputError` of ``--markers``) the first of ``markers`` that is
+        not one of this trajectory's, naming its file (or ``unnamed``: read from none)."""
+        unknown = [m for m in markers if m not in self.markers]
+        if unknown:
+            raise InputError(
+                "--markers",
+                f"marker {unknown[0]!r} not found in {self.source or unnamed}; "
+                f"available: {', '.join(self.markers)}",
+            )
+
     def select(self, markers: list[str] | tuple[str, ...]) -> Trajectory:
         """Keep only the named markers, in the order given."""
         src = self.source or "trajectory"

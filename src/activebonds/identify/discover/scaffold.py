@@ -107,13 +107,7 @@ class Scaffold:
 
 def _window(traj, markers, frames):
     if markers is not None:
-        unknown = [m for m in markers if m not in traj.markers]
-        if unknown:
-            raise InputError(
-                "--markers",
-                f"marker {unknown[0]!r} not found in {traj.source or 'the recording'}; "
-                f"available: {', '.join(traj.markers)}",
-            )
+        traj.check_markers(markers)
         if len(set(markers)) != len(markers):
             raise InputError("--markers", "a marker is named twice")
         traj = traj.select(list(markers))
