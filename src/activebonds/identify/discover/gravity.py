@@ -5,6 +5,7 @@ the markers that reach the ground, each block with the rule behind its numbers."
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -16,10 +17,10 @@ from .model_text import quoted, searched, vector
 G = 9.81  # m/s^2
 FLAT = 1e-3  # m: a recording whose markers span less than this along an axis is flat there
 CONTACT_REACH = 0.02  # m: a marker this close to the ground touches it, at most ...
-# ... and at most this share of the body's height (the 95th percentile of the markers' height
-# above the ground): 2 cm for a body of 0.67 m and taller (a human, a horse), 1.5 mm for a
-# mouse of 5 cm, whose hips and back a fixed 2 cm would put on the ground
-CONTACT_REACH_SHARE = 0.03
+# ... and at most this share of the body's size (the median over frames of its markers' largest
+# extent along an axis): 2 cm for a body of 0.29 m and larger (a human, a horse, MuJoCo's
+# thrown body), 2.2 mm for a mouse of 3.2 cm, whose hip a fixed 2 cm put on the ground
+CONTACT_REACH_SHARE = 0.07
 CONTACT_SHARE = 0.05  # of the frames: a contact marker is on the ground at least this often
 HEIGHT_RANGE = 0.05  # m: the ground's height is free within this of its guess (impacts go deep)
 PENETRATION = 0.005  # m: the contacts hold the body's weight at this depth
@@ -135,12 +136,16 @@ def _ground(x: np.ndarray, axis: int, sign: float) -> float:
     return ground_level(sign * x[:, :, axis])
 
 
-def contact_reach(h: np.ndarray, ground: float) -> float:
+def contact_reach(x: np.ndarray) -> float:
     """How close to the ground a marker touches it (m): :data:`CONTACT_REACH`, or
-    :data:`CONTACT_REACH_SHARE` of the body's height above the ground where that is less
-    (``h``: the markers' heights along up [F, P], NaN where missing)."""
-    height = float(np.nanpercentile(h - ground, 95))
-    return min(CONTACT_REACH, CONTACT_REACH_SHARE * max(height, 0.0))
+    :data:`CONTACT_REACH_SHARE` of the body's size where that is less (``x``: the markers'
+    positions [F, P, D], NaN where missing; the size is the median over frames of their
+    largest extent along an axis)."""
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with no marker: NaN
+        extent = np.nanmax(x, axis=1) - np.nanmin(x, axis=1)
+        size = float(np.nanmedian(np.nanmax(extent, axis=1)))
+    return min(CONTACT_REACH, CONTACT_REACH_SHARE * size) if np.isfinite(size) else CONTACT_REACH
 
 
 def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
@@ -149,7 +154,7 @@ def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     ground = _ground(x, axis, sign)
     # within reach above or below (False where missing: NaN compares False); a marker far
     # below the ground (a dip, a swapped label) does not touch it
-    reach = contact_reach(h, ground)
+    reach = contact_reach(x)
     near = np.abs(h - ground) < reach
     share = near.sum(axis=0) / np.maximum(mask.sum(axis=0), 1)
     touching = [i for i in range(len(names)) if share[i] >= CONTACT_SHARE]

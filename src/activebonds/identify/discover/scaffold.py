@@ -55,8 +55,8 @@ What is written, and the rules (``P`` markers, rate ``f`` Hz, window ``T`` secon
   itself, measured), that direction; otherwise none, and the summary says so (``--up``
   names the vertical, ``--no-gravity`` leaves it out). A flat recording (2D, or with no
   extent along an axis) has no vertical to guess.
-* **Ground contacts** (with gravity): one per marker within reach of the ground (2 cm, or 3 %
-  of the body's height where less: :func:`.gravity.contact_reach`), above or below it,
+* **Ground contacts** (with gravity): one per marker within reach of the ground (2 cm, or 7 %
+  of the body's size where less: :func:`.gravity.contact_reach`), above or below it,
   in at least :data:`CONTACT_SHARE` of the frames, the plane at the guessed ground
   (height free within :data:`HEIGHT_RANGE`); stiffness ``M g / (n delta)`` (the whole weight
   ``M g`` shared by the ``n`` contacts at a penetration ``delta`` = :data:`PENETRATION`),
