@@ -124,14 +124,14 @@ class Score(Record):
 
     def text(self) -> str:
         """The verdict in words, with both numbers."""
-        m, z = _mm(self.model_mm), _mm(self.zero_force_mm)
+        m, z, unit = _mm(self.model_mm), _mm(self.zero_force_mm), self.unit
         if self.better is None:
-            return f"not judged ({m} vs {z} mm for zero force)"
+            return f"not judged ({m} vs {z} {unit} for zero force)"
         if self.better:
             gain = self.gain_pct
             by = f"by {gain:.3g} %" if math.isfinite(gain) else "(zero force fails)"
-            return f"better than zero force {by} ({m} vs {z} mm)"
-        return f"{self.word} than zero force ({m} vs {z} mm): {EXPLAINS_NOT}"
+            return f"better than zero force {by} ({m} vs {z} {unit})"
+        return f"{self.word} than zero force ({m} vs {z} {unit}): {EXPLAINS_NOT}"
 
     @property
     def overall(self) -> Verdict:
