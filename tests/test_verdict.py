@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, write_trajectory
-from activebonds.identify.judge.ahead import compare, comparisons, zero_force_ahead
+from activebonds.identify.judge.ahead import compare, comparisons
 from activebonds.identify.judge.metrics import window_metrics
+from activebonds.identify.judge.predictions import zero_force_ahead
 from activebonds.identify.judge.verdict import (
     EXPLAINS_NOT,
     MARGIN_PCT,
