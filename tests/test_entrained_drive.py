@@ -30,8 +30,7 @@ from activebonds.identify.costs.shooting import (
 )
 from activebonds.identify.costs.shooting import start_states as window_starts
 from activebonds.identify.costs.windows import join_windows, make_cost, make_windows, start_phases
-from activebonds.identify.judge.ahead import model_ahead
-from activebonds.identify.judge.predictions import free_run, one_step, tracked_phases
+from activebonds.identify.judge.predictions import free_run, model_ahead, one_step, tracked_phases
 from activebonds.identify.search.population_cost import make_population_cost
 from activebonds.model import dumps_model, loads_model
 from activebonds.physics import phase, rollout, rollout_states

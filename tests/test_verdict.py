@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from activebonds.data import Trajectory, write_trajectory
-from activebonds.identify.judge.ahead import compare, comparisons, zero_force_ahead
+from activebonds.identify.judge.ahead import compare, comparisons
 from activebonds.identify.judge.metrics import window_metrics
+from activebonds.identify.judge.predictions import zero_force_ahead
 from activebonds.identify.judge.verdict import (
     EXPLAINS_NOT,
     MARGIN_PCT,
@@ -66,7 +67,14 @@ def test_the_words_and_the_rule():
 
 
 def test_per_marker_words_name_the_worse_markers():
-    c = Comparison(1, 0.9, 1.0, ("Head", "Withers"), (0.79, 0.5), (0.39, 1.2))
+    c = Comparison(
+        0.9,
+        1.0,
+        horizon=1,
+        markers=("Head", "Withers"),
+        model_per_marker=(0.79, 0.5),
+        zero_force_per_marker=(0.39, 1.2),
+    )
     assert c.overall.better is True
     assert c.worse_markers() == ["Head"]
     assert c.markers_text() == (
@@ -74,7 +82,9 @@ def test_per_marker_words_name_the_worse_markers():
     )
     assert c.lines("held-out frames")[0].startswith("verdict, held-out frames, one step: better")
     assert Comparison.from_dict(json.loads(json.dumps(c.to_dict()))) == c
-    k = Comparison(10, 1.0, 2.0, ("A",), (1.0,), (2.0,))
+    k = Comparison(
+        1.0, 2.0, horizon=10, markers=("A",), model_per_marker=(1.0,), zero_force_per_marker=(2.0,)
+    )
     assert k.what == "10 frames ahead"
     assert k.markers_text() == "better than zero force at every marker (1)"
 

@@ -39,7 +39,6 @@ from pydantic import ValidationError
 from ..data import Trajectory
 from ..errors import InputError, option_error
 from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
-from ..identify.judge.baselines import zero_force_predictions
 from ..identify.judge.metrics import (
     DEFAULT_STARTS,
     THRESHOLD_MM,
@@ -47,23 +46,18 @@ from ..identify.judge.metrics import (
     start_frames,
     window_metrics,
 )
-from ..identify.judge.predictions import rms_mm
-from ..identify.judge.verdict import Comparison, Verdict, free_run_advice, holds
+from ..identify.judge.predictions import rms_mm, zero_force_predictions
+from ..identify.judge.verdict import (
+    Comparison,
+    ParticleScore,
+    Score,
+    Verdict,
+    free_run_advice,
+    holds,
+)
 from ..model import Model
 from .gait_runs import GaitEvaluation, gait_evaluation
-from .predict import predict
-
-
-@dataclass(frozen=True)
-class ParticleScore:
-    """One particle's RMS errors (mm): the model's and the zero-force predictor's."""
-
-    particle: str
-    marker: str
-    one_step_rms_mm: float
-    zero_force_one_step_rms_mm: float
-    free_run_rms_mm: float  # from the first free-run start, as FreeRunMetrics
-    zero_force_free_run_rms_mm: float
+from .predict import Prediction, predict
 
 
 @dataclass(frozen=True)
@@ -109,21 +103,7 @@ class Evaluation:
             "integrator": self.integrator,
             "model": self.model.to_dict(),
             "zero_force": self.zero_force.to_dict(),
-            "particles": [
-                {
-                    "particle": p.particle,
-                    "marker": p.marker,
-                    "one_step_rms_mm": {
-                        "model": _plain(p.one_step_rms_mm),
-                        "zero_force": _plain(p.zero_force_one_step_rms_mm),
-                    },
-                    "free_run_rms_mm": {
-                        "model": _plain(p.free_run_rms_mm),
-                        "zero_force": _plain(p.zero_force_free_run_rms_mm),
-                    },
-                }
-                for p in self.particles
-            ],
+            "particles": [p.to_dict() for p in self.particles],
             "comparisons": [c.to_dict() for c in self.comparisons],
             "holds": self.holds,
             **({"gait": self.gait.record()} if self.gait is not None else {}),
@@ -138,10 +118,6 @@ class Evaluation:
                 else {}
             ),
         }
-
-
-def _plain(x: float) -> float | str:
-    return float(x) if np.isfinite(x) else str(float(x))
 
 
 def evaluate(
@@ -174,6 +150,47 @@ def evaluate(
     :class:`InputError` (one line) for markers or frames the recording does not have, or a
     ``body`` name the model does not have."""
     from ..identify.problem import select_data
+
+    settings = _settings(markers, frames, substeps, integrator, horizon)
+    start = settings.frames[0]
+    if origin is not None and not 0 <= int(origin) <= start:
+        raise InputError("--origin", f"must be a frame from 0 to the window's first, {start}")
+    offset = 0 if origin is None else start - int(origin)
+    data = select_data(model, recording, settings)
+    run = {"substeps": substeps, "method": integrator, "offset": offset}
+    options = {"starts": starts, "threshold_mm": threshold_mm}
+    found = window_metrics(model, data, substeps, integrator, offset, **options)
+    picked = _body(body, model.particle_names, data.markers)
+    body_found = None
+    if picked:  # the same runs, only these markers' errors counted
+        body_found = window_metrics(
+            model, data, substeps, integrator, offset, markers=picked, **options
+        )
+    gait_found = None
+    if gait:
+        where = {"feet": feet, "up": up, "offset": offset, "first_frame": start}
+        gait_found = gait_evaluation(model, data, substeps=substeps, integrator=integrator, **where)
+    return Evaluation(
+        model_name=model.name,
+        source=str(recording.source or ""),
+        frames=(int(start), int(start + data.n_frames)),
+        markers=tuple(data.markers),
+        substeps=int(substeps),
+        integrator=integrator,
+        model=found["model"],
+        zero_force=found["zero_force"],
+        particles=particle_scores(model, data, predict(model, data, **run)),
+        comparisons=tuple(comparisons(model, data, horizon, **run)),
+        gait=gait_found,
+        holds=holds(model, data),
+        body_markers=tuple(model.particle_names[i] for i in picked),
+        body=body_found,
+    )
+
+
+def _settings(markers, frames, substeps: int, integrator: str, horizon: int):
+    """:func:`evaluate`'s options as a fit's settings (its markers, frames and integration);
+    :class:`InputError` (one line, as the command line's options) for the first problem."""
     from ..identify.settings import FitSettings
 
     try:
@@ -187,64 +204,27 @@ def evaluate(
         raise option_error(e) from None
     if int(horizon) < 1:
         raise InputError("--horizon", f"must be at least 1, got {horizon}")
-    start = settings.frames[0]
-    if origin is not None and not 0 <= int(origin) <= start:
-        raise InputError("--origin", f"must be a frame from 0 to the window's first, {start}")
-    offset = 0 if origin is None else start - int(origin)
-    data = select_data(model, recording, settings)
-    found = window_metrics(
-        model, data, substeps, integrator, offset, starts=starts, threshold_mm=threshold_mm
-    )
-    picked = _body(body, model.particle_names, data.markers)
-    body_found = None
-    if picked:
-        options = {"starts": starts, "threshold_mm": threshold_mm, "markers": picked}
-        body_found = window_metrics(model, data, substeps, integrator, offset, **options)
-    pred = predict(model, data, substeps=substeps, method=integrator, offset=offset)
+    return settings
+
+
+def particle_scores(model: Model, data: Trajectory, pred: Prediction) -> tuple[ParticleScore, ...]:
+    """Per particle, the model's one-step and free-run RMS (``pred``, :func:`predict` along
+    ``data``) beside zero force's on the same terms (its free run from the first free-run
+    start)."""
     rec = np.asarray(data.positions, np.float64)
     first = start_frames(rec, 1)
     zero_one, zero_run = zero_force_predictions(rec, first[0] if first else rec.shape[0])
-    zero_one_rms = rms_mm(zero_one, rec)
-    zero_run_rms = rms_mm(zero_run, rec)
-    particles = tuple(
+    zero_one_rms, zero_run_rms = rms_mm(zero_one, rec), rms_mm(zero_run, rec)
+    return tuple(
         ParticleScore(
             particle=name,
             marker=marker,
-            one_step_rms_mm=float(pred.one_step_rms_mm[i]),
-            zero_force_one_step_rms_mm=float(zero_one_rms[i]),
-            free_run_rms_mm=float(pred.free_run_rms_mm[i]) if first else float("nan"),
-            zero_force_free_run_rms_mm=float(zero_run_rms[i]),
+            one_step=Score(float(pred.one_step_rms_mm[i]), float(zero_one_rms[i])),
+            free_run=Score(
+                float(pred.free_run_rms_mm[i]) if first else float("nan"), float(zero_run_rms[i])
+            ),
         )
         for i, (name, marker) in enumerate(zip(model.particle_names, data.markers, strict=True))
-    )
-    return Evaluation(
-        model_name=model.name,
-        source=str(recording.source or ""),
-        frames=(int(start), int(start + data.n_frames)),
-        markers=tuple(data.markers),
-        substeps=int(substeps),
-        integrator=integrator,
-        model=found["model"],
-        zero_force=found["zero_force"],
-        particles=particles,
-        comparisons=tuple(
-            comparisons(model, data, horizon, substeps=substeps, method=integrator, offset=offset)
-        ),
-        gait=gait_evaluation(
-            model,
-            data,
-            substeps=substeps,
-            integrator=integrator,
-            feet=feet,
-            up=up,
-            offset=offset,
-            first_frame=start,
-        )
-        if gait
-        else None,
-        holds=holds(model, data),
-        body_markers=tuple(model.particle_names[i] for i in picked),
-        body=body_found,
     )
 
 

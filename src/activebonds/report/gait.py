@@ -40,6 +40,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..data.period import dominant_period
+from ..identify.judge.predictions import constant_velocity
 
 STRIDES = 5  # strides of each free run
 STARTS = 10  # free runs, from start frames spread over the window
@@ -329,7 +330,7 @@ def constant_velocity_runs(positions: np.ndarray, starts: Sequence[int], n: int)
     x = np.asarray(positions, np.float64)
     s = np.asarray(starts, int)
     k = np.arange(1, n + 1, dtype=np.float64)[None, :, None, None]
-    return x[s][:, None] + k * (x[s] - x[s - 1])[:, None]
+    return constant_velocity(x[s][:, None], (x[s] - x[s - 1])[:, None], k)
 
 
 def plain(value):

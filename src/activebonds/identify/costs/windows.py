@@ -344,8 +344,11 @@ def make_residuals(
 def constant_velocity_cost(windows: Windows) -> float:
     """The zero-force predictor's summed squared error (m^2) on ``windows``' terms: each
     start's positions carried on at its start velocity, ``x0 + k dt v0`` k frames ahead."""
+    from ..judge.predictions import constant_velocity
+
     k = np.arange(1, windows.target.shape[1] + 1)[None, :, None, None]
-    err = windows.x0[:, None] + k * windows.dt * windows.v0[:, None] - windows.target
+    carried = constant_velocity(windows.x0[:, None], windows.v0[:, None], k * windows.dt)
+    err = carried - windows.target
     return float(np.sum(windows.weight[..., None] * err**2))
 
 

@@ -10,111 +10,21 @@ target makes its marker's RMS, and the overall one, +inf.
 
 The model's time starts at the window's first frame (``offset``: frames from the model's time
 origin to the window, as :func:`~activebonds.identify.judge.metrics.free_run_metrics`); an entrained
-drive's phase at each start is tracked along the window
-(:func:`~activebonds.identify.judge.predictions.tracked_phases`).
+drive's phase at each start is tracked along the window. The predictions are
+:mod:`~activebonds.identify.judge.predictions`' (:func:`~.predictions.model_ahead`,
+:func:`~.predictions.zero_force_ahead`); this module scores them.
 """
 
 from __future__ import annotations
 
-from functools import partial
-
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ...data import Trajectory
 from ...model import Model
-from ...runtime import float64
-from .predictions import StaticTopology, float64_params, solved, tracked_phases
+from .predictions import model_ahead, zero_force_ahead
 from .verdict import Comparison
 
 DEFAULT_AHEAD = 10  # frames ahead in fit's summary and evaluate's default
-
-
-@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method", "newton"))
-def _runs(
-    params,
-    x_prev,
-    x0,
-    t0,
-    dt,
-    topo: StaticTopology,
-    n_steps,
-    substeps,
-    method,
-    psis=None,
-    newton: bool = False,
-):
-    """(start velocities, the runs' last positions): ``psis``, an entrained drive's phases at
-    the frames of ``x_prev`` and ``x0``; ``newton``, the start velocities by Newton's method
-    (:func:`.predictions.solved`)."""
-    from ...physics.integrate import rollout_states, start_velocity
-
-    def one(a, b, t, *psi):
-        p_prev, p0 = psi if psi else (None, None)
-        v = start_velocity(
-            params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=newton
-        )
-        xs = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)[0]
-        return v, xs[-1]
-
-    return jax.vmap(one)(x_prev, x0, t0, *(psis or ()))
-
-
-def _starts(rec: np.ndarray, k: int) -> np.ndarray:
-    """Start frames s with frames s - 1 and s complete and a frame s + k in the window."""
-    complete = np.isfinite(rec).all(axis=(1, 2))
-    s = np.arange(1, rec.shape[0] - k)
-    return s[complete[s] & complete[s - 1]] if s.size else s
-
-
-@float64
-def model_ahead(
-    model: Model,
-    positions: np.ndarray,
-    dt: float,
-    k: int,
-    substeps: int = 1,
-    method: str = "euler",
-    offset: int = 0,
-) -> np.ndarray:
-    """The model's prediction of each frame ``s + k`` from the recorded state at ``s``,
-    aligned with the recording [F, P, D]: NaN where there is no start (and +inf where the
-    run went non-finite)."""
-    rec = np.asarray(positions, np.float64)
-    out = np.full_like(rec, np.nan)
-    starts = _starts(rec, k)
-    if starts.size == 0:
-        return out
-    psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
-    psis = None if psi is None else (jnp.asarray(psi[starts - 1]), jnp.asarray(psi[starts]))
-    pred = solved(
-        _runs,
-        float64_params(model),
-        jnp.asarray(rec[starts - 1]),
-        jnp.asarray(rec[starts]),
-        jnp.asarray((starts + int(offset)) * float(dt)),
-        float(dt),
-        topo=StaticTopology(model.topology),
-        n_steps=int(k),
-        substeps=int(substeps),
-        method=method,
-        psis=psis,
-    )[1]
-    pred = np.array(pred, np.float64)
-    pred[~np.isfinite(pred)] = np.inf  # a failed prediction: an infinite error, not a gap
-    out[starts + k] = pred
-    return out
-
-
-def zero_force_ahead(positions: np.ndarray, k: int) -> np.ndarray:
-    """The constant-velocity prediction of each frame ``s + k`` from frames ``s - 1``, ``s``
-    [F, P, D] (NaN where there is no start)."""
-    rec = np.asarray(positions, np.float64)
-    out = np.full_like(rec, np.nan)
-    starts = _starts(rec, k)
-    out[starts + k] = rec[starts] + k * (rec[starts] - rec[starts - 1])
-    return out
 
 
 def _rms(pred: np.ndarray, rec: np.ndarray) -> tuple[float, np.ndarray, int]:
@@ -133,23 +43,14 @@ def _rms(pred: np.ndarray, rec: np.ndarray) -> tuple[float, np.ndarray, int]:
     return overall, per, terms
 
 
-def compare(
-    model: Model,
-    trajectory: Trajectory,
-    k: int = 1,
-    *,
-    substeps: int = 1,
-    method: str = "euler",
-    offset: int = 0,
-) -> Comparison:
+def compare(model: Model, trajectory: Trajectory, k: int = 1, **run) -> Comparison:
     """The model and zero force ``k`` frames ahead on ``trajectory`` (markers in the model's
-    particle order)."""
+    particle order; ``run``: ``substeps``, ``method`` and ``offset``, as
+    :func:`~activebonds.identify.judge.predictions.model_ahead`'s)."""
     rec = np.asarray(trajectory.positions, np.float64)
     k = int(k)
-    mine = model_ahead(model, rec, trajectory.dt, k, substeps, method, offset)
-    zero = zero_force_ahead(rec, k)
-    m, m_per, terms = _rms(mine, rec)
-    z, z_per, _ = _rms(zero, rec)
+    m, m_per, terms = _rms(model_ahead(model, rec, trajectory.dt, k, **run), rec)
+    z, z_per, _ = _rms(zero_force_ahead(rec, k), rec)
     return Comparison(
         horizon=k,
         model_mm=m,
@@ -162,21 +63,14 @@ def compare(
 
 
 def comparisons(
-    model: Model,
-    trajectory: Trajectory,
-    horizon: int = DEFAULT_AHEAD,
-    *,
-    substeps: int = 1,
-    method: str = "euler",
-    offset: int = 0,
+    model: Model, trajectory: Trajectory, horizon: int = DEFAULT_AHEAD, **run
 ) -> list[Comparison]:
     """One step and ``horizon`` frames ahead (only one step when ``horizon`` is 1, or when
-    the window is too short for ``horizon``: it is clipped to the frames there are)."""
+    the window is too short for ``horizon``: it is clipped to the frames there are;
+    ``run``: as :func:`compare`'s)."""
     n = trajectory.n_frames
     ks = [1]
     h = min(int(horizon), max(n - 2, 1))
     if h > 1:
         ks.append(h)
-    return [
-        compare(model, trajectory, k, substeps=substeps, method=method, offset=offset) for k in ks
-    ]
+    return [compare(model, trajectory, k, **run) for k in ks]

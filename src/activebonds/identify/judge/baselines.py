@@ -1,7 +1,7 @@
 """What a fit is judged against: the zero-force predictor and the exact floor of a model family.
 
 * **Zero-force baseline** (constant velocity): the one-step prediction with no force at all,
-  ``x_{t+1} = 2 x_t - x_{t-1}``. A fitted model that does not beat it on frames it never saw
+  ``x_{t+1} = 2 x_t - x_{t-1}`` (:func:`~activebonds.identify.judge.predictions.constant_velocity`). A fitted model that does not beat it on frames it never saw
   has learnt nothing that generalises.
 * **Momentum floor**: every force of a model made only of bonds (springs, dampers, muscles,
   flexion springs) is internal, so it conserves linear *and* angular momentum: the one-step
@@ -21,27 +21,21 @@ import numpy as np
 from ... import bonds
 from ...model import Model
 from ..costs.windows import make_windows
+from .predictions import constant_velocity, zero_force_predictions
+
+__all__ = [  # zero force's predictions are predictions.py's, named here too for its readers
+    "model_floor_rms_mm",
+    "momentum_floor_rms_mm",
+    "zero_force_predictions",
+    "zero_force_rms_mm",
+    "zero_force_rms_mm_of",
+]
 
 
 def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float):
     w = make_windows(positions, mask, dt, 1)
-    inertial = w.x0 + dt * w.v0  # x_t + dt v_t = 2 x_t - x_{t-1}
+    inertial = constant_velocity(w.x0, w.v0, dt)  # x_t + dt v_t = 2 x_t - x_{t-1}
     return w, w.target[:, 0] - inertial, w.weight[:, 0]  # [S, P, D], [S, P]
-
-
-def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
-    """The constant-velocity predictor's one-step predictions [F, P, D] (NaN for frames 0
-    and 1 and where an input frame is incomplete, as the model's) and its free run from frames ``start - 1`` and ``start`` (NaN up to ``start``),
-    the predictions of :func:`~activebonds.identify.judge.metrics.zero_force_metrics`."""
-    rec = np.asarray(positions, np.float64)
-    one = np.full_like(rec, np.nan)
-    one[2:] = 2.0 * rec[1:-1] - rec[:-2]
-    complete = np.isfinite(rec).all(axis=(1, 2))
-    one[2:][~(complete[1:-1] & complete[:-2])] = np.nan  # the terms the metrics count
-    run = np.full_like(rec, np.nan)
-    steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
-    run[start + 1 :] = rec[start] + steps * (rec[start] - rec[start - 1])
-    return one, run
 
 
 def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float) -> float:

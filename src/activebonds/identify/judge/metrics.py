@@ -36,8 +36,8 @@ import numpy as np
 
 from ...data import Trajectory
 from ...model import Model
-from .baselines import zero_force_predictions
-from .predictions import free_run, one_step, tracked_phases
+from .predictions import free_run, one_step, tracked_phases, zero_force_predictions
+from .verdict import Record
 
 THRESHOLD_MM = 50.0  # a free run is "off" once a marker is this far from its recording
 DEFAULT_STARTS = 10  # free runs started, spread evenly over the window
@@ -46,9 +46,10 @@ ERROR_MEASURE = "max over markers"  # what "off by more than the threshold" mean
 
 
 @dataclass(frozen=True)
-class FreeRunMetrics:
+class FreeRunMetrics(Record):
     """The three numbers of one predictor along one recorded window (frames are indices into
-    that window; errors in mm)."""
+    that window; errors in mm); back from :meth:`to_dict` by :meth:`Record.from_dict` (raises
+    KeyError, TypeError or ValueError if malformed)."""
 
     n_frames: int  # frames of the window
     threshold_mm: float
@@ -74,21 +75,6 @@ class FreeRunMetrics:
                 out[key] = list(value)
         out["error_measure"] = ERROR_MEASURE
         return out
-
-    @classmethod
-    def from_dict(cls, data: dict) -> FreeRunMetrics:
-        """Back from :meth:`to_dict` (raises KeyError, TypeError or ValueError if malformed)."""
-        return cls(
-            n_frames=int(data["n_frames"]),
-            threshold_mm=float(data["threshold_mm"]),
-            one_step_rms_mm=float(data["one_step_rms_mm"]),
-            free_run_rms_mm=float(data["free_run_rms_mm"]),
-            starts=tuple(int(s) for s in data["starts"]),
-            frames_within=tuple(int(s) for s in data["frames_within"]),
-            censored=tuple(bool(c) for c in data["censored"]),
-            median_frames_within=float(data["median_frames_within"]),
-            median_censored=bool(data["median_censored"]),
-        )
 
 
 def censored_text(value: float, censored: bool) -> str:

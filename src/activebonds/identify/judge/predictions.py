@@ -1,11 +1,16 @@
-"""What a model predicts along a recording: one-step predictions, a free run, their errors.
+"""THE module of every prediction from recorded states: the model's and zero force's.
 
-One-step predictions are made as the cost makes them (DESIGN.md §3): frame t is predicted
-from the *recorded* state at t - 1, with the velocity the integrator carries there given
-``x[t-2]`` and ``x[t-1]`` (:func:`~activebonds.physics.integrate.start_velocity`; the
-backward difference for one-substep Euler). The free run starts from the first two recorded frames and never
-looks at the data again. Everything is float64 NumPy; NaN marks what cannot be predicted
-(missing inputs, before the start, or after a free run went non-finite).
+Every model prediction is one compiled program, :func:`runs_from`: from each recorded state
+(frames s - 1 and s) the model runs K frames on its own, with the velocity the integrator
+carries at s given ``x[s-1]`` and ``x[s]``
+(:func:`~activebonds.physics.integrate.start_velocity`; the backward difference for
+one-substep Euler), as the cost predicts (DESIGN.md §3). The one-step predictions
+(:func:`one_step`) are K = 1 from every frame, the frames ahead (:func:`model_ahead`) K from
+every start, a free run (:func:`free_run`) the whole window from the first two complete
+frames, never looking at the data again. Zero force's predictions are one formula,
+:func:`constant_velocity` (:func:`zero_force_predictions`, :func:`zero_force_ahead`; the fit
+cost's and the gait's runs call it too). Everything is float64 NumPy; NaN marks what cannot
+be predicted (missing inputs, before the start, or after a free run went non-finite).
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from ... import bonds
 from ...model import Model, Params, Topology
-from ...physics import advance, phase, rollout_states, start_velocity
+from ...physics import phase, rollout_states, start_velocity
 from ...physics.integrators import Integrator
 from ...runtime import float64
 
@@ -85,43 +90,8 @@ def solved(program, *args, **kwargs):
     return program(*args, newton=True, **kwargs)
 
 
-@partial(jax.jit, static_argnames=("topo", "substeps", "method", "newton"))
-def _one_step(
-    params,
-    x_prev,
-    x0,
-    times,
-    dt,
-    topo: StaticTopology,
-    substeps: int,
-    method: str,
-    psis=None,
-    newton: bool = False,
-):
-    """(start velocities, predictions): ``psis``, an entrained drive's phases (at the frames of
-    ``x_prev``, of ``x0``); ``newton``, the start velocities by Newton's method (see
-    :func:`solved`)."""
-
-    def step(a, b, t, *psi):
-        v = start_velocity(
-            params,
-            topo.topo,
-            a,
-            b,
-            dt,
-            substeps,
-            method,
-            t=t,
-            psi=psi[0] if psi else None,
-            newton=newton,
-        )
-        return v, advance(params, topo.topo, b, v, dt, substeps, method, t, *psi[1:])[0]
-
-    return jax.vmap(step)(x_prev, x0, times, *(psis or ()))
-
-
-@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method", "newton"))
-def _free_run(
+@partial(jax.jit, static_argnames=("topo", "n_steps", "substeps", "method", "newton", "last"))
+def _runs(
     params,
     x_prev,
     x0,
@@ -133,15 +103,67 @@ def _free_run(
     method: str,
     psis=None,
     newton: bool = False,
+    last: bool = False,
 ):
-    """``psis``: an entrained drive's phases at the frames of ``x_prev`` and ``x0``; then the
-    run's phases are returned too. ``newton``: as :func:`_one_step`'s."""
-    psi_prev, psi0 = psis if psis is not None else (None, None)
-    v0 = start_velocity(
-        params, topo.topo, x_prev, x0, dt, substeps, method, t=t0, psi=psi_prev, newton=newton
+    """THE program of every prediction from recorded states: from each start (the recorded
+    positions ``x_prev`` and ``x0`` [S, P, D] of its frames s - 1 and s, ``t0`` [S] the time
+    of s) the model runs ``n_steps`` frames on its own. Returns (start velocities [S, P, D],
+    positions, velocities[, phases]) of the runs [S, n_steps, ...], or with ``last`` only
+    their last positions [S, P, D]. ``psis``: an entrained drive's phases at the frames of
+    ``x_prev`` and ``x0`` ([S] each); ``newton``: the start velocities by Newton's method
+    (see :func:`solved`). One start without its axis ([P, D], a scalar time) is run as it
+    is, not vmapped: a time-dependent force's sines then take their scalar form, as a free
+    run always has."""
+
+    def one(a, b, t, *psi):
+        p_prev, p0 = psi if psi else (None, None)
+        v = start_velocity(
+            params, topo.topo, a, b, dt, substeps, method, t=t, psi=p_prev, newton=newton
+        )
+        run = rollout_states(params, topo.topo, b, v, dt, n_steps, substeps, method, t, p0)
+        return (v, run[0][-1]) if last else (v, *run)
+
+    if x0.ndim == 2:  # one start [P, D], run as it is
+        return one(x_prev, x0, t0, *(psis or ()))
+    return jax.vmap(one)(x_prev, x0, t0, *(psis or ()))
+
+
+def runs_from(
+    model: Model,
+    x_prev: np.ndarray,
+    x0: np.ndarray,
+    times: np.ndarray,
+    dt: float,
+    n_steps: int,
+    substeps: int = 1,
+    method: str = "euler",
+    psis: tuple[np.ndarray, np.ndarray] | None = None,
+    last: bool = False,
+) -> tuple:
+    """The model run ``n_steps`` frames from each recorded state: the positions ``x_prev``
+    and ``x0`` [S, P, D] of frames s - 1 and s, ``times`` [S] the times of s, ``psis`` an
+    entrained drive's phases there (or None); one state without the start axis is one run
+    (:func:`_runs`). Every prediction of this module is one call
+    of it (one compiled program per shape): the one-step predictions (one frame from every
+    frame), the frames ahead (K frames from every start), a free run (the whole window from
+    one start). Returns float64 arrays: (start velocities [S, P, D], positions, velocities[,
+    phases]) [S, n_steps, ...], or with ``last`` (start velocities, last positions
+    [S, P, D])."""
+    out = solved(
+        _runs,
+        float64_params(model),
+        jnp.asarray(x_prev),
+        jnp.asarray(x0),
+        jnp.asarray(times),
+        float(dt),
+        topo=StaticTopology(model.topology),
+        n_steps=int(n_steps),
+        substeps=int(substeps),
+        method=method,
+        psis=None if psis is None else tuple(jnp.asarray(p) for p in psis),
+        last=last,
     )
-    run = rollout_states(params, topo.topo, x0, v0, dt, n_steps, substeps, method, t0, psi0)
-    return (v0, *run)
+    return tuple(np.array(a, dtype=np.float64) for a in out)
 
 
 @partial(jax.jit, static_argnames=("topo", "substeps"))
@@ -198,20 +220,9 @@ def one_step(
     x0 = np.where(ok[:, None, None], prev, 0.0)
     x_prev = np.where(ok[:, None, None], prev2, 0.0)
     psi = tracked_phases(model, x, dt, substeps, offset)
-    psis = None if psi is None else (jnp.asarray(psi[:-2]), jnp.asarray(psi[1:-1]))
-    pred = solved(
-        _one_step,
-        float64_params(model),
-        jnp.asarray(x_prev),
-        jnp.asarray(x0),
-        (jnp.arange(1, x.shape[0] - 1) + max(int(offset), 0)) * float(dt),
-        float(dt),
-        topo=StaticTopology(model.topology),
-        substeps=int(substeps),
-        method=method,
-        psis=psis,
-    )[1]
-    pred = np.array(pred, dtype=np.float64)
+    psis = None if psi is None else (psi[:-2], psi[1:-1])
+    times = (np.arange(1, x.shape[0] - 1) + max(int(offset), 0)) * float(dt)
+    pred = runs_from(model, x_prev, x0, times, dt, 1, substeps, method, psis, last=True)[1]
     pred[~ok] = np.nan
     out[2:] = pred
     return _finite_or_nan(out)
@@ -254,27 +265,17 @@ def free_run(
         phases = tracked_phases(model, x, dt, substeps, offset)
     psis = None
     if phases is not None:
-        psis = (jnp.asarray(phases[s - 1]), jnp.asarray(phases[s]))
+        psis = (phases[s - 1], phases[s])
         psi_out[: s + 1] = phases[: s + 1]
-    run = solved(
-        _free_run,
-        float64_params(model),
-        jnp.asarray(x[s - 1]),
-        jnp.asarray(x[s]),
-        (s + max(int(offset), 0)) * float(dt),
-        float(dt),
-        topo=StaticTopology(model.topology),
-        n_steps=max(n - s - 1, 1),
-        substeps=int(substeps),
-        method=method,
-        psis=psis,
-    )
-    vs[s] = np.asarray(run[0], dtype=np.float64)
+    t0 = (s + max(int(offset), 0)) * float(dt)
+    steps = max(n - s - 1, 1)
+    run = runs_from(model, x[s - 1], x[s], t0, dt, steps, substeps, method, psis)
+    vs[s] = run[0]
     if n - s - 1 > 0:
-        xs[s + 1 :] = np.array(run[1], dtype=np.float64)
-        vs[s + 1 :] = np.asarray(run[2], dtype=np.float64)
+        xs[s + 1 :] = run[1]
+        vs[s + 1 :] = run[2]
         if psis is not None:
-            psi_out[s + 1 :] = np.asarray(run[3], dtype=np.float64)[: n - s - 1]
+            psi_out[s + 1 :] = run[3][: n - s - 1]
     bad = ~(np.isfinite(xs).all(axis=(1, 2)) & np.isfinite(vs).all(axis=(1, 2)))
     bad[: s + 1] = False
     if bad.any():
@@ -283,6 +284,80 @@ def free_run(
         vs[first:] = np.nan
         psi_out[first:] = np.nan
     return (xs, vs, psi_out) if with_phases else (xs, vs)
+
+
+def ahead_starts(positions: np.ndarray, k: int) -> np.ndarray:
+    """Start frames s with frames s - 1 and s complete and a frame s + k in the window."""
+    complete = np.isfinite(positions).all(axis=(1, 2))
+    s = np.arange(1, positions.shape[0] - k)
+    return s[complete[s] & complete[s - 1]] if s.size else s
+
+
+@float64
+def model_ahead(
+    model: Model,
+    positions: np.ndarray,
+    dt: float,
+    k: int,
+    substeps: int = 1,
+    method: str = "euler",
+    offset: int = 0,
+) -> np.ndarray:
+    """The model's prediction of each frame ``s + k`` from the recorded state at ``s``
+    (:func:`ahead_starts`), aligned with the recording [F, P, D]: NaN where there is no
+    start (and +inf where the run went non-finite). Time and an entrained drive's phase as
+    :func:`one_step`'s."""
+    rec = np.asarray(positions, np.float64)
+    out = np.full_like(rec, np.nan)
+    starts = ahead_starts(rec, k)
+    if starts.size == 0:
+        return out
+    psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
+    psis = None if psi is None else (psi[starts - 1], psi[starts])
+    times = (starts + int(offset)) * float(dt)
+    pred = runs_from(
+        model, rec[starts - 1], rec[starts], times, dt, k, substeps, method, psis, last=True
+    )[1]
+    pred[~np.isfinite(pred)] = np.inf  # a failed prediction: an infinite error, not a gap
+    out[starts + k] = pred
+    return out
+
+
+# ----------------------------------------------------------------------------- zero force
+
+
+def constant_velocity(x, v, t):
+    """THE zero-force (constant-velocity) prediction: positions ``x`` carried on at the
+    velocity ``v`` for the time ``t``, ``x + t v`` (broadcast; ``v`` per frame and ``t`` in
+    frames, or per second and in seconds, as the fit cost's start velocities)."""
+    return x + t * v
+
+
+def zero_force_ahead(positions: np.ndarray, k: int) -> np.ndarray:
+    """The zero-force prediction of each frame ``s + k`` from frames ``s - 1`` and ``s``
+    (:func:`ahead_starts`), ``x_s + k (x_s - x_{s-1})``, [F, P, D] (NaN where there is no
+    start)."""
+    rec = np.asarray(positions, np.float64)
+    out = np.full_like(rec, np.nan)
+    starts = ahead_starts(rec, k)
+    out[starts + k] = constant_velocity(rec[starts], rec[starts] - rec[starts - 1], k)
+    return out
+
+
+def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
+    """The zero-force predictor's one-step predictions [F, P, D] (NaN for frames 0 and 1
+    and where an input frame is incomplete, as the model's) and its free run from frames
+    ``start - 1`` and ``start`` (NaN up to ``start``), the predictions of
+    :func:`~activebonds.identify.judge.metrics.zero_force_metrics`."""
+    rec = np.asarray(positions, np.float64)
+    one = np.full_like(rec, np.nan)
+    one[2:] = 2.0 * rec[1:-1] - rec[:-2]
+    complete = np.isfinite(rec).all(axis=(1, 2))
+    one[2:][~(complete[1:-1] & complete[:-2])] = np.nan  # the terms the metrics count
+    run = np.full_like(rec, np.nan)
+    steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
+    run[start + 1 :] = constant_velocity(rec[start], rec[start] - rec[start - 1], steps)
+    return one, run
 
 
 def _finite_or_nan(a: np.ndarray) -> np.ndarray:

@@ -12,17 +12,24 @@ beside the zero-force (constant-velocity) predictor on the same terms:
   way, as a model whose forces vanish does);
 * ``not judged`` when either number is missing (NaN: nothing to predict).
 
-A :class:`Comparison` holds one kind of prediction (one step, or K frames ahead: the model's
-free run from each recorded state) on one window, overall and per marker; its
-:meth:`Comparison.lines` are what people read. Plain numbers only: nothing here computes a
-prediction (:mod:`activebonds.identify.judge.ahead` does).
+The judge's score records are one family, :class:`Score`: the model's error beside zero
+force's on the same terms (RMS, in :attr:`Score.unit`) and the verdict on them. A
+:class:`Verdict` is those two numbers alone; a :class:`Comparison` one kind of prediction
+(one step, or K frames ahead: the model's free run from each recorded state) on one window,
+overall and per marker, whose :meth:`Comparison.lines` are what people read; a
+:class:`ParticleScore` one particle's one-step and free-run scores. Their JSON is
+:class:`Record`'s (non-finite numbers as strings), as is that of one predictor's free-run
+numbers (:class:`~activebonds.identify.judge.metrics.FreeRunMetrics`). Plain numbers only:
+nothing here computes a prediction (:mod:`activebonds.identify.judge.predictions` does).
 """
 
 from __future__ import annotations
 
 import math
+import typing
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
+from typing import ClassVar
 
 MARGIN_PCT = 0.1  # better by less than this (percent of the zero-force error): not better
 EXPLAINS_NOT = "the model does not explain this motion"
@@ -36,12 +43,49 @@ def _number(x) -> float:
         return math.nan
 
 
+class Record:
+    """The JSON of a score record (a frozen dataclass): :meth:`from_dict` reads every field
+    back by its type, from the key :attr:`KEYS` names (default: the field's name); a missing
+    key takes the field's default. Non-finite numbers are written as the strings 'inf',
+    '-inf' and 'nan' (:func:`plain`) and read back by :attr:`number`."""
+
+    KEYS: ClassVar[dict[str, str]] = {}
+    number: ClassVar = staticmethod(float)  # a number back from its JSON value
+
+    @classmethod
+    def from_dict(cls, data: dict):
+        """Back from the record's dict (raises KeyError, TypeError or ValueError if
+        malformed)."""
+        hints = typing.get_type_hints(cls)
+        values = {}
+        for f in fields(cls):
+            key = cls.KEYS.get(f.name, f.name)
+            if key not in data and f.default is not MISSING:
+                continue
+            values[f.name] = _read(hints[f.name], data[key], cls.number)
+        return cls(**values)
+
+
+def _read(kind, value, number):
+    """A JSON value back as the field type ``kind``: a number, a bool, a string or a tuple
+    of them."""
+    if typing.get_origin(kind) is tuple:
+        item = typing.get_args(kind)[0]
+        return tuple(_read(item, v, number) for v in value)
+    return number(value) if kind is float else kind(value)
+
+
 @dataclass(frozen=True)
-class Verdict:
-    """The model's RMS error (mm) judged against the zero-force predictor's on the same terms."""
+class Score(Record):
+    """THE score record: the model's RMS error beside the zero-force predictor's on the same
+    terms (in :attr:`unit`), and the verdict on them. Every record of the judge that sets
+    the model beside zero force is one (:class:`Verdict`, :class:`Comparison`,
+    :class:`ParticleScore`'s scores)."""
 
     model_mm: float
     zero_force_mm: float
+    unit: ClassVar[str] = "mm"
+    number: ClassVar = staticmethod(_number)  # None or text: NaN, not judged
 
     @property
     def judged(self) -> bool:
@@ -80,25 +124,40 @@ class Verdict:
 
     def text(self) -> str:
         """The verdict in words, with both numbers."""
-        m, z = _mm(self.model_mm), _mm(self.zero_force_mm)
+        m, z, unit = _mm(self.model_mm), _mm(self.zero_force_mm), self.unit
         if self.better is None:
-            return f"not judged ({m} vs {z} mm for zero force)"
+            return f"not judged ({m} vs {z} {unit} for zero force)"
         if self.better:
             gain = self.gain_pct
             by = f"by {gain:.3g} %" if math.isfinite(gain) else "(zero force fails)"
-            return f"better than zero force {by} ({m} vs {z} mm)"
-        return f"{self.word} than zero force ({m} vs {z} mm): {EXPLAINS_NOT}"
+            return f"better than zero force {by} ({m} vs {z} {unit})"
+        return f"{self.word} than zero force ({m} vs {z} {unit}): {EXPLAINS_NOT}"
+
+    @property
+    def overall(self) -> Verdict:
+        """The two numbers alone, and their verdict."""
+        return Verdict(self.model_mm, self.zero_force_mm)
+
+    def pair(self) -> dict:
+        """``{"model": ..., "zero_force": ...}``, plain JSON values."""
+        return {"model": plain(self.model_mm), "zero_force": plain(self.zero_force_mm)}
 
     def to_dict(self) -> dict:
-        """Plain JSON values (non-finite numbers as the strings 'inf', 'nan')."""
+        """The verdict's plain JSON values (non-finite numbers as the strings 'inf', 'nan')."""
         return {
-            "model_mm": _plain(self.model_mm),
-            "zero_force_mm": _plain(self.zero_force_mm),
-            "gain_pct": _plain(self.gain_pct),
+            "model_mm": plain(self.model_mm),
+            "zero_force_mm": plain(self.zero_force_mm),
+            "gain_pct": plain(self.gain_pct),
             "better": self.better,
             "verdict": self.word,
             "text": self.text(),
         }
+
+
+@dataclass(frozen=True)
+class Verdict(Score):
+    """A score of the two numbers alone: ``better than zero force by 12.3 % (1.59 vs 1.81
+    mm)``."""
 
 
 def verdict(model_mm, zero_force_mm) -> Verdict:
@@ -112,31 +171,30 @@ def _mm(x: float) -> str:
     return "∞" if math.isinf(x) else f"{x:.4g}"
 
 
-def _plain(x: float) -> float | str:
+def plain(x: float) -> float | str:
+    """A number as JSON: itself, or 'inf', '-inf' or 'nan'."""
     return float(x) if math.isfinite(x) else str(float(x))
 
 
 @dataclass(frozen=True)
-class Comparison:
+class Comparison(Score):
     """One kind of prediction on one window: the model's and the zero-force predictor's RMS
     errors (mm), overall (pooled over every term) and per marker."""
 
     horizon: int  # frames ahead: 1 for the one-step prediction
-    model_mm: float
-    zero_force_mm: float
     markers: tuple[str, ...]
     model_per_marker: tuple[float, ...]
     zero_force_per_marker: tuple[float, ...]
     terms: int = 0  # (start, marker) terms counted
+    KEYS: ClassVar[dict[str, str]] = {
+        "model_per_marker": "model_per_marker_mm",
+        "zero_force_per_marker": "zero_force_per_marker_mm",
+    }
 
     @property
     def what(self) -> str:
         """``one step`` or ``10 frames ahead``."""
         return "one step" if self.horizon == 1 else f"{self.horizon} frames ahead"
-
-    @property
-    def overall(self) -> Verdict:
-        return Verdict(self.model_mm, self.zero_force_mm)
 
     @property
     def per_marker(self) -> dict[str, Verdict]:
@@ -174,27 +232,40 @@ class Comparison:
     def to_dict(self) -> dict:
         return {
             "horizon": self.horizon,
-            "model_mm": _plain(self.model_mm),
-            "zero_force_mm": _plain(self.zero_force_mm),
+            "model_mm": plain(self.model_mm),
+            "zero_force_mm": plain(self.zero_force_mm),
             "markers": list(self.markers),
-            "model_per_marker_mm": [_plain(x) for x in self.model_per_marker],
-            "zero_force_per_marker_mm": [_plain(x) for x in self.zero_force_per_marker],
+            "model_per_marker_mm": [plain(x) for x in self.model_per_marker],
+            "zero_force_per_marker_mm": [plain(x) for x in self.zero_force_per_marker],
             "terms": int(self.terms),
             "verdict": self.overall.to_dict(),
             "worse_markers": self.worse_markers(),
         }
 
-    @classmethod
-    def from_dict(cls, data: dict) -> Comparison:
-        return cls(
-            horizon=int(data["horizon"]),
-            model_mm=_number(data["model_mm"]),
-            zero_force_mm=_number(data["zero_force_mm"]),
-            markers=tuple(data["markers"]),
-            model_per_marker=tuple(_number(x) for x in data["model_per_marker_mm"]),
-            zero_force_per_marker=tuple(_number(x) for x in data["zero_force_per_marker_mm"]),
-            terms=int(data.get("terms", 0)),
-        )
+
+@dataclass(frozen=True)
+class ParticleScore:
+    """One particle's two :class:`Score` records: one step, and the free run from the first
+    free-run start (as :class:`~activebonds.identify.judge.metrics.FreeRunMetrics`')."""
+
+    particle: str
+    marker: str
+    one_step: Score
+    free_run: Score
+
+    # the four numbers by the names evaluate's readers know
+    one_step_rms_mm = property(lambda self: self.one_step.model_mm)
+    zero_force_one_step_rms_mm = property(lambda self: self.one_step.zero_force_mm)
+    free_run_rms_mm = property(lambda self: self.free_run.model_mm)
+    zero_force_free_run_rms_mm = property(lambda self: self.free_run.zero_force_mm)
+
+    def to_dict(self) -> dict:
+        return {
+            "particle": self.particle,
+            "marker": self.marker,
+            "one_step_rms_mm": self.one_step.pair(),
+            "free_run_rms_mm": self.free_run.pair(),
+        }
 
 
 def comparisons_from(records: Sequence[dict] | None) -> list[Comparison]:
