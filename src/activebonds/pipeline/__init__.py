@@ -86,7 +86,16 @@ from .notes import (
     still_note,
 )
 from .refits import MAX_SHOT, SHOOTING, fit_step
-from .steps import Steps, begin, evaluations, how_made, write_evaluation, write_html, write_scaffold
+from .steps import (
+    Steps,
+    begin,
+    evaluations,
+    how_made,
+    scaffold_of,
+    write_evaluation,
+    write_html,
+    write_scaffold,
+)
 from .structure import MAX_DECIDED, noise_of_fitted, recording_name, smoothed, structure_step
 
 __all__ = [
@@ -134,7 +143,6 @@ def run(
     progress (with a ``status``), or None. Bad input raises InputError before anything is
     written."""
     from ..data import read_trajectory
-    from ..identify.discover.scaffold import scaffold
     from ..model import loads_model
 
     recording = read_trajectory(recording_path)
@@ -142,15 +150,8 @@ def run(
         raise InputError("--ahead", f"must be at least 1, got {options.ahead}")
     split = windows(recording.n_frames, options.frames, options.held_out)
     fit_settings(options, split)  # the fit's options checked before anything is written
-    found = scaffold(  # checks the markers, the mass, the vertical: before anything is written
-        recording,
-        markers=list(options.markers) if options.markers else None,
-        frames=split.fitted,
-        total_mass=options.total_mass,
-        up=options.up,
-        gravity=options.gravity,
-        name=recording_path.stem,
-    )
+    # the scaffold checks the markers, the mass, the vertical: before anything is written
+    found = scaffold_of(recording, split, options, recording_path.stem)
     noise = noise_of_fitted(recording, split, options)
     structural = smoothed(recording, split, noise.window)
     state = prepare(out, recording_path, options, overwrite)

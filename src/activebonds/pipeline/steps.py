@@ -15,6 +15,22 @@ from .folder import STEPS, Folder, Options, Windows
 from .notes import noise_line
 
 
+def scaffold_of(recording, split: Windows, options: Options, name: str):
+    """The candidate model of the fitted frames (:func:`~activebonds.identify.discover.scaffold.
+    scaffold` with the options), its inputs checked."""
+    from ..identify.discover.scaffold import scaffold
+
+    return scaffold(
+        recording,
+        markers=list(options.markers) if options.markers else None,
+        frames=split.fitted,
+        total_mass=options.total_mass,
+        up=options.up,
+        gravity=options.gravity,
+        name=name,
+    )
+
+
 def begin(
     folder: Folder,
     state: dict | None,
