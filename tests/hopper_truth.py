@@ -82,9 +82,13 @@ def forces(x: np.ndarray, v: np.ndarray, p: dict) -> np.ndarray:
     f = np.zeros((2, 3))
     f[:, 2] -= m * G
     dx, dv = x[1] - x[0], v[1] - v[0]
-    length = np.sqrt(dx @ dx)
+    # the dot products summed left to right, as written (``@`` is BLAS's, whose order and
+    # fused multiply-adds vary with the build: NumPy 2.4's differed from the float loop's in
+    # the last bit)
+    length = np.sqrt(dx[0] * dx[0] + dx[1] * dx[1] + dx[2] * dx[2])
     u = dx / length
-    tension = p["leg.stiffness"] * (length - p["leg.rest_length"]) + p["leg.damping"] * (dv @ u)
+    along = dv[0] * u[0] + dv[1] * u[1] + dv[2] * u[2]
+    tension = p["leg.stiffness"] * (length - p["leg.rest_length"]) + p["leg.damping"] * along
     f[0] += tension * u
     f[1] -= tension * u
     depth = p["ground.height"] - x[:, 2]
