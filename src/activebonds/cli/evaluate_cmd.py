@@ -84,6 +84,16 @@ def evaluate(
             "(default: the window's first frame)."
         ),
     ] = None,
+    burn_in: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Also judge free runs as system identification does: the state estimated "
+            "from the N recorded frames before each start (parameters held), then the run; "
+            "the RMS error 1-100 frames on and the frames within 50 mm, beside zero force "
+            "(the least-squares line through the same frames).",
+        ),
+    ] = None,
     as_json: AsJson = False,
 ):
     """Score a model on a recording, fitting nothing: one-step RMS, free-run RMS and frames a
@@ -109,6 +119,7 @@ def evaluate(
             up=up,
             body=body,
             origin=origin,
+            burn_in=burn_in,
         )
     except InputError as e:
         fail(e)

@@ -39,6 +39,7 @@ from pydantic import ValidationError
 from ..data import Trajectory
 from ..errors import InputError, option_error
 from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
+from ..identify.judge.burn_in import BurnIn, burn_in
 from ..identify.judge.metrics import (
     DEFAULT_STARTS,
     THRESHOLD_MM,
@@ -78,6 +79,7 @@ class Evaluation:
     holds: dict | None = None  # what holds the model (identify.verdict.holds): the advice's
     body_markers: tuple[str, ...] = ()  # asked for: the markers whose errors alone count
     body: dict[str, FreeRunMetrics] | None = None  # their numbers: "model", "zero_force"
+    burn_in: BurnIn | None = None  # asked for: free runs after a burn-in, beside zero force
 
     @property
     def verdict(self) -> Verdict | None:
@@ -89,7 +91,8 @@ class Evaluation:
         a, b = self.frames
         out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
         advice = free_run_advice(self.model.free_run_rms_mm, self.holds)
-        return out + ([advice] if advice else [])
+        after = self.burn_in.lines() if self.burn_in is not None else []
+        return out + after + ([advice] if advice else [])
 
     def record(self) -> dict:
         """Plain JSON values (non-finite floats as 'inf', '-inf' or 'nan', as
@@ -107,6 +110,7 @@ class Evaluation:
             "comparisons": [c.to_dict() for c in self.comparisons],
             "holds": self.holds,
             **({"gait": self.gait.record()} if self.gait is not None else {}),
+            **({"burn_in": self.burn_in.record()} if self.burn_in is not None else {}),
             **(
                 {
                     "body": {
@@ -136,6 +140,7 @@ def evaluate(
     up: Sequence[float] | None = None,
     body: Sequence[str] | None = None,
     origin: int | None = None,
+    burn_in: int | None = None,
 ) -> Evaluation:
     """``model`` scored on frames ``START:STOP`` of ``recording`` (``markers``: one per
     particle, in order; default the model's). ``substeps`` and ``integrator``: the
@@ -146,7 +151,9 @@ def evaluate(
     names whose errors alone count in a second set of the free-run numbers. ``origin``: the
     recording's frame where the model's time is 0 (a clock drive and a moving anchor start
     there, an entrained drive's phase is tracked from there, the frames before the window
-    filled as ``fit --validate`` fills them); default the window's first frame. Raises
+    filled as ``fit --validate`` fills them); default the window's first frame. ``burn_in``:
+    N, also the free runs after an N-frame burn-in (:mod:`~activebonds.identify.judge.burn_in`),
+    :data:`BURN_IN_HORIZON` frames long. Raises
     :class:`InputError` (one line) for markers or frames the recording does not have, or a
     ``body`` name the model does not have."""
     from ..identify.problem import select_data
@@ -185,7 +192,31 @@ def evaluate(
         holds=holds(model, data),
         body_markers=tuple(model.particle_names[i] for i in picked),
         body=body_found,
+        burn_in=_burn_in(model, data, burn_in, substeps, integrator, offset),
     )
+
+
+BURN_IN_HORIZON = 100  # frames of each free run after a burn-in
+
+
+def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None:
+    """The free runs after a ``frames``-frame burn-in (None where not asked for); an
+    InputError naming ``--burn-in`` where the window has no start with such a burn-in."""
+    if frames is None:
+        return None
+    try:
+        return burn_in(
+            model,
+            data.positions,
+            data.dt,
+            int(frames),
+            BURN_IN_HORIZON,
+            substeps=substeps,
+            method=integrator,
+            offset=offset,
+        )
+    except ValueError as e:
+        raise InputError("--burn-in", str(e)) from None
 
 
 def _settings(markers, frames, substeps: int, integrator: str, horizon: int):

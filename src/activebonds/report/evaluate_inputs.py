@@ -44,6 +44,7 @@ def evaluate_from_options(
     up: str | None,
     body: str | None,
     origin: int | None,
+    burn_in: int | None = None,
 ) -> Evaluation:
     """:func:`~activebonds.report.evaluate.evaluate` of the model file ``model`` on the
     recording ``traj``, with the command's options: ``feet`` and ``body`` names separated by
@@ -68,4 +69,5 @@ def evaluate_from_options(
         up=parse_up(up, loaded.dimension, numbers=True) if up else None,
         body=_names(body),
         origin=origin,
+        burn_in=burn_in,
     )
