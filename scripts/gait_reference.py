@@ -156,8 +156,8 @@ def one_gait(name: str, file: str) -> dict:
         "targets": {
             "period_tolerance": g.PERIOD_TOLERANCE,
             "excursion_tolerance": g.EXCURSION_TOLERANCE,
-            "body_limit_mm": g.BODY_LIMIT_MM,
-            "cycle_rms_limit_mm": g.CYCLE_RMS_LIMIT_MM,
+            "own_factor": g.OWN_FACTOR,
+            "own_floor_mm": g.OWN_FLOOR_MM,
         },
     }
 

@@ -130,9 +130,10 @@ def test_the_recording_against_itself_and_its_mean_gait_pass_everything():
 
 
 def test_the_bundled_trot_against_itself():
-    """The held-out trot (frames 300-599) scored as its own run: period, excursions and
-    cycle average pass; its body markers wander 109 mm from their mean (the horse drifts on
-    the treadmill), more than issue 28's 100 mm."""
+    """The held-out trot (frames 300-599) scored as its own run passes every target: its body
+    markers wander 109 mm from their mean (the horse drifts on the treadmill), which failed
+    issue 28's fixed 100 mm; (iii) is now held against the recording's own wander, (iv)
+    against its own cycle-to-cycle spread (46 mm)."""
     from activebonds.data import read_trajectory
     from helpers import HORSE_TROT
 
@@ -142,7 +143,15 @@ def test_the_bundled_trot_against_itself():
     assert g.features(x[:300], UP, FEET).period_frames == pytest.approx(41.4, abs=0.05)
     own = g.summarise([g.score_run(x[300:600], ref)], ref)
     assert own.period_ok and own.excursion_ok and own.cycle_ok
-    assert own.body_distance_mm == pytest.approx(109.3, abs=0.1) and not own.body_ok
+    assert own.body_distance_mm == pytest.approx(109.3, abs=0.1) and own.body_ok
+    assert ref.own_wander_mm == pytest.approx(109.3, abs=0.1)
+    assert own.body_limit_mm == pytest.approx(1.25 * ref.own_wander_mm)
+    assert own.cycle_limit_mm == pytest.approx(1.25 * ref.spread_mm) and ref.spread_mm > 40.0
+    # a run drifting 1.3x the recording's own wander fails (iii)
+    drift = x[300:600].copy()
+    body = list(ref.body)
+    drift[:, body] += np.linspace(0.0, 1.3 * 0.1093, len(drift))[:, None, None] * [1, 0, 0]
+    assert not g.summarise([g.score_run(drift, ref)], ref).body_ok
 
 
 OSCILLATOR = """

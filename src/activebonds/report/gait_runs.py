@@ -73,6 +73,7 @@ class GaitEvaluation:
                     "period_frames": r.period_frames,
                     "excursion_mm": list(r.excursion_mm),
                     "body_distance_mm": r.body_distance_mm,
+                    "own_wander_mm": r.own_wander_mm,
                     "spread_mm": r.spread_mm,
                     "spread_shape_mm": r.spread_shape_mm,
                 },
@@ -128,7 +129,8 @@ class GaitEvaluation:
                 _num(z.body_distance_mm),
                 ok(z.body_ok),
                 yes(better["body"]),
-                f"<= {g.BODY_LIMIT_MM:g} mm",
+                f"<= {g.OWN_FACTOR:g}x its own over a run's span ({_num(r.own_wander_mm)}): "
+                f"{_num(m.body_limit_mm)}",
             ),
             (
                 "cycle-average RMS (mm; recording: spread)",
@@ -138,7 +140,7 @@ class GaitEvaluation:
                 _num(z.cycle_rms_mm),
                 ok(z.cycle_ok),
                 yes(better["cycle"]),
-                f"<= {g.CYCLE_RMS_LIMIT_MM:g} mm",
+                f"<= {g.OWN_FACTOR:g}x its own spread: {_num(m.cycle_limit_mm)}",
             ),
             (
                 "  its shape, means removed (mm)",
@@ -181,8 +183,8 @@ def targets() -> dict[str, float]:
     return {
         "period_tolerance": g.PERIOD_TOLERANCE,
         "excursion_tolerance": g.EXCURSION_TOLERANCE,
-        "body_limit_mm": g.BODY_LIMIT_MM,
-        "cycle_rms_limit_mm": g.CYCLE_RMS_LIMIT_MM,
+        "own_factor": g.OWN_FACTOR,
+        "own_floor_mm": g.OWN_FLOOR_MM,
     }
 
 
