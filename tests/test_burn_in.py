@@ -91,3 +91,27 @@ def test_evaluate_burn_in_on_the_command_line(tmp_path):
     refused = cli_in_process("evaluate", TRIANGLE, data, "--frames", "0:8", "--burn-in", "10")
     assert refused.returncode == 2
     assert refused.stderr.strip().startswith("error: --burn-in: no start has 11 complete frames")
+
+
+def test_the_mean_gait_after_a_burn_in_predicts_a_periodic_recording():
+    """A noise-free periodic motion (a sum of harmonics per marker, feet lowest): the mean gait
+    played from the phase and offset that fit the burn-in predicts the frames after it to the
+    resampling's error, tens of frames on; shifted by a constant, the offset follows it."""
+    from activebonds.report import gait as g
+
+    period, n = 40.0, 400
+    t = np.arange(n, dtype=np.float64)[:, None]
+    rng = np.random.default_rng(3)
+    amp, ph = rng.uniform(0.01, 0.05, (2, 4, 3)), rng.uniform(0, 2 * np.pi, (2, 4, 3))
+    base = np.array([[0.0, 0.0, 0.02], [0.3, 0.0, 0.02], [0.0, 0.2, 1.0], [0.3, 0.2, 1.1]])
+    x = base + sum(
+        amp[h] * np.sin(2 * np.pi * (h + 1) * t[..., None] / period + ph[h]) for h in range(2)
+    )
+    ref = g.features(x, (0.0, 0.0, 1.0), [0, 1])
+    assert ref.period_frames == pytest.approx(period, rel=0.01)
+    runs = g.template_runs(x, ref, [60, 123, 250], 10, 60)
+    for run, s in zip(runs, (60, 123, 250), strict=True):
+        err = np.sqrt(np.sum((run - x[s + 1 : s + 61]) ** 2, axis=-1)) * 1000.0
+        assert err.max() < 1.0, err.max()  # mm; the motion spans tens of mm
+    moved = g.template_runs(x + [0.05, 0.0, 0.0], ref, [123], 10, 60)[0]
+    assert np.abs(moved - x[124:184] - [0.05, 0.0, 0.0]).max() < 1e-3

@@ -39,7 +39,7 @@ from pydantic import ValidationError
 from ..data import Trajectory
 from ..errors import InputError, option_error
 from ..identify.judge.ahead import DEFAULT_AHEAD, comparisons
-from ..identify.judge.burn_in import BurnIn, burn_in
+from ..identify.judge.burn_in import BurnIn, burn_in, score, targets
 from ..identify.judge.metrics import (
     DEFAULT_STARTS,
     THRESHOLD_MM,
@@ -205,7 +205,7 @@ def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None
     if frames is None:
         return None
     try:
-        return burn_in(
+        found = burn_in(
             model,
             data.positions,
             data.dt,
@@ -217,6 +217,32 @@ def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None
         )
     except ValueError as e:
         raise InputError("--burn-in", str(e)) from None
+    return _with_template(found, model, data)
+
+
+def _with_template(found: BurnIn, model: Model, data: Trajectory) -> BurnIn:
+    """``found`` with the recording's mean gait as a predictor after the same burn-ins
+    (:func:`~activebonds.report.gait.template_runs`), where the recording is rhythmic (its
+    feet's heights have a period): found as it is otherwise."""
+    from dataclasses import replace
+
+    from . import gait as g
+    from .gait_runs import choose_feet, choose_up
+
+    rec = np.asarray(data.positions, np.float64)
+    try:
+        up, _ = choose_up(model, data, None)
+        feet, _ = choose_feet(model, data, up, None)
+    except InputError:
+        return found
+    if not feet or len(feet) == rec.shape[1]:
+        return found
+    ref = g.features(rec, up, feet)
+    if not (np.isfinite(ref.period_frames) and np.isfinite(ref.gait).all()):
+        return found
+    runs = g.template_runs(rec, ref, found.starts, found.frames, found.horizon)
+    curve, within = score(runs, targets(rec, found.starts, found.horizon), found.threshold_mm)
+    return replace(found, template_mm=curve, template_within=within)
 
 
 def _settings(markers, frames, substeps: int, integrator: str, horizon: int):

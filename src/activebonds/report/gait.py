@@ -373,6 +373,38 @@ def stride_frames(ref: GaitFeatures, strides: int = STRIDES) -> int:
     return int(np.ceil(strides * ref.period_frames))
 
 
+def template_runs(
+    positions: np.ndarray, ref: GaitFeatures, starts: Sequence[int], burn: int, n: int
+) -> np.ndarray:
+    """The recording's mean gait played as a predictor after a burn-in: for each start s, the
+    phase (of :data:`PHASE_BINS`) and the body's offset (the mean over the burn-in frames
+    s - ``burn`` ... s and the markers) that best fit those recorded frames, then the mean
+    gait at that phase and offset ``n`` frames on, [S, n, P, D]. The baseline a gait model's
+    free runs after a burn-in must beat (the nonlinear system-identification benchmarks'
+    convention, with the recording's own cycle for a model)."""
+    x = np.asarray(positions, np.float64)
+    step = PHASE_BINS / ref.period_frames  # phase bins per frame
+    phases = np.arange(PHASE_BINS, dtype=np.float64)
+
+    def played(start_phase: np.ndarray, k: np.ndarray) -> np.ndarray:  # [..., K, P, D]
+        p = (start_phase[..., None] + k * step) % PHASE_BINS
+        i = np.floor(p).astype(int)
+        f = (p - i)[..., None, None]
+        return ref.gait[i] * (1 - f) + ref.gait[(i + 1) % PHASE_BINS] * f
+
+    out = []
+    k_burn = np.arange(burn + 1, dtype=np.float64)
+    k_ahead = np.arange(burn + 1, burn + 1 + n, dtype=np.float64)
+    cands = played(phases, k_burn)  # [bins, burn + 1, P, D]
+    for s in starts:
+        window = x[s - burn : s + 1]  # [burn + 1, P, D]
+        offset = np.nanmean(window[None] - cands, axis=(1, 2))  # [bins, D]
+        err = np.nanmean(np.sum((window[None] - cands - offset[:, None, None]) ** 2, -1), (1, 2))
+        best = int(np.nanargmin(err))
+        out.append(played(phases[best : best + 1], k_ahead)[0] + offset[best])
+    return np.stack(out)
+
+
 def constant_velocity_runs(positions: np.ndarray, starts: Sequence[int], n: int) -> np.ndarray:
     """The zero-force predictor's free runs: ``x_s + k (x_s - x_{s-1})`` for k = 1 .. n from
     each start, [S, n, P, D]."""

@@ -49,6 +49,10 @@ class BurnIn:
     model_within: float  # median frames before a marker is off by more than threshold_mm
     zero_force_within: float
     threshold_mm: float = THRESHOLD_MM
+    # the recording's mean gait played from the phase the burn-in shows (report.gait's
+    # template_runs), where the recording is rhythmic: the baseline a gait model must beat
+    template_mm: tuple[float, ...] | None = None
+    template_within: float | None = None
 
     def lines(self) -> list[str]:
         """The verdict in words: the error at the horizon and the frames within the
@@ -56,12 +60,21 @@ class BurnIn:
         h = self.horizon
         m, z = self.model_mm[-1], self.zero_force_mm[-1]
         word = "better" if m < z else "worse"
-        return [
+        out = [
             f"free runs after a {self.frames}-frame burn-in ({len(self.starts)} starts): "
             f"{h} frames ahead {m:.4g} mm, zero force {z:.4g} mm ({word} than zero force); "
             f"within {self.threshold_mm:g} mm for {self.model_within:g} frames (median), zero "
             f"force {self.zero_force_within:g}"
         ]
+        if self.template_mm is not None:
+            g = self.template_mm[-1]
+            beats = "better" if m < g else "worse"
+            out.append(
+                f"the recording's mean gait from the burn-in's phase: {h} frames ahead "
+                f"{g:.4g} mm, within {self.threshold_mm:g} mm for {self.template_within:g} "
+                f"frames (the model is {beats} than this template {h} frames ahead)"
+            )
+        return out
 
     def record(self) -> dict:
         return {
@@ -73,6 +86,14 @@ class BurnIn:
             "model_within": self.model_within,
             "zero_force_within": self.zero_force_within,
             "threshold_mm": self.threshold_mm,
+            **(
+                {
+                    "template_mm": [_num(x) for x in self.template_mm],
+                    "template_within": self.template_within,
+                }
+                if self.template_mm is not None
+                else {}
+            ),
         }
 
 
@@ -141,20 +162,36 @@ def burn_in(
         np.float64,
     )
     zero = _line_runs(window, horizon)
-    target = np.full((len(picked), horizon, *x.shape[1:]), np.nan)
-    for i, s in enumerate(picked):
-        ahead = x[s + 1 : s + 1 + horizon]
-        target[i, : len(ahead)] = ahead
+    target = targets(x, picked, horizon)
+    model_curve, model_within = score(runs, target, threshold_mm)
+    zero_curve, zero_within = score(zero, target, threshold_mm)
     return BurnIn(
         frames=int(frames),
         horizon=int(horizon),
         starts=tuple(int(s) for s in picked),
-        model_mm=_curve(runs, target),
-        zero_force_mm=_curve(zero, target),
-        model_within=_within(runs, target, threshold_mm),
-        zero_force_within=_within(zero, target, threshold_mm),
+        model_mm=model_curve,
+        zero_force_mm=zero_curve,
+        model_within=model_within,
+        zero_force_within=zero_within,
         threshold_mm=float(threshold_mm),
     )
+
+
+def targets(positions: np.ndarray, starts, horizon: int) -> np.ndarray:
+    """The recorded frames s + 1 ... s + ``horizon`` after each start [S, horizon, P, D]
+    (NaN past the recording's end)."""
+    x = np.asarray(positions, np.float64)
+    out = np.full((len(starts), horizon, *x.shape[1:]), np.nan)
+    for i, s in enumerate(starts):
+        ahead = x[s + 1 : s + 1 + horizon]
+        out[i, : len(ahead)] = ahead
+    return out
+
+
+def score(runs: np.ndarray, target: np.ndarray, threshold_mm: float = THRESHOLD_MM):
+    """(the RMS error curve k = 1 ... horizon frames on, the median frames within
+    ``threshold_mm``) of runs [S, horizon, P, D] against :func:`targets`."""
+    return _curve(runs, target), _within(runs, target, threshold_mm)
 
 
 def _curve(runs: np.ndarray, target: np.ndarray) -> tuple[float, ...]:
