@@ -108,3 +108,23 @@ def test_markers_never_present_in_the_held_out_tail_are_said_before_fitting():
         f"note: 1 of 3 markers never present in the held-out frames 48:60 ({markers[1]})"
     )
     assert absent_note(cut, markers, (40, 60)) is None  # present in 40:44
+
+
+def test_auto_prints_the_uncertainty_warnings_as_a_count_and_leaves_their_words_to_the_report():
+    """The uncertainty's warnings advise refits (--cost shooting, --substeps 4) that `auto`
+    decides itself: its summary counts them in one line; the report has their words."""
+    from activebonds.pipeline.refits import printed_lines
+
+    lines = [
+        "zero-force baseline on the same frames 0.1009 mm",
+        "uncertainty: 9 of 9 parameters determined",
+        "uncertainty: warning: these intervals come from the one-step cost: refit with --cost shooting",
+        "uncertainty: warning: at --substeps 4 the parameters move: refit with --substeps 4",
+    ]
+    printed = printed_lines(lines)
+    assert printed[:2] == lines[:2] and not any("refit" in p for p in printed)
+    assert (
+        printed[-1]
+        == "uncertainty: 2 warnings on these intervals, in the report's Uncertainty section"
+    )
+    assert printed_lines(lines[:2]) == lines[:2]

@@ -279,6 +279,22 @@ def fit_into(run_path, model_path, recording_path, settings, say, fit_progress) 
             )
     if result.status != "completed":
         raise RuntimeError(f"the fit ended {result.status}; see {run_path}")
-    for line in result.lines():
+    for line in printed_lines(result.lines()):
         say(f"      {line}")
     return result.rms_mm
+
+
+WARNING = "uncertainty: warning: "
+
+
+def printed_lines(lines: list[str]) -> list[str]:
+    """A fit's summary as ``auto`` prints it: the uncertainty's warnings (long, some advising
+    a refit ``auto`` decides itself) counted in one line, their words in the report."""
+    warned = [line for line in lines if line.startswith(WARNING)]
+    kept = [line for line in lines if not line.startswith(WARNING)]
+    if warned:
+        kept.append(
+            f"uncertainty: {len(warned)} warning{'s' * (len(warned) > 1)} on these intervals, "
+            "in the report's Uncertainty section"
+        )
+    return kept
