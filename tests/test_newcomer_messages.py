@@ -333,3 +333,13 @@ def test_a_tiny_fit_on_a_thrown_body_advises_no_drive(tmp_path):
     assert proc.returncode == 0, proc.stderr
     advice = [line for line in proc.stdout.splitlines() if line.startswith("advice:")]
     assert advice and all("rhythmic drive" not in a for a in advice), proc.stdout
+
+
+def test_backwards_frames_are_said_as_typed(tmp_path):
+    """`--frames 5:1` said '(5, 1)', a Python tuple; the line says what was typed."""
+    before = {p.name for p in tmp_path.iterdir()}
+    one_line_refusal(
+        cli_in_process("fit", TRIANGLE, TRIANGLE_CSV, "--out", tmp_path / "run", "--frames", "5:1"),
+        "--frames: frames must be START:STOP with 0 <= START < STOP, got 5:1",
+    )
+    nothing_written(tmp_path, before)

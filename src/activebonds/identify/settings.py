@@ -127,7 +127,9 @@ class FitSettings(BaseModel):
             return v
         start, stop = v
         if start < 0 or (stop is not None and stop <= start):
-            raise ValueError(f"frames must be START:STOP with 0 <= START < STOP, got {v}")
+            raise ValueError(
+                f"frames must be START:STOP with 0 <= START < STOP, got {frames_text(v)}"
+            )
         return v
 
     @field_validator("cost", "integrator")
