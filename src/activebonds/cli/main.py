@@ -79,12 +79,12 @@ def info(
         elif key in ("dt", "duration"):
             value = f"{value:.6g} s"
         elif key == "units":
-            value = f"{value} in the file (read as metres)"
-        table.add_row(key, str(value))
+            value = f"{value} in the file (converted to metres)"
+        table.add_row(LABELS.get(key, key), str(value))
     table.add_row("markers", f"{len(d['markers'])}: " + ", ".join(d["markers"]))
     gaps = {k: v for k, v in d["gaps"].items() if v}
     if gaps:
-        table.add_row("gaps", ", ".join(f"{k} {v}" for k, v in gaps.items()))
+        table.add_row("missing samples", ", ".join(f"{k} {v}" for k, v in gaps.items()))
     if d["ground"] is not None:
         table.add_row("vertical, ground (guessed)", d["ground"]["text"])
     else:
@@ -110,6 +110,10 @@ def info(
             "none" if window is None else f"{window['frames']} ({window['length']} frames)",
         )
     out.print(per_marker)
+
+
+# info's rows, as people read them ("total_gaps" counts missing marker-frames, not gaps)
+LABELS = {"total_gaps": "missing samples"}
 
 
 def _windows_text(record: dict) -> str:
