@@ -17,6 +17,7 @@ from activebonds.identify import costs, fit, resume
 from activebonds.identify.costs.base import ResidualFunction
 from activebonds.identify.costs.restart_cost import RestartCost
 from activebonds.identify.costs.windows import join_windows, make_residuals, make_windows, rms_mm
+from activebonds.identify.prepare import prepare
 from activebonds.identify.settings import FitSettings
 from activebonds.identify.solvers import stage as lm
 from activebonds.model import load_model
@@ -206,3 +207,7 @@ def test_auto_is_chosen_by_the_library_from_python(triangle_recording):
     )  # fmt: skip
     assert result.settings.cost == "shooting" and result.settings.horizon == (10,)
     assert [s.cost for s in result.refinement] in (["shooting"], ["restart"])
+    # a horizon asked for is kept, in settings given whole as in options
+    asked = FitSettings(bonds="standard", population=8, generations=2, cost="auto", horizon=5)
+    given = prepare(EXAMPLES / "triangle.toml", data, asked, horizon_given=True)
+    assert given.settings.horizon == (5,) and given.cost_note.startswith("cost: shooting (auto")

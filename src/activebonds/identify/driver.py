@@ -200,8 +200,9 @@ def fit(
     """
     clock = Clock()
     if not isinstance(model, Prepared):
-        given = settings is not None or "horizon" in options
-        model = prepare(model, data, settings or FitSettings(**options), horizon_given=given)
+        settings = settings or FitSettings(**options)
+        given = "horizon" in settings.model_fields_set  # else auto's cost has its own
+        model = prepare(model, data, settings, horizon_given=given)
     settings = model.settings
     keep_compiled()  # a second fit of the same shapes loads this one's programs
     with _precision(settings), shown(progress, status) as (progress, status):
