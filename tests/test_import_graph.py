@@ -27,6 +27,7 @@ LAYERS = (
         "lazy",
         "notebook",
         "registry",
+        "axes",
     ),  # foundation: no module of the package below them
     ("bonds",),  # the force laws, one module per bond kind, and their registry
     ("model",),  # model files, topology, parameters, genome layout

@@ -40,10 +40,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..axes import AXES  # noqa: F401 (the table, named here for the readers of orientation)
 from ..errors import InputError
 from .trajectory import Trajectory
 
-AXES = "XYZ"  # the axes' letters (labels and file names may write them in lower case)
 CLEAR = 0.5  # the flattest axis must score at most this fraction of the next one
 G = 9.81  # m/s^2
 FLIGHT_MARGIN = 0.03  # m: in flight, the lowest marker is at least this far above the ground

@@ -41,13 +41,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import bonds
+from ..axes import AXES
 from .forms import form_of
 from .genes import Gene, bond_group
 from .model import Model
 from .schema import ModelSpec
 
 NEAR_BOUND = 0.01  # share of the search range (log range for log genes) that is "near"
-AXES = "xyz"
 
 
 # ----------------------------------------------------------------------------- names
@@ -122,7 +122,8 @@ class _Words:
         if gene.part is not None:
             words = f"{gene.part} weight from {self._source(gene.kind, gene.source)}"
         elif gene.axis is not None:
-            words = f"{gene.key} {AXES[gene.axis] if gene.axis < len(AXES) else gene.axis}"
+            axis = AXES[gene.axis].lower() if gene.axis < len(AXES) else gene.axis
+            words = f"{gene.key} {axis}"
         else:
             words = gene.key
         return f"{self._head(gene)} {words}"
