@@ -97,3 +97,21 @@ def test_an_evaluation_given_is_what_the_report_says(stiff_run):
             assert line in text, line
     assert "verdict, frames beyond the fit 60:120, 10 frames ahead" not in text
     assert "<th>5 ahead (beyond)</th>" in text
+
+
+def test_the_baselines_say_the_summarys_figure_beyond_the_fit(stiff_run):
+    """One run, one figure: the Baselines section's one step on the frames beyond is the
+    summary's verdict's (evaluate's terms, a window of its own), not a second number predicted
+    on from the fitted frames (a new user's report said 1.28 and 1.281 mm)."""
+    from activebonds.identify.judge.verdict import Verdict
+
+    base, run = stiff_run
+    report = write_report(run, base / "one-figure.html", frames=120)
+    found = evaluate(
+        load_model(run / "best_model.toml"), read_trajectory(base / "rec.csv"), frames=(60, 120)
+    )
+    one = found.comparisons[0]
+    said = Verdict(one.model_mm, one.zero_force_mm).text()
+    text = _text(report)
+    at = text.index('id="baselines"')
+    assert said in text[:at] and said in text[at:]

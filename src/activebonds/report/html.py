@@ -251,11 +251,16 @@ class ReportView:
 
     run: RunRecord
     prediction: Prediction
+    # the frames beyond the fit scored as evaluate scores them (the summary's verdict): the
+    # one-step (model, zero force) RMS in mm, or None
+    beyond_one_step: tuple[float, float] | None = None
 
 
-def stage_sections(record: RunRecord, pred: Prediction) -> list[Section]:
-    """The sections of the post-fit stages that left a record, in the registry's order."""
-    view = ReportView(record, pred)
+def stage_sections(record: RunRecord, pred: Prediction, beyond=None) -> list[Section]:
+    """The sections of the post-fit stages that left a record, in the registry's order
+    (``beyond``: the frames beyond the fit as the summary scores them, :class:`.tables.Beyond`)."""
+    one = beyond.comparisons[0] if beyond is not None and beyond.comparisons else None
+    view = ReportView(record, pred, None if one is None else (one.model_mm, one.zero_force_mm))
     return [
         section
         for stage in stages.stages()
@@ -346,7 +351,7 @@ def run_sections(
     media = animation.write_animation([(record.label, pred)], fig_dir / "animation.gif", **frame_at)
     sections = [
         _summary_section(record, pred, beyond),
-        *stage_sections(record, pred),
+        *stage_sections(record, pred, beyond),
         Section(
             "Convergence",
             figures=[Figure(conv[0], "Best and population-median cost as RMS position error.")],

@@ -66,7 +66,12 @@ class BaselinesStage:
         return out
 
     def sections(self, record: dict, report) -> list[Section]:
-        return [Section("Baselines", tables=[table(record, report.prediction)], anchor="baselines")]
+        beyond = getattr(report, "beyond_one_step", None)
+        return [
+            Section(
+                "Baselines", tables=[table(record, report.prediction, beyond)], anchor="baselines"
+            )
+        ]
 
     def columns(self, record: dict) -> dict:
         out = {"zero_force_rms_mm": record.get("zero_force_rms_mm")}
@@ -134,15 +139,20 @@ def references(record: dict) -> list[tuple[str, float]]:
     return out
 
 
-def table(record: dict, pred) -> Table:
+def table(record: dict, pred, scored: tuple[float, float] | None = None) -> Table:
     """The fit beside its baselines (RMS one-step error, mm) on the fitted frames and, where
-    the report predicts past them (``pred``), on the frames beyond."""
+    the report predicts past them (``pred``), on the frames beyond: as the summary's verdict
+    scores them where it has (``scored``: the model's and zero force's, as ``evaluate
+    --frames`` scores the frames beyond, a window of their own), else predicted on from the
+    fitted frames."""
     fit = pred.fit_frames
     beyond = pred.extended and pred.n_frames - fit >= 1
     model_fit = float(np.sqrt(np.nanmean(pred.one_step_rms_mm**2)))
     model_beyond = float(np.sqrt(np.nanmean(pred.one_step_rms_mm_beyond**2))) if beyond else None
     zero_beyond = None
-    if beyond:
+    if beyond and scored is not None:  # one figure for one run: the summary's
+        model_beyond, zero_beyond = (float(x) for x in scored)
+    elif beyond:
         rec = pred.recorded[fit - 2 :]
         mask = np.isfinite(rec).all(axis=-1)
         zero_beyond = zero_force_rms_mm(np.where(mask[..., None], rec, np.nan), mask, pred.dt)
