@@ -111,8 +111,8 @@ def _guessed(traj, asked: bool, source: str, notes: list[str]):
         said = "no guess" if ground is None else ground.describe()
         if ground is not None and agrees is False:
             said += f", but the acceleration in flight says {fall.describe()}"
-        elif ground is not None and not ground.clear:
-            said += " (not clearly flatter than another axis)"
+        elif ground is not None and not ground.clear and "(uncertain:" not in said:
+            said += " (not clearly flatter than another axis)"  # once: its doubts say why
         if asked:
             raise InputError(
                 source, f"the vertical is uncertain ({said}); give --up AXIS or --no-gravity"
