@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -242,10 +243,16 @@ def test_fit_summary_and_report_flag_a_value_at_its_bound(tmp_path):
     res = CliRunner().invoke(app, [str(a) for a in args] + ["--out", str(run)])
     assert res.exit_code == 0, res.output
     lines = [ln for ln in res.output.splitlines() if "at or near a search bound" in ln]
-    assert lines == [
-        "1 of 3 parameters at or near a search bound (within 1 % of the range; widen it and "
-        "fit again): spring A-B stiffness = 20 (near max 20)"
-    ]
+    # the value printed to 6 digits: the refinement's bounded steps (sin transform) end at the
+    # bound or a few 1e-5 of it short, as the platform's rounding has it (20 or 19.9996)
+    (line,) = lines
+    found = re.fullmatch(
+        r"1 of 3 parameters at or near a search bound \(within 1 % of the range; widen it and "
+        r"fit again\): spring A-B stiffness = ([0-9.]+) \(near max 20\)",
+        line,
+    )
+    assert found, line
+    assert float(found.group(1)) == pytest.approx(20.0, rel=1e-4)
     record = load_run(run)
     table = parameters_table(record, searched_model(record))
     rows = {row[0]: row for row in table.rows}
