@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(pipeline.py: scaffold, structure, fit, evaluate on a held-out tail, report)."""
+(the pipeline package: scaffold, structure, fit, evaluate on a held-out tail, report)."""
 
 from __future__ import annotations
 

@@ -109,7 +109,7 @@ def levenberg_marquardt(
 ):
     """Minimise ``|residual(y)|^2 / 2`` from ``y0`` (a pytree): ``linearize(y, r) -> (system,
     gradient J^T r)``, ``step(system, damping) -> d`` (``damping`` a number, times I, or a
-    pytree like y: a diagonal). Returns (y, steps, message) as :func:`.refine._solve` does;
+    pytree like y: a diagonal). Returns (y, steps, message) as :func:`.stage.solve` does;
     ``on_step(steps, loss)`` after every evaluation; ``scale(system)``: the largest diagonal
     entry of J^T J, for the precision test (none without it); ``linear_enough(y)``: whether
     the Gauss-Newton model can be trusted that far at y (else the test waits: e.g. a variable

@@ -8,13 +8,15 @@ instead (``benchmarks/shooting.py`` compares the two).
 
 After the evolution strategy, ``fit --refine lm`` polishes its best genome with one
 Levenberg-Marquardt stage per horizon of ``--horizon`` (a curriculum: each stage starts from
-the previous stage's result), on the cost ``--cost`` names:
+the previous stage's result), on the cost ``--cost`` names; the stage is the cost's own
+(:mod:`activebonds.identify.costs`), run through this module's shared services:
 
-* ``restart``: the ES's own cost at that horizon (restarts from the recorded states every H
-  frames; H = 1 is the paper's one-step cost); the variables are the genes;
-* ``shooting``: multiple shooting with windows of H frames (:mod:`.shooting`); the variables
-  are the genes and every window's start state (after a warm start of the genes alone on the
-  restart cost of that horizon). A shooting stage after another starts its
+* the restart cost (:mod:`activebonds.identify.costs.restart_cost`): the ES's own cost at that
+  horizon (restarts from the recorded states every H frames; H = 1 is the paper's one-step
+  cost); the variables are the genes;
+* multiple shooting (:mod:`activebonds.identify.costs.shooting_cost`): windows of H frames;
+  the variables are the genes and every window's start state (after a warm start of the genes
+  alone on the restart cost of that horizon). A shooting stage after another starts its
   states from the previous stage's trajectory.
 
 Bounds are kept through the search space: a gene is ``lo + (hi - lo) (1 + sin u) / 2`` of an
