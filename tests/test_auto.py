@@ -10,6 +10,7 @@ import pytest
 
 from activebonds import pipeline
 from activebonds.data.bundled import dataset
+from activebonds.identify.judge.burn_in import BurnIn
 from activebonds.identify.judge.verdict import comparisons_from
 from activebonds.model import load_model
 from activebonds.simulation import simulate_to_file
@@ -74,8 +75,16 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
     one, ahead = held["comparisons"]
     assert one["model_mm"] < 0.5 * one["zero_force_mm"]
     assert ahead["horizon"] == 10 and ahead["model_mm"] < 0.5 * ahead["zero_force_mm"]
+    # free runs after a 10-frame burn-in on the held-out frames: the model's state from the
+    # frames before each start, then the run, beside zero force's line through them
+    after = held["burn_in"]
+    assert after["frames"] == 10 and after["horizon"] == 49  # 60 frames: 49 after 11
+    assert after["model_mm"][9] < 0.5 * after["zero_force_mm"][9]
+    said = BurnIn.from_record(after).lines()[0]
+    assert said.startswith("free runs after a 10-frame burn-in") and said in proc.stdout
     # the report says the held-out verdicts the terminal said: the evaluation's, both kinds
     report = html.unescape((out / "report.html").read_text(encoding="utf-8"))
+    assert said in report and "The held-out frames' free runs after a burn-in" in report
     for c in comparisons_from(held["comparisons"]):
         for line in c.lines("frames beyond the fit 240:300"):
             assert line in report, line

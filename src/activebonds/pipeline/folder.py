@@ -14,6 +14,9 @@ from ..errors import InputError, option_error
 HELD_OUT = 0.2  # the share of the frames held out at the end of the window
 
 AHEAD = 10  # frames ahead of the multi-step verdict
+# frames of the held-out free runs' burn-in (the state estimated there, then the run:
+# identify.judge.burn_in), where the held-out tail has such a stretch
+BURN_IN = 10
 POPULATION = 40  # the ES's, small: it starts at the structure's exact optimum
 GENERATIONS = 200
 CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most these)

@@ -114,11 +114,13 @@ class Scored:
     """An evaluation's record (evaluation.json), read back, with its verdict lines."""
 
     def __init__(self, record: dict):
+        from ..identify.judge.burn_in import BurnIn
         from ..identify.judge.verdict import comparisons_from, free_run_advice
 
         self.record = record
         self.frames = tuple(record["frames"])
         self.comparisons = comparisons_from(record["comparisons"])
+        self.burn_in = BurnIn.from_record(record["burn_in"]) if "burn_in" in record else None
         self._advice = free_run_advice(
             record["model"].get("free_run_rms_mm", math.nan), record.get("holds")
         )
@@ -131,7 +133,8 @@ class Scored:
     def lines(self) -> list[str]:
         a, b = self.frames
         out = [line for c in self.comparisons for line in c.lines(f"frames {a}:{b}")]
-        return out + ([self._advice] if self._advice else [])
+        after = self.burn_in.lines() if self.burn_in is not None else []
+        return out + after + ([self._advice] if self._advice else [])
 
 
 def absent_note(recording, markers, held_out: tuple[int, int]) -> str | None:

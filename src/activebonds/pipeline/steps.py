@@ -11,7 +11,8 @@ from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
-from .folder import STEPS, Folder, Options, Windows
+from ..errors import InputError
+from .folder import BURN_IN, STEPS, Folder, Options, Windows
 from .notes import noise_line
 
 
@@ -117,18 +118,26 @@ def evaluations(run: Path, recording, split: Windows, options: Options):
     """Two thunks: the kept run's model evaluated on the held-out frames and on the fitted
     ones."""
 
-    def on(frames):
+    def on(frames, burn_in=None):
         def evaluate_there():
             from ..identify.rundir import RunDir
             from ..model import load_model
             from ..report.evaluate import evaluate
 
             model = load_model(RunDir(run).best_model_path)
+            if burn_in is not None:  # free runs after a burn-in, where the tail has one
+                try:
+                    return evaluate(
+                        model, recording, frames=frames, horizon=options.ahead, burn_in=burn_in
+                    )
+                except InputError as e:
+                    if e.source != "--burn-in":
+                        raise
             return evaluate(model, recording, frames=frames, horizon=options.ahead)
 
         return evaluate_there
 
-    return on(split.held_out), on(split.fitted)
+    return on(split.held_out, BURN_IN), on(split.fitted)
 
 
 def write_evaluation(folder: Folder, held, fitted) -> str:

@@ -196,7 +196,7 @@ def evaluate(
     )
 
 
-BURN_IN_HORIZON = 100  # frames of each free run after a burn-in
+BURN_IN_HORIZON = 100  # frames of each free run after a burn-in, at most (the window's rest)
 
 
 def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None:
@@ -210,7 +210,7 @@ def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None
             data.positions,
             data.dt,
             int(frames),
-            BURN_IN_HORIZON,
+            max(1, min(BURN_IN_HORIZON, data.n_frames - int(frames) - 1)),  # within the window
             substeps=substeps,
             method=integrator,
             offset=offset,

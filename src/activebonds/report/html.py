@@ -349,8 +349,18 @@ def run_sections(
     params = plots.parameters(model, fig_dir / "parameters", bounds=searched)
     variants = plots.variant_success(record.history, fig_dir / "variants")
     media = animation.write_animation([(record.label, pred)], fig_dir / "animation.gif", **frame_at)
+    if beyond is not None and beyond.burn_in is not None:
+        curve = plots.burn_in_curve(beyond.burn_in, fig_dir / "burn_in")
+        caption = (
+            "The held-out frames' free runs after a burn-in: the state estimated from the "
+            "recorded frames before each start with the parameters held, then the run "
+            "(identify/judge/burn_in.py)."
+        )
+        burn_in_figures = [Figure(curve[0], caption)]
+    else:
+        burn_in_figures = []
     sections = [
-        _summary_section(record, pred, beyond),
+        _summary_section(record, pred, beyond, burn_in_figures),
         *stage_sections(record, pred, beyond),
         Section(
             "Convergence",
@@ -376,11 +386,15 @@ def run_sections(
     return sections
 
 
-def _summary_section(record: RunRecord, pred: Prediction, beyond: Beyond | None) -> Section:
-    """The verdicts in words and the run's tables: at a glance, free runs, errors."""
+def _summary_section(
+    record: RunRecord, pred: Prediction, beyond: Beyond | None, figures=()
+) -> Section:
+    """The verdicts in words and the run's tables: at a glance, free runs, errors; the
+    free runs after a burn-in beyond the fit (``figures``), where scored."""
     return Section(
         "Summary",
         text=verdict_text(record, pred, beyond),
+        figures=list(figures),
         tables=[
             t
             for t in (

@@ -514,6 +514,31 @@ def one_step_errors_figure(
     return fig
 
 
+def burn_in_curve(found, stem: str | Path) -> list[Path]:
+    """The free runs after a burn-in (:class:`~activebonds.identify.judge.burn_in.BurnIn`):
+    the RMS error k frames after the start, the model's beside zero force's and, where the
+    recording is rhythmic, its mean gait's."""
+    fig, ax = _subplots(figsize=(8.0, 2.8), layout="constrained")
+    k = np.arange(1, found.horizon + 1)
+    curves = [("zero force", found.zero_force_mm, ZERO_FORCE), ("model", found.model_mm, FREE_RUN)]
+    if found.template_mm is not None:
+        curves.insert(1, ("the recording's mean gait", found.template_mm, "tab:green"))
+    for label, values, color in curves:
+        ax.plot(k, np.asarray(values, np.float64), color=color, lw=1.2, label=label)
+    ax.axhline(found.threshold_mm, color="0.5", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_xlabel("frames after the start", fontsize=8)
+    ax.set_ylabel("RMS error (mm)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(
+        f"Free runs after a {found.frames}-frame burn-in ({len(found.starts)} starts; dotted: "
+        f"{found.threshold_mm:g} mm)",
+        fontsize=9,
+    )
+    return save(fig, stem)
+
+
 def activations(
     pred: Prediction,
     labels: Sequence[str],

@@ -15,6 +15,7 @@ from ..errors import InputError
 from ..identify.judge.ahead import DEFAULT_AHEAD
 from ..identify.judge.ahead import comparisons as ahead_comparisons
 from ..identify.judge.baselines import zero_force_predictions
+from ..identify.judge.burn_in import BurnIn
 from ..identify.judge.metrics import FreeRunMetrics
 from ..identify.judge.predictions import rms_mm
 from ..identify.judge.verdict import Comparison, comparisons_from, free_run_advice, verdict
@@ -176,17 +177,20 @@ class Beyond:
 
     frames: tuple[int, int]
     comparisons: tuple[Comparison, ...]
+    burn_in: BurnIn | None = None  # free runs after a burn-in there, where scored
 
     @classmethod
     def from_record(cls, record: dict) -> Beyond:
         """From an evaluation's record (:meth:`.evaluate.Evaluation.record`, as ``auto``'s
         evaluation.json keeps its held-out one)."""
         a, b = record["frames"]
-        return cls((int(a), int(b)), tuple(comparisons_from(record["comparisons"])))
+        after = BurnIn.from_record(record["burn_in"]) if "burn_in" in record else None
+        return cls((int(a), int(b)), tuple(comparisons_from(record["comparisons"])), after)
 
     def lines(self) -> list[str]:
         a, b = self.frames
-        return verdict_lines(f"frames beyond the fit {a}:{b}", self.comparisons)
+        after = self.burn_in.lines() if self.burn_in is not None else []
+        return verdict_lines(f"frames beyond the fit {a}:{b}", self.comparisons) + after
 
 
 def beyond_scores(record: RunRecord, pred: Prediction, horizon: int = DEFAULT_AHEAD) -> Beyond:

@@ -57,8 +57,11 @@ class BurnIn:
     def lines(self) -> list[str]:
         """The verdict in words: the error at the horizon and the frames within the
         threshold, the model beside zero force."""
-        h = self.horizon
-        m, z = self.model_mm[-1], self.zero_force_mm[-1]
+        # the farthest frame ahead that some start has recorded
+        scored = [k for k, z in enumerate(self.zero_force_mm) if np.isfinite(z)]
+        at = scored[-1] if scored else self.horizon - 1
+        h = at + 1
+        m, z = self.model_mm[at], self.zero_force_mm[at]
         word = "better" if m < z else "worse"
         out = [
             f"free runs after a {self.frames}-frame burn-in ({len(self.starts)} starts): "
@@ -67,7 +70,7 @@ class BurnIn:
             f"force {self.zero_force_within:g}"
         ]
         if self.template_mm is not None:
-            g = self.template_mm[-1]
+            g = self.template_mm[at]
             beats = "better" if m < g else "worse"
             out.append(
                 f"the recording's mean gait from the burn-in's phase: {h} frames ahead "
@@ -75,6 +78,29 @@ class BurnIn:
                 f"frames (the model is {beats} than this template {h} frames ahead)"
             )
         return out
+
+    @classmethod
+    def from_record(cls, record: dict) -> BurnIn:
+        """Back from :meth:`record` (non-finite numbers as their text)."""
+
+        def curve(key):
+            values = record.get(key)
+            return None if values is None else tuple(float(x) for x in values)
+
+        return cls(
+            frames=int(record["frames"]),
+            horizon=int(record["horizon"]),
+            starts=tuple(int(s) for s in record["starts"]),
+            model_mm=curve("model_mm"),
+            zero_force_mm=curve("zero_force_mm"),
+            model_within=float(record["model_within"]),
+            zero_force_within=float(record["zero_force_within"]),
+            threshold_mm=float(record["threshold_mm"]),
+            template_mm=curve("template_mm"),
+            template_within=(
+                None if record.get("template_within") is None else float(record["template_within"])
+            ),
+        )
 
     def record(self) -> dict:
         return {
