@@ -208,3 +208,24 @@ def test_a_stiffness_fitted_at_one_step_a_frame_is_as_far_off_as_the_modes_say(s
     assert f"refit with --substeps {more}" in words and f"{100 * found:+.1f} %" in words
     assert modes.warning(omega, data.dt, more) is None
     assert modes.stiffness_bias(2.5 / data.dt, data.dt) is None  # past the stability limit
+
+
+def test_an_exact_fit_of_a_simulated_recording_is_not_told_to_refit(tmp_path):
+    """A recording made by `simulate` at one Euler substep, fitted exactly at one: the check's
+    move is real (a finer integration is another model of these frames) but 'one step per
+    frame is too coarse ... refit with --substeps 4' misled a new user; the warning says the
+    fit is exact instead, with the same numbers."""
+    import json
+
+    from activebonds.identify import fit
+
+    model = load_model(TRIANGLE)
+    fit(model, simulate(model, 120, 100.0), bonds="standard", population=8, generations=3,
+        out=tmp_path / "run", cost="restart")  # fmt: skip
+    record = json.loads((tmp_path / "run" / "uncertainty.json").read_text())
+    assert record["sigma_mm"] < integrator_check.EXACT_MM
+    check = record["substeps_check"]
+    assert check["moved"] >= 1
+    said = [w for w in record["warnings"] if "--substeps 4" in w]
+    assert len(said) == 1 and said[0].startswith("the fit is exact at one step per frame")
+    assert "refit with --substeps" not in said[0] and check["parameter"] in said[0]

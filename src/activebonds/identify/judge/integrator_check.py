@@ -83,6 +83,26 @@ class SubstepsCheck:
         )
 
 
+EXACT_MM = 1e-6  # residuals below this (mm a coordinate): the fit is exact, to rounding
+
+
+def exact_warning(checked: SubstepsCheck, sigma_mm: float) -> str:
+    """:meth:`SubstepsCheck.warning` for a fit whose residuals are rounding (``sigma_mm``
+    below :data:`EXACT_MM`): a recording made by this very integration (a file of
+    ``activebonds simulate``), which the parameters describe exactly. The parameters' move at
+    finer substeps is real, but there a finer integration is another model of the same
+    frames, and no refit is called for."""
+    steps = "one step" if checked.fitted == 1 else f"{checked.fitted} steps"
+    return (
+        f"the fit is exact at {steps} per frame (residuals {sigma_mm:.2g} mm, rounding): the "
+        f"recording was likely made by this very integration; at --substeps "
+        f"{checked.substeps} the parameters would move ({checked.moved} of {checked.determined} "
+        f"by more than their 95 % interval, the most {checked.parameter}: "
+        f"{checked.before:.6g} -> {checked.after:.6g}), a finer integration being another "
+        "model of these frames; refit at finer substeps only for a recording of a real motion"
+    )
+
+
 def check(
     ident: Identification,
     settings: FitSettings,

@@ -63,6 +63,10 @@ class UncertaintyStage:
             checked,
             None if fastest is None else modes.warning(*fastest, fit.settings.substeps),
         )
+        said = checked.warning() if hasattr(checked, "warning") else None
+        if said and report.sigma_mm < integrator_check.EXACT_MM:  # an exact fit: no refit
+            exact = integrator_check.exact_warning(checked, report.sigma_mm)
+            record["warnings"] = [exact if w == said else w for w in record["warnings"]]
         noise = marker_noise(fit.ident.all_data)
         record["noise_mm"] = noise
         found = uncertainty.misfit(report.sigma_mm, noise, report.cost, horizon)
