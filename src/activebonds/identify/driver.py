@@ -25,7 +25,7 @@ from ..model import Model, dumps_model
 from ..runtime import keep_compiled
 from . import stages
 from .costs.windows import Display
-from .prepare import Prepared, prepare, validation_frames
+from .prepare import Prepared, prepare
 from .problem import Identification, identification
 from .progress import shown
 from .rundir import RunDir
@@ -226,7 +226,7 @@ class Clock:
 def _fit(prepared: Prepared, out, overwrite: bool, progress, status=None, command=None, clock=None):
     settings = prepared.settings
     ident = identification(prepared.model, prepared.data, settings)
-    held_out = validation_frames(ident.model, prepared.recordings[0], settings)
+    held_out = prepared.held_out
     run = None
     if out is not None:
         path = prepared.model_path

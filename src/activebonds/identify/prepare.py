@@ -30,6 +30,7 @@ class Prepared:
     settings: FitSettings
     cost_note: str | None = None  # which cost ``auto`` chose and why
     predictions: str = ""  # what the gaps leave of the predictions
+    held_out: object = None  # the validation frames (:func:`validation_frames`), or None
 
     @property
     def many(self) -> bool:
@@ -65,8 +66,8 @@ def prepare(
     spec = variant(model_obj, settings.bonds)
     settings, why = choose(settings, spec, recordings[0], horizon_given)
     predictions = check_predictions(spec, recordings, settings)
-    validation_frames(spec, recordings[0], settings)
-    return Prepared(model_obj, model_path, recordings, paths, settings, why, predictions)
+    held_out = validation_frames(spec, recordings[0], settings)
+    return Prepared(model_obj, model_path, recordings, paths, settings, why, predictions, held_out)
 
 
 def validation_frames(model: Model, recording: Trajectory, settings: FitSettings):

@@ -11,7 +11,6 @@ from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
-from ..errors import InputError
 from .folder import BURN_IN, STEPS, Folder, Options, Windows
 from .notes import noise_line
 
@@ -120,20 +119,17 @@ def evaluations(run: Path, recording, split: Windows, options: Options):
 
     def on(frames, burn_in=None):
         def evaluate_there():
+            from ..identify.judge.burn_in import burn_in_starts
             from ..identify.rundir import RunDir
             from ..model import load_model
             from ..report.evaluate import evaluate
 
             model = load_model(RunDir(run).best_model_path)
-            if burn_in is not None:  # free runs after a burn-in, where the tail has one
-                try:
-                    return evaluate(
-                        model, recording, frames=frames, horizon=options.ahead, burn_in=burn_in
-                    )
-                except InputError as e:
-                    if e.source != "--burn-in":
-                        raise
-            return evaluate(model, recording, frames=frames, horizon=options.ahead)
+            after = None  # free runs after a burn-in, where the frames have a start for one
+            if burn_in is not None:
+                seen = recording.select(list(model.markers)).window(*frames).positions
+                after = burn_in if burn_in_starts(seen, burn_in, 1, 1) else None
+            return evaluate(model, recording, frames=frames, horizon=options.ahead, burn_in=after)
 
         return evaluate_there
 

@@ -31,6 +31,7 @@ from ...physics import linsolve, rollout_states
 from ...runtime import float64
 from .metrics import THRESHOLD_MM, frames_within
 from .predictions import StaticTopology, float64_params, tracked_phases
+from .verdict import plain
 
 ITERATIONS = 8  # Gauss-Newton steps of the burn-in's state estimate
 DAMPING = 1e-9  # of J^T J's largest diagonal entry: a step near Gauss-Newton's, always solvable
@@ -107,24 +108,20 @@ class BurnIn:
             "frames": self.frames,
             "horizon": self.horizon,
             "starts": list(self.starts),
-            "model_mm": [_num(x) for x in self.model_mm],
-            "zero_force_mm": [_num(x) for x in self.zero_force_mm],
+            "model_mm": [plain(x) for x in self.model_mm],
+            "zero_force_mm": [plain(x) for x in self.zero_force_mm],
             "model_within": self.model_within,
             "zero_force_within": self.zero_force_within,
             "threshold_mm": self.threshold_mm,
             **(
                 {
-                    "template_mm": [_num(x) for x in self.template_mm],
+                    "template_mm": [plain(x) for x in self.template_mm],
                     "template_within": self.template_within,
                 }
                 if self.template_mm is not None
                 else {}
             ),
         }
-
-
-def _num(x: float):
-    return float(x) if np.isfinite(x) else str(x)
 
 
 def burn_in_starts(positions: np.ndarray, frames: int, horizon: int, count: int) -> list[int]:

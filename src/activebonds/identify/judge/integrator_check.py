@@ -68,11 +68,16 @@ class SubstepsCheck:
     def record(self) -> dict:
         return asdict(self)
 
+    @property
+    def steps(self) -> str:
+        """The fit's substeps in words: 'one step', '2 steps'."""
+        return "one step" if self.fitted == 1 else f"{self.fitted} steps"
+
     def warning(self) -> str | None:
         """One sentence where the intervals do not hold at the fit's substeps, else None."""
         if not self.moved:
             return None
-        steps = "one step" if self.fitted == 1 else f"{self.fitted} steps"
+        steps = self.steps
         return (
             f"at --substeps {self.substeps} the parameters move: {self.moved} of "
             f"{self.determined} by more than their 95 % interval, the most {self.parameter} "
@@ -92,9 +97,8 @@ def exact_warning(checked: SubstepsCheck, sigma_mm: float) -> str:
     ``activebonds simulate``), which the parameters describe exactly. The parameters' move at
     finer substeps is real, but there a finer integration is another model of the same
     frames, and no refit is called for."""
-    steps = "one step" if checked.fitted == 1 else f"{checked.fitted} steps"
     return (
-        f"the fit is exact at {steps} per frame (residuals {sigma_mm:.2g} mm, rounding): the "
+        f"the fit is exact at {checked.steps} per frame (residuals {sigma_mm:.2g} mm, rounding): the "
         f"recording was likely made by this very integration; at --substeps "
         f"{checked.substeps} the parameters would move ({checked.moved} of {checked.determined} "
         f"by more than their 95 % interval, the most {checked.parameter}: "

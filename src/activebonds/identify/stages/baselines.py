@@ -66,7 +66,7 @@ class BaselinesStage:
         return out
 
     def sections(self, record: dict, report) -> list[Section]:
-        beyond = getattr(report, "beyond_one_step", None)
+        beyond = report.beyond_one_step
         return [
             Section(
                 "Baselines", tables=[table(record, report.prediction, beyond)], anchor="baselines"
