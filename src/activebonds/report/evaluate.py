@@ -227,18 +227,14 @@ def _with_template(found: BurnIn, model: Model, data: Trajectory) -> BurnIn:
     from dataclasses import replace
 
     from . import gait as g
-    from .gait_runs import choose_feet, choose_up
+    from .gait_runs import recorded_gait
 
     rec = np.asarray(data.positions, np.float64)
     try:
-        up, _ = choose_up(model, data, None)
-        feet, _ = choose_feet(model, data, up, None)
-    except InputError:
+        ref = recorded_gait(model, data)[0]
+    except InputError:  # not rhythmic: no gait to play
         return found
-    if not feet or len(feet) == rec.shape[1]:
-        return found
-    ref = g.features(rec, up, feet)
-    if not (np.isfinite(ref.period_frames) and np.isfinite(ref.gait).all()):
+    if not np.isfinite(ref.gait).all():
         return found
     runs = g.template_runs(rec, ref, found.starts, found.frames, found.horizon)
     curve, within = score(runs, targets(rec, found.starts, found.horizon), found.threshold_mm)

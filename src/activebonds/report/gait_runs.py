@@ -261,6 +261,26 @@ def choose_feet(model: Model, data: Trajectory, up, feet: Sequence[str] | None):
     return g.lowest_markers(data.positions, up), "the lowest markers by mean height"
 
 
+def recorded_gait(model: Model, data: Trajectory, feet=None, up=None):
+    """(the recording's gait :func:`~.gait.features`, (up, whence), (feet, whence)), the
+    vertical and the feet found from the model or the recording where not given; an
+    :class:`InputError` where the feet are not some of the markers or their heights have no
+    period in ``data`` (no gait)."""
+    rec = np.asarray(data.positions, np.float64)
+    up_vec, up_from = choose_up(model, data, up)
+    feet_idx, feet_from = choose_feet(model, data, up_vec, feet)
+    if not feet_idx or len(feet_idx) == rec.shape[1]:
+        raise InputError("--feet", "name the feet: some markers, not all")
+    ref = g.features(rec, up_vec, feet_idx)
+    if not np.isfinite(ref.period_frames):
+        raise InputError(
+            "--gait",
+            f"the heights of {', '.join(model.particle_names[i] for i in feet_idx)} have no "
+            "period in these frames (no gait to compare with)",
+        )
+    return ref, (up_vec, up_from), (feet_idx, feet_from)
+
+
 def gait_evaluation(
     model: Model,
     data: Trajectory,
@@ -280,17 +300,7 @@ def gait_evaluation(
     ``first_frame``: that frame's number in the recording, for the text).
     Raises :class:`InputError` when the feet's heights have no period in ``data``."""
     rec = np.asarray(data.positions, np.float64)
-    up_vec, up_from = choose_up(model, data, up)
-    feet_idx, feet_from = choose_feet(model, data, up_vec, feet)
-    if not feet_idx or len(feet_idx) == rec.shape[1]:
-        raise InputError("--feet", "name the feet: some markers, not all")
-    ref = g.features(rec, up_vec, feet_idx)
-    if not np.isfinite(ref.period_frames):
-        raise InputError(
-            "--gait",
-            f"the heights of {', '.join(model.particle_names[i] for i in feet_idx)} have no "
-            "period in these frames (no gait to compare with)",
-        )
+    ref, (up_vec, up_from), (feet_idx, feet_from) = recorded_gait(model, data, feet, up)
     n = g.stride_frames(ref, strides)
     chosen = g.gait_starts(rec, starts)
     runs = np.stack(
