@@ -74,19 +74,15 @@ def dominant_period(heights: np.ndarray, max_lag: int | None = None) -> float:
     return float(p + np.clip(shift, -0.5, 0.5))
 
 
-def recording_period(
+def detrended(
     positions: np.ndarray, mask: np.ndarray | None = None, up: Sequence[float] | None = None
-) -> float:
-    """The dominant period (frames, :func:`dominant_period`) of a recording's markers
-    ``positions`` [F, P, D] (``mask`` [F, P]: the recorded ones): of their heights along
-    ``up`` (any non-zero vector) when given, else of every coordinate; each column's
-    least-squares straight line in time removed first. NaN: the recording repeats nothing
-    (or is too short to tell: fewer than two periods)."""
+) -> np.ndarray:
+    """The columns whose period :func:`recording_period` finds [F, H]: a recording's marker
+    heights along ``up`` (any non-zero vector) when given, else every coordinate, each with its
+    least-squares straight line in time removed (NaN where not recorded)."""
     x = np.asarray(positions, np.float64)
     if mask is not None:
         x = np.where(np.asarray(mask, bool)[..., None], x, np.nan)
-    if x.ndim != 3 or x.shape[0] < 8:
-        return float("nan")
     if up is not None and np.linalg.norm(up) > 0:
         n = np.asarray(up, np.float64)
         columns = x @ (n / np.linalg.norm(n))
@@ -100,6 +96,34 @@ def recording_period(
             continue
         slope, intercept = np.polyfit(t[ok], columns[ok, j], 1)
         out[:, j] = columns[:, j] - (slope * t + intercept)
+    return out
+
+
+def recording_period(
+    positions: np.ndarray, mask: np.ndarray | None = None, up: Sequence[float] | None = None
+) -> float:
+    """The dominant period (frames, :func:`dominant_period`) of a recording's markers
+    ``positions`` [F, P, D] (``mask`` [F, P]: the recorded ones): of their heights along
+    ``up`` (any non-zero vector) when given, else of every coordinate; each column's
+    least-squares straight line in time removed first (:func:`detrended`). NaN: the recording
+    repeats nothing (or is too short to tell: fewer than two periods)."""
+    x = np.asarray(positions)
+    if x.ndim != 3 or x.shape[0] < 8:
+        return float("nan")
+    out = detrended(x, mask, up)
     if not np.isfinite(out).any():
         return float("nan")
     return dominant_period(out)
+
+
+def peak_height(columns: np.ndarray, period: float) -> float:
+    """The mean autocorrelation of ``columns`` [F, H] at a lag of ``period`` frames, linear
+    between the whole lags either side: how alike one period and the next are (1: a perfect
+    repeat; :data:`MIN_PEAK` the least :func:`dominant_period` calls a period). NaN for a
+    period that is not finite."""
+    if not np.isfinite(period):
+        return float("nan")
+    r = autocorrelation(columns, int(np.ceil(period)))
+    k = int(np.floor(period))
+    w = period - k
+    return float((1.0 - w) * r[k] + w * r[min(k + 1, r.size - 1)])

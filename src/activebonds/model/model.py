@@ -9,6 +9,7 @@ import jax
 import numpy as np
 
 from .. import bonds
+from ..axes import AXES
 from .forms import form_of, set_value
 from .genome import Genome, put_bonds, put_gravity, put_masses, put_shared, shared_value, takes
 from .layout import Layout
@@ -186,10 +187,11 @@ def _coupling(spec: ModelSpec, names, arrays, disable) -> Coupling | None:
 
 
 def _signal(table, names, dimension: int) -> Signal:
-    """A coupling signal's static part: its particles, the height's axis (the last), its
-    offset."""
+    """A coupling signal's static part: its particles, the height's axis (the table's, else
+    the last), its offset."""
     which = [table.particle] if table.signal == "height" else table.particles
-    return Signal(tuple(names[n] for n in which), dimension - 1, float(table.offset))
+    axis = dimension - 1 if table.axis is None else AXES.index(table.axis.upper())
+    return Signal(tuple(names[n] for n in which), axis, float(table.offset))
 
 
 def _file_params(spec: ModelSpec) -> Params:

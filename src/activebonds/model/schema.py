@@ -34,6 +34,7 @@ from pydantic import (
 )
 
 from .. import bonds
+from ..axes import AXES
 from .forms import form_of
 from .values import FiniteFloat, Param, Scalar, _finite, _Strict, _value_of
 
@@ -68,6 +69,7 @@ class Quadrature(_Strict):
     signal: Literal["height", "length"] = "height"
     particle: str | None = Field(default=None, min_length=1)
     particles: list[str] | None = None
+    axis: Literal["X", "Y", "Z", "x", "y", "z"] | None = None
     gain: FiniteFloat | Param
     offset: FiniteFloat = 0.0
 
@@ -76,7 +78,7 @@ class Coupling(_Strict):
     """The entrainment of the drive (DESIGN.md §2, "Entrained drive"): its phase psi is a
     state, d psi/dt = 2 pi f - gain s cos psi, pulled by the body's signal s minus ``offset``
     (m, fixed): with ``signal = "height"`` (the default), the coordinate of ``particle`` along
-    the last axis (up for the default gravity); with ``signal = "length"``, the distance
+    ``axis`` (a letter, X, Y or Z; default the last axis, up for the default gravity); with ``signal = "length"``, the distance
     between the two ``particles`` (e.g. a leg bond's length). ``gain`` (rad/s per m, >= 0;
     gene ``drive.coupling.gain``) and ``start_phase`` (psi at the first frame of the window or
     the simulation, rad; gene ``drive.coupling.start_phase`` when free) are numbers or
@@ -86,6 +88,7 @@ class Coupling(_Strict):
     signal: Literal["height", "length"] = "height"
     particle: str | None = Field(default=None, min_length=1)
     particles: list[str] | None = None
+    axis: Literal["X", "Y", "Z", "x", "y", "z"] | None = None
     gain: FiniteFloat | Param
     offset: FiniteFloat = 0.0
     start_phase: FiniteFloat | Param = 0.0
@@ -110,9 +113,17 @@ def _reads_drive(bond) -> bool:
     return not par.when or bool(getattr(bond, par.when, False))
 
 
-def _check_signal(table, where: str, names: set[str]) -> None:
+def _check_signal(table, where: str, names: set[str], dimension: int) -> None:
     """A coupling signal's particles: one known name for a height, two distinct known names
-    for a length (``where``: the table's dotted key, for the message)."""
+    for a length (``where``: the table's dotted key, for the message); a height's axis one
+    of the model's."""
+    if table.axis is not None and (
+        table.signal != "height" or AXES.index(table.axis.upper()) >= dimension
+    ):
+        raise ValueError(
+            f"{where}.axis: a height's axis, one of {', '.join(AXES[:dimension])} (a length has "
+            "none)"
+        )
     if table.signal == "height":
         if table.particle is None or table.particles is not None:
             raise ValueError(f"{where}.particle: a height signal needs particle = .. (one name)")
@@ -398,9 +409,9 @@ class ModelSpec(_Strict):
         coupling = self.drive.coupling if self.drive is not None else None
         if coupling is None:
             return
-        _check_signal(coupling, "drive.coupling", names)
+        _check_signal(coupling, "drive.coupling", names, self.dimension)
         if coupling.quadrature is not None:
-            _check_signal(coupling.quadrature, "drive.coupling.quadrature", names)
+            _check_signal(coupling.quadrature, "drive.coupling.quadrature", names, self.dimension)
         if not any(_reads_drive(b) for b in self.bond):
             raise ValueError(
                 "drive.coupling: an entrained drive needs a neural bond or a periodic force to "
