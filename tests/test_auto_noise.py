@@ -1,5 +1,5 @@
 """``activebonds auto`` on a recording from an independent simulator under marker noise: the
-structure, the masses and every parameter found (pipeline.py, structure_choice.py).
+structure, the masses and every parameter found (auto/, structure_choice.py).
 
 MuJoCo (RK4 at 1e-4 s, ``mujoco_truth.py``) moves five free point masses (0.5-2.1 kg) joined by
 eight spring-damper tendons, each mass to its three nearest; 5 s sampled at 100 Hz, 0.5 mm of
@@ -15,7 +15,7 @@ import json
 import numpy as np
 import pytest
 
-from activebonds import pipeline
+from activebonds import auto
 from activebonds.data import Trajectory, write_trajectory
 from activebonds.model import load_model
 
@@ -51,8 +51,8 @@ def _value(x):
 def test_auto_finds_the_structure_masses_and_parameters_under_noise(recording, tmp_path):
     truth, path = recording
     said = []
-    options = pipeline.Options(total_mass=float(np.sum(truth.masses)))
-    outcome = pipeline.run(path, tmp_path / "out", options, say=said.append)
+    options = auto.Options(total_mass=float(np.sum(truth.masses)))
+    outcome = auto.run(path, tmp_path / "out", options, say=said.append)
     assert any("marker noise about 0.49" in line and "smoothed over" in line for line in said)
     state = json.loads((tmp_path / "out" / "auto.json").read_text())
     assert state["noise"]["sigma"] == pytest.approx(0.5, rel=0.05) and state["noise"]["window"]

@@ -1,34 +1,127 @@
-"""The steps of ``activebonds auto`` and how each is run: announced, timed and recorded in
-``OUT/auto.json``, or skipped where an earlier run finished it; the scaffold's, the evaluation's
-and the report's work."""
+"""The steps of ``activebonds auto``, registered in order (:data:`STEPS`), and how they are
+run: each announced (``[k/n] name: what``, ``n`` the registry's count), timed and recorded in
+``OUT/auto.json`` with its note and what it noted beside it
+(:meth:`~.workspace.Workspace.note`), or said done where an earlier run finished it."""
 
 from __future__ import annotations
 
-import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .folder import BURN_IN, STEPS, Folder, Options, Windows
+from ..registry import Registry
+from .folder import Folder, Options, Windows
 from .notes import noise_line
 
 
-def scaffold_of(recording, split: Windows, options: Options, name: str):
-    """The candidate model of the fitted frames (:func:`~activebonds.identify.discover.scaffold.
-    scaffold` with the options), its inputs checked."""
-    from ..identify.discover.scaffold import scaffold
+@dataclass(frozen=True)
+class Step:
+    """One step: its name, what it does (said before it, from the workspace), its work
+    (``run(ws)``, returning its note) and the lines said after its line (``after(ws)``, also
+    where an earlier run finished it)."""
 
-    return scaffold(
-        recording,
-        markers=list(options.markers) if options.markers else None,
-        frames=split.fitted,
-        total_mass=options.total_mass,
-        up=options.up,
-        gravity=options.gravity,
-        name=name,
+    name: str
+    doing: Callable[[object], str]
+    run: Callable[[object], str]
+    after: Callable[[object], list[str]] | None = None
+
+
+def _scaffold(ws) -> str:
+    from .scaffold import write_scaffold
+
+    return write_scaffold(ws.folder, ws.scaffold, ws.say)
+
+
+def _structure(ws) -> str:
+    from .structure import structure_step
+
+    return structure_step(ws.folder, ws.structural, ws.split, ws.options, ws.say)
+
+
+def _fit(ws) -> str:
+    from .fit import fit_step
+
+    return fit_step(ws)
+
+
+def _table(ws) -> list[str]:
+    from .fit import table_lines
+
+    return table_lines(ws)
+
+
+def _evaluate(ws) -> str:
+    from .evaluation import evaluations, write_evaluation
+
+    held, fitted = evaluations(ws.kept_run, ws.recording, ws.split, ws.options)
+    return write_evaluation(ws.folder, held(), fitted())
+
+
+def _report(ws) -> str:
+    from .evaluation import how_made, write_html
+
+    a, b = ws.split.fitted[0], ws.split.held_out[1]
+    made = how_made(ws.state)
+    return write_html(ws.kept_run, ws.folder.report, b - a, ws.folder.evaluation, made)
+
+
+def _evaluating(ws) -> str:
+    s, b = ws.split.held_out
+    return (
+        f"the fitted model on the held-out frames {s}:{b} and the fitted ones, one step and "
+        f"{ws.options.ahead} frames ahead, beside zero force"
     )
+
+
+STEPS: Registry[Step] = Registry(
+    "auto step",
+    [
+        Step("scaffold", lambda ws: "a candidate model of the fitted frames", _scaffold),
+        Step(
+            "structure",
+            lambda ws: "which candidate bonds the fitted frames need (exact least squares, "
+            "BIC, a validation tail)",
+            _structure,
+        ),
+        Step(
+            "fit",
+            lambda ws: "the candidate models, each fitted and judged on the validation frames "
+            f"(population {ws.options.population}, {ws.options.generations} generations, then "
+            "the refinement)",
+            _fit,
+            _table,
+        ),
+        Step("evaluate", _evaluating, _evaluate),
+        Step(
+            "report",
+            lambda ws: "the HTML report of the run over the fitted and held-out frames",
+            _report,
+        ),
+    ],
+)
+
+
+def run_steps(ws) -> None:
+    """Every registered step in turn (see the module's docstring)."""
+    steps, say = ws.state["steps"], ws.say
+    n = len(STEPS.names())
+    for k, step in enumerate(STEPS.entries(), 1):
+        if step.name in steps:
+            say(f"[{k}/{n}] {step.name}: done before ({steps[step.name]['seconds']:.0f} s)")
+        else:
+            say(f"[{k}/{n}] {step.name}: {step.doing(ws)}")
+            ws.notes.pop(step.name, None)
+            t0 = time.perf_counter()
+            note = step.run(ws)
+            seconds = time.perf_counter() - t0
+            noted = ws.notes.pop(step.name, {})
+            steps[step.name] = {"seconds": round(seconds, 1), "note": note, **noted}
+            ws.folder.write_state(ws.state)
+            say(f"[{k}/{n}] {step.name}: {note} ({seconds:.0f} s)")
+        for line in step.after(ws) if step.after is not None else ():
+            say(line)
 
 
 def begin(
@@ -57,11 +150,12 @@ def begin(
             "options": options.record(),
             "fitted_frames": list(split.fitted),
             "held_out_frames": list(split.held_out),
+            "validation_frames": list(split.validation),
             "steps": {},
         }
         folder.write_state(state)
     else:
-        done = [s for s in STEPS if s in state["steps"]]
+        done = [s for s in STEPS.names() if s in state["steps"]]
         say(f"continuing {out}: {', '.join(done) or 'no step'} finished")
     a, s = split.fitted
     b = split.held_out[1]
@@ -72,101 +166,3 @@ def begin(
     say(noise_line(noise))
     state["noise"] = asdict(noise)
     return state
-
-
-class Steps:
-    """Runs the steps in turn: each announced, timed and recorded in the folder's state with
-    its note (and what it records beside it in ``state["parts"][name]``), or said done where
-    an earlier run finished it."""
-
-    def __init__(self, folder: Folder, state: dict, say: Callable[[str], None]):
-        self.folder, self.state, self.say = folder, state, say
-
-    def __call__(self, k: int, name: str, what: str, body: Callable[[], str]) -> None:
-        steps, say = self.state["steps"], self.say
-        if name in steps:
-            say(f"[{k}/5] {name}: done before ({steps[name]['seconds']:.0f} s)")
-            return
-        self.state["parts"] = {}  # what a step records beside its note
-        say(f"[{k}/5] {name}: {what}")
-        t0 = time.perf_counter()
-        note = body()
-        seconds = time.perf_counter() - t0
-        parts = self.state.pop("parts").get(name, {})
-        steps[name] = {"seconds": round(seconds, 1), "note": note, **parts}
-        self.folder.write_state(self.state)
-        say(f"[{k}/5] {name}: {note} ({seconds:.0f} s)")
-
-
-def write_scaffold(folder: Folder, found, say: Callable[[str], None]) -> str:
-    """Step 1: the scaffold ``found`` (checked to load) written, its notes said."""
-    from ..atomic import write_text_atomic
-    from ..model import loads_model
-
-    loads_model(found.text, str(folder.scaffold))
-    for note in found.notes:
-        say(f"      {note}")
-    write_text_atomic(folder.scaffold, found.text)
-    return (
-        f"{found.particles} particles, {found.bonds} candidate bonds, {found.contacts} "
-        f"ground contacts, gravity {found.gravity}: {folder.scaffold}"
-    )
-
-
-def evaluations(run: Path, recording, split: Windows, options: Options):
-    """Two thunks: the kept run's model evaluated on the held-out frames and on the fitted
-    ones."""
-
-    def on(frames, burn_in=None):
-        def evaluate_there():
-            from ..identify.judge.burn_in import burn_in_starts
-            from ..identify.rundir import RunDir
-            from ..model import load_model
-            from ..report.evaluate import evaluate
-
-            model = load_model(RunDir(run).best_model_path)
-            after = None  # free runs after a burn-in, where the frames have a start for one
-            if burn_in is not None:
-                seen = recording.select(list(model.markers)).window(*frames).positions
-                after = burn_in if burn_in_starts(seen, burn_in, 1, 1) else None
-            return evaluate(model, recording, frames=frames, horizon=options.ahead, burn_in=after)
-
-        return evaluate_there
-
-    return on(split.held_out, BURN_IN), on(split.fitted)
-
-
-def write_evaluation(folder: Folder, held, fitted) -> str:
-    from ..atomic import write_text_atomic
-
-    record = {"held_out": held.record(), "fitted": fitted.record()}
-    write_text_atomic(folder.evaluation, json.dumps(record, indent=2) + "\n")
-    one = held.comparisons[0]
-    return (
-        f"held out, one step: {one.model_mm:.4g} mm (zero force {one.zero_force_mm:.4g} mm): "
-        f"{folder.evaluation}"
-    )
-
-
-def how_made(state: dict) -> list[str]:
-    """How the kept model was made, for the report: the noise's line and the first three
-    steps' notes (every run tried, kept or not, and why), the masses' note."""
-    from ..data.smoothing import Noise
-
-    steps = state["steps"]
-    out = [noise_line(Noise(**state["noise"]))] if "noise" in state else []
-    out += [f"{name}: {steps[name]['note']}" for name in STEPS[:3] if name in steps]
-    if steps.get("fit", {}).get("masses"):
-        out.append(steps["fit"]["masses"])
-    return out
-
-
-def write_html(run: Path, report: Path, frames: int, evaluation: Path, made=()) -> str:
-    """The run's report, its held-out verdicts (one step and K ahead) the evaluation's,
-    ``made`` (:func:`how_made`) a section of its own."""
-    from ..report import write_report
-    from ..report.html import Beyond
-
-    held = json.loads(evaluation.read_text(encoding="utf-8"))["held_out"]
-    beyond = Beyond.from_record(held)
-    return str(write_report(run, report, frames=frames, beyond=beyond, made=made))

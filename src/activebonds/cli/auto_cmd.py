@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(the pipeline package: scaffold, structure, fit, evaluate on a held-out tail, report)."""
+(the auto package: scaffold, structure, fit, evaluate on a held-out tail, report)."""
 
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ def auto(
     held-out tail and the fitted frames beside zero force, write the report; the verdict last.
     Run again with the same recording and options, the finished steps are kept and an
     interrupted fit resumes."""
-    from .. import pipeline
+    from .. import auto as auto_package
     from ..identify.rundir import RunWriteError
     from ..identify.settings import parse_frames, parse_markers
     from .app import say
@@ -66,7 +66,7 @@ def auto(
     from .progress_bar import run_progress as _progress
 
     try:
-        options = pipeline.Options(
+        options = auto_package.Options(
             markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
             held_out=held_out,
@@ -78,7 +78,7 @@ def auto(
             seed=seed,
             ahead=ahead,
         )
-        outcome = pipeline.run(
+        outcome = auto_package.run(
             traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress
         )
     except InputError as e:
