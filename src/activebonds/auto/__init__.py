@@ -120,20 +120,23 @@ def run(
     overwrite: bool = False,
     say: Callable[[str], None] = print,
     fit_progress=None,
+    verbose: bool = True,
 ) -> Outcome:
     """Every step of ``activebonds auto`` (see the module's docstring), each announced by
     ``say``; ``fit_progress(generations, starting)``: a context manager yielding the fit's
-    progress (with a ``status``), or None. Bad input raises InputError before anything is
+    progress (with a ``status``), or None; ``verbose``: each fit's summary said (else one
+    line a fit). Bad input raises InputError before anything is
     written. numpy's RuntimeWarnings (a mean of no frames on a gappy recording) are not
     shown: what they mean is said in the scores."""
     import numpy as np
 
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
-        return _run(recording_path, out, options, overwrite, say, fit_progress)
+        return _run(recording_path, out, options, overwrite, say, fit_progress, verbose)
 
 
-def _run(recording_path: Path, out: Path, options: Options, overwrite, say, fit_progress):
+def _run(recording_path: Path, out: Path, options: Options, overwrite, say, fit_progress,
+         verbose):  # fmt: skip
     from ..data import read_trajectory
     from ..model import loads_model
     from .scaffold import scaffold_of
@@ -164,6 +167,7 @@ def _run(recording_path: Path, out: Path, options: Options, overwrite, say, fit_
         fit_progress=fit_progress,
         state=state,
         scaffold=found,
+        verbose=verbose,
     )
     run_steps(ws)
     state["total_seconds"] = round(sum(v["seconds"] for v in state["steps"].values()), 1)

@@ -49,8 +49,7 @@ def fit_step(ws) -> str:
     ws.note("fit", "candidates", rows)
     flight = ws.folder.run_flight if ws.folder.run_flight.exists() else None
     masses = fixed_masses_note(kept.run, flight) if kept.run != ws.folder.run_masses else None
-    if masses:
-        ws.say(f"      {masses}")
+    if masses:  # said after the verdict (Outcome.verdict_lines)
         ws.note("fit", "masses", masses)
     j = kept.judged
     a, b = j.frames

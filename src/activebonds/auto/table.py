@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import math
 
-from .judge import RULE
-
 
 def row(name: str, run: str, judged, fitted_mm: float, kept: bool, why: str) -> dict:
     """One candidate's row: its name, run, the judge's scores (:class:`~.judge.Judged`),
@@ -53,7 +51,8 @@ def lines(rows: list[dict]) -> list[str]:
         return "  ".join([*out, str(cells[-1])])
 
     intro = (
-        f"candidates on the validation frames {a}:{b} (the fitted frames' tail; 'worse': "
-        f"markers worse than zero force one step); kept: {RULE.replace('frames ahead', f'{h} frames ahead')}"
+        f"candidates on the validation frames {a}:{b} (the fitted frames' tail), the rule: "
+        f"fewer markers worse than zero force one step ('worse'), then a lower RMS {h} frames "
+        "ahead"
     )
     return [intro, line(head), *(line(c) for c in body)]

@@ -31,6 +31,7 @@ class Workspace:
     fit_progress: Callable | None
     state: dict
     scaffold: object = None  # the scaffold found before anything was written
+    verbose: bool = True  # each fit's summary said; else one line and its warnings' count
     notes: dict[str, dict] = field(default_factory=dict)
 
     def settings(self):
@@ -80,7 +81,13 @@ class Workspace:
                 )  # fmt: skip
         if result.status != "completed":
             raise RuntimeError(f"the fit ended {result.status}; see {run_path}")
-        for line in printed_lines(result.lines()):
+        lines = printed_lines(result.lines())
+        if not self.verbose:
+            counted = [line for line in lines if line.startswith("uncertainty: ") and
+                       "warning" in line and not line.startswith(WARNING)]  # fmt: skip
+            lines = [f"{run_name}: one-step RMS {result.rms_mm:.4g} mm on the fitted frames "
+                     "(--verbose: the fit's summary)", *counted]  # fmt: skip
+        for line in lines:
             self.say(f"      {line}")
         return result.rms_mm
 

@@ -52,6 +52,9 @@ def auto(
     overwrite: Annotated[
         bool, typer.Option(help="Replace an earlier output folder of activebonds auto.")
     ] = False,
+    verbose: Annotated[
+        bool, typer.Option("--verbose", help="Say each fit's summary, not one line a fit.")
+    ] = False,
 ):
     """From a recording to an evaluated model: scaffold a candidate model of the fitted frames,
     decide its springs (structure), fit it (the cost as fit --cost auto), evaluate it on the
@@ -79,7 +82,8 @@ def auto(
             ahead=ahead,
         )
         outcome = auto_package.run(
-            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress
+            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress,
+            verbose=verbose,
         )
     except InputError as e:
         fail(e)
