@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(pipeline.py)."""
+(the package auto/)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from activebonds import pipeline
+from activebonds import auto
 from activebonds.data.bundled import dataset
 from activebonds.identify.judge.burn_in import BurnIn
 from activebonds.identify.judge.verdict import comparisons_from
@@ -28,9 +28,9 @@ def triangle(tmp_path_factory):
 
 
 def test_the_window_split_and_its_limits():
-    split = pipeline.windows(600, (0, None), 0.2)
+    split = auto.windows(600, (0, None), 0.2)
     assert split.fitted == (0, 480) and split.held_out == (480, 600)
-    assert pipeline.windows(600, (100, 300), 0.25).held_out == (250, 300)
+    assert auto.windows(600, (100, 300), 0.25).held_out == (250, 300)
     for frames, share, option in [
         ((0, None), 1.5, "--held-out"),
         ((0, None), 0.0, "--held-out"),
@@ -38,7 +38,7 @@ def test_the_window_split_and_its_limits():
         ((700, None), 0.2, "--frames"),
     ]:
         with pytest.raises(Exception) as err:
-            pipeline.windows(600, frames, share)
+            auto.windows(600, frames, share)
         assert option in str(err.value)
 
 
@@ -50,8 +50,10 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
     proc = cli_in_process(*args)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.strip().splitlines()
-    for k, step in enumerate(pipeline.STEPS, 1):
-        assert any(line.startswith(f"[{k}/5] {step}: ") for line in lines), step
+    n = len(auto.STEPS.names())
+    assert n == 5
+    for k, step in enumerate(auto.STEPS.names(), 1):
+        assert any(line.startswith(f"[{k}/{n}] {step}: ") for line in lines), step
     last = lines[-1]
     assert last.startswith("verdict, held-out frames 240:300: one step: better than zero force")
     assert "10 frames ahead: better than zero force" in last
@@ -89,7 +91,7 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
         for line in c.lines("frames beyond the fit 240:300"):
             assert line in report, line
     state = json.loads((out / "auto.json").read_text())
-    assert set(state["steps"]) == set(pipeline.STEPS)
+    assert set(state["steps"]) == set(auto.STEPS.names())
     # ... and how the model was made: the noise's line and the first three steps' notes
     made = report.split('<section id="made"><h2>How this model was made</h2>')[1]
     made = made.split("</section>")[0]
@@ -111,7 +113,7 @@ def test_auto_from_a_simulated_recording_to_a_verdict(triangle, tmp_path):
 
 @pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
 def test_too_many_candidates_are_kept_undecided(triangle, tmp_path, monkeypatch):
-    monkeypatch.setattr(pipeline.structure, "MAX_DECIDED", 2)
+    monkeypatch.setattr(auto.structure, "MAX_DECIDED", 2)
     out = tmp_path / "out"
     proc = cli_in_process(
         "auto", triangle, "--out", out, "--no-gravity", "--generations", "5",
@@ -154,46 +156,10 @@ def test_a_folder_of_something_else_is_refused(triangle, tmp_path):
     assert [p.name for p in out.iterdir()] == ["mine.txt"]
 
 
-@pytest.mark.parametrize("shot_mm, kept_name", [(40.0, "run-shot"), (60.0, "run")])
-def test_a_shot_model_is_kept_only_where_it_predicts_the_fitted_frames_better(
-    triangle, tmp_path, monkeypatch, shot_mm, kept_name
-):
-    """``shoot`` compares the two runs' 10-frames-ahead RMS on their fitted frames (their
-    baselines' records) and keeps the shot model only where it is lower."""
-    from activebonds.identify.rundir import RunDir
-
-    folder = pipeline.Folder(tmp_path)
-
-    def write_run(path, ahead_mm):
-        path.mkdir()
-        RunDir(path).best_model_path.write_text(dataset("triangle.toml").path.read_text())
-        judged = [{"horizon": 1, "model_mm": 1.0}, {"horizon": 10, "model_mm": ahead_mm}]
-        (path / "baselines.json").write_text(json.dumps({"judged": judged}))
-
-    write_run(folder.run, 50.0)
-    shot = []
-    monkeypatch.setattr(
-        pipeline.refits, "fit_into", lambda run, *a: shot.append(run) or write_run(run, shot_mm)
-    )
-    said = []
-    kept, note = pipeline.refits.shoot(
-        folder,
-        folder.run,
-        triangle,
-        pipeline.fit_settings(pipeline.Options(), pipeline.windows(300, (0, None), 0.2)),
-        said.append,
-        None,
-    )
-    assert shot == [folder.run_shot] and kept.name == kept_name
-    assert f"{shot_mm:.4g} vs 50 mm" in note
-    if kept_name == "run":
-        assert any("no better than run's" in line for line in said)
-
-
 def test_the_last_verdict_says_when_one_step_scores_are_the_noise_s():
     from types import SimpleNamespace
 
-    from activebonds.pipeline import NOISY_ONE_STEP, Outcome
+    from activebonds.auto import NOISY_ONE_STEP, Outcome
 
     def comparison(what, text):
         return SimpleNamespace(what=what, overall=SimpleNamespace(text=lambda: text))

@@ -13,7 +13,7 @@ from activebonds.errors import InputError
 from activebonds.identify.discover.scaffold import scaffold
 from activebonds.identify.judge.verdict import Verdict
 from activebonds.model import load_model
-from activebonds.pipeline import STILL, fixed_masses_note, still_note
+from activebonds.auto import STILL, fixed_masses_note, still_note
 from activebonds.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,7 +74,7 @@ def test_frames_beyond_the_recording_are_refused_as_fit_evaluate_and_fill_refuse
     rule (data.trajectory.frame_window) refuses it for every command, in one line, and nothing
     is written."""
     from activebonds.data import write_trajectory
-    from activebonds.pipeline.folder import windows
+    from activebonds.auto.folder import windows
     from helpers import cli_in_process
 
     with pytest.raises(InputError, match=r"window stop 5000 is out of range for 1200 frames"):
@@ -95,7 +95,7 @@ def test_frames_beyond_the_recording_are_refused_as_fit_evaluate_and_fill_refuse
 
 
 def test_markers_never_present_in_the_held_out_tail_are_said_before_fitting():
-    from activebonds.pipeline.notes import absent_note
+    from activebonds.auto.notes import absent_note
 
     data = simulate(load_model(TRIANGLE), 60, 100.0)
     positions = data.positions.copy()
@@ -113,7 +113,7 @@ def test_markers_never_present_in_the_held_out_tail_are_said_before_fitting():
 def test_auto_prints_the_uncertainty_warnings_as_a_count_and_leaves_their_words_to_the_report():
     """The uncertainty's warnings advise refits (--cost shooting, --substeps 4) that `auto`
     decides itself: its summary counts them in one line; the report has their words."""
-    from activebonds.pipeline.refits import printed_lines
+    from activebonds.auto.workspace import printed_lines
 
     lines = [
         "zero-force baseline on the same frames 0.1009 mm",

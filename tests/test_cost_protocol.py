@@ -80,7 +80,7 @@ def test_no_module_outside_the_costs_and_integrators_branches_on_their_names(pat
 def test_every_module_but_the_owners_is_checked():
     checked = {p.relative_to(PACKAGE).as_posix() for p in outside_owners()}
     assert {"identify/solvers/refine.py", "identify/judge/uncertainty.py"} <= checked
-    assert {"pipeline/refits.py", "cli/main.py", "simulation.py"} <= checked
+    assert {"auto/candidates/shot.py", "cli/main.py", "simulation.py"} <= checked
     assert {"identify/stages/refinement.py", "identify/settings.py"} <= checked
     assert not any(c.startswith("identify/costs/") for c in checked)
 

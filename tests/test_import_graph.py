@@ -36,7 +36,7 @@ LAYERS = (
     ("report", "export"),  # results shown, or written for other tools
     ("experiments",),  # the paper's studies, built on fits and reports
     ("sweep",),  # many fits from a manifest
-    ("pipeline",),  # a recording to an evaluated model, in one call
+    ("auto",),  # a recording to an evaluated model, in one call: a search over candidates
     ("cli", ROOT),  # the command line; the package's public face
 )
 # Arrows up that are known and to be removed: (importer, imported). Skipped by the layering

@@ -1,5 +1,5 @@
 """``activebonds auto``: from a recording to an evaluated model in one command
-(the pipeline package: scaffold, structure, fit, evaluate on a held-out tail, report)."""
+(the auto package: scaffold, structure, fit, evaluate on a held-out tail, report)."""
 
 from __future__ import annotations
 
@@ -52,13 +52,16 @@ def auto(
     overwrite: Annotated[
         bool, typer.Option(help="Replace an earlier output folder of activebonds auto.")
     ] = False,
+    verbose: Annotated[
+        bool, typer.Option("--verbose", help="Say each fit's summary, not one line a fit.")
+    ] = False,
 ):
     """From a recording to an evaluated model: scaffold a candidate model of the fitted frames,
     decide its springs (structure), fit it (the cost as fit --cost auto), evaluate it on the
     held-out tail and the fitted frames beside zero force, write the report; the verdict last.
     Run again with the same recording and options, the finished steps are kept and an
     interrupted fit resumes."""
-    from .. import pipeline
+    from .. import auto as auto_package
     from ..identify.rundir import RunWriteError
     from ..identify.settings import parse_frames, parse_markers
     from .app import say
@@ -66,7 +69,7 @@ def auto(
     from .progress_bar import run_progress as _progress
 
     try:
-        options = pipeline.Options(
+        options = auto_package.Options(
             markers=parse_markers(markers),
             frames=parse_option_frames(frames, parse_frames),
             held_out=held_out,
@@ -78,8 +81,9 @@ def auto(
             seed=seed,
             ahead=ahead,
         )
-        outcome = pipeline.run(
-            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress
+        outcome = auto_package.run(
+            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress,
+            verbose=verbose,
         )
     except InputError as e:
         fail(e)

@@ -88,23 +88,33 @@ def _fixed(value):
     return value
 
 
-def determined(rows, share: float = HOLD) -> set[str]:
-    """The parameters (``bond[i].key``) of a run's ``uncertainty.csv`` ``rows`` (dicts) that
-    are determined within ``share`` of their value: their 95 % interval inside ``value *
-    (1 -+ share)``."""
+def determined(estimates, genes, share: float = HOLD) -> set[tuple[int, str]]:
+    """The bond parameters, as (the bond's index in the model file, its key), that a run's
+    uncertainty record determined within ``share`` of their value (their 95 % interval inside
+    ``value * (1 -+ share)``). ``estimates``: the record's (``RunDir(run).record
+    ("uncertainty")["estimates"]``: dicts with ``name``, ``value``, ``low``, ``high``,
+    ``determined``); ``genes``: the fitted model's layout's (:class:`~.model.genes.Gene`),
+    which say what each estimate's parameter is: a bond's own scalar (one bond, no type, no
+    axis) counts, a type's shared one, a mass or a vector's axis does not."""
+    by_name = {g.name: g for g in genes}
     out = set()
-    for row in rows:
-        if not row["parameter"].startswith("bond[") or row["determined"] != "yes":
+    for e in estimates:
+        gene = by_name.get(e.get("name"))
+        if gene is None or gene.owner != "bond" or gene.type is not None or not e["determined"]:
             continue
-        value, low, high = (float(row[k]) for k in ("value", "ci95_low", "ci95_high"))
+        if len(gene.bonds) != 1 or gene.axis is not None or gene.part is not None:
+            continue
+        value, low, high = (e.get(k) for k in ("value", "low", "high"))
+        if None in (value, low, high):
+            continue
         if value > 0 and low >= value * (1.0 - share) and high <= value * (1.0 + share):
-            out.add(row["parameter"])
+            out.add((gene.bonds[0], gene.key))
     return out
 
 
-def held(spec: ModelSpec, masses: np.ndarray, hold: set[str]) -> ModelSpec:
-    """``spec`` with its masses fixed at ``masses`` [P] (kg) and the bond parameters named in
-    ``hold`` (``bond[i].key``: :func:`determined`) fixed at their values; the rest free."""
+def held(spec: ModelSpec, masses: np.ndarray, hold: set[tuple[int, str]]) -> ModelSpec:
+    """``spec`` with its masses fixed at ``masses`` [P] (kg) and the bond parameters in
+    ``hold`` ((bond index, key): :func:`determined`) fixed at their values; the rest free."""
     particles = [
         p.model_copy(update={"mass": float(m)})
         for p, m in zip(spec.particle, np.asarray(masses, np.float64), strict=True)
@@ -114,7 +124,7 @@ def held(spec: ModelSpec, masses: np.ndarray, hold: set[str]) -> ModelSpec:
             update={
                 name: _fixed(getattr(b, name))
                 for name in type(b).model_fields
-                if f"bond[{i}].{name}" in hold
+                if (i, name) in hold
             }
         )
         for i, b in enumerate(spec.bond)

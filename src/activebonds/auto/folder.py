@@ -22,7 +22,6 @@ GENERATIONS = 200
 CHECKPOINT_EVERY = 50  # generations between checkpoints (Ctrl-C loses at most these)
 
 MIN_FRAMES = 10  # frames of the fitted window and of the held-out tail, at least
-STEPS = ("scaffold", "structure", "fit", "evaluate", "report")
 STATE = "auto.json"
 
 
@@ -54,6 +53,19 @@ class Windows:
 
     fitted: tuple[int, int]
     held_out: tuple[int, int]
+
+    @property
+    def validation(self) -> tuple[int, int]:
+        """The validation frames: the tail of the fitted frames, their last share beyond
+        :data:`~activebonds.identify.discover.structure_choice.TRAIN` (20 %), at least
+        :data:`~activebonds.identify.discover.structure_choice.MIN_TAIL` frames: the tail the
+        structure step chooses its variant on, and the one ``auto``'s judge scores every
+        candidate on. Never the held-out frames."""
+        from ..identify.discover.structure_choice import MIN_TAIL, TRAIN
+
+        a, b = self.fitted
+        split = a + int(round(TRAIN * (b - a)))
+        return (max(a, min(split, b - MIN_TAIL)), b)
 
 
 def windows(n_frames: int, frames: tuple[int, int | None], held_out: float) -> Windows:

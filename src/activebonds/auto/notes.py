@@ -29,7 +29,7 @@ class Outcome:
         what limits them: held-out frames that hardly move (:func:`still_note`), masses the
         fit did not identify (the fit step's note)."""
         notes = [still_note(self.held_out, self.fitted)]
-        notes.append((self.state.get("parts", {}).get("fit") or {}).get("masses"))
+        notes.append((self.state.get("steps", {}).get("fit") or {}).get("masses"))
         return self.held_out.lines() + [n for n in notes if n]
 
     def verdict(self) -> str:

@@ -1,0 +1,96 @@
+"""The one rule by which ``activebonds auto`` keeps a model: every candidate's run scored on
+the validation frames (the tail of the fitted frames, never the held-out ones), one step at
+each marker and ``--ahead`` frames ahead overall, beside zero force; a candidate is better
+where fewer markers are worse than zero force one step, then where it predicts ``--ahead``
+frames ahead closer."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+RULE = (
+    "on the validation frames, fewer markers worse than zero force one step, then a lower "
+    "RMS frames ahead"
+)
+
+
+@dataclass(frozen=True)
+class Judged:
+    """A run's best model scored on the validation frames ``frames`` (errors in mm): one
+    step overall and at each marker, and ``horizon`` frames ahead, each beside zero force's."""
+
+    frames: tuple[int, int]
+    horizon: int
+    one_step_mm: float
+    zero_force_one_step_mm: float
+    worse: int  # markers where the model is not better than zero force, one step
+    markers: int  # markers judged
+    ahead_mm: float
+    zero_force_ahead_mm: float
+
+    def record(self) -> dict:
+        out = asdict(self)
+        out["frames"] = list(self.frames)
+        return {k: (v if not isinstance(v, float) or math.isfinite(v) else None) for k, v in
+                out.items()}  # fmt: skip
+
+
+def _finite(x: float) -> float:
+    return x if isinstance(x, int | float) and math.isfinite(x) else math.inf
+
+
+def better(new: Judged, old: Judged) -> bool:
+    """Whether ``new`` is the better model: fewer markers worse than zero force one step,
+    then (as many) a lower RMS ``horizon`` frames ahead (a non-finite one is no better than
+    any)."""
+    if new.worse != old.worse:
+        return new.worse < old.worse
+    return _finite(new.ahead_mm) < _finite(old.ahead_mm)
+
+
+def compared(new: Judged, old: Judged, old_name: str) -> str:
+    """Why ``new`` is or is not better than ``old`` (the run ``old_name``), in words: the
+    first of the rule's two scores that differs."""
+    if new.worse != old.worse:
+        return (
+            f"{new.worse} marker(s) worse than zero force one step, {old_name} {old.worse}"
+        )
+    return (
+        f"{new.horizon} ahead {new.ahead_mm:.4g} mm, {old_name} {old.ahead_mm:.4g} mm"
+    )
+
+
+def judged_of(evaluation) -> Judged:
+    """An :class:`~activebonds.report.evaluate.Evaluation` (one step, then frames ahead) as
+    the rule reads it."""
+    one, ahead = evaluation.comparisons[0], evaluation.comparisons[-1]
+    return Judged(
+        frames=tuple(evaluation.frames),
+        horizon=int(ahead.horizon),
+        one_step_mm=float(one.model_mm),
+        zero_force_one_step_mm=float(one.zero_force_mm),
+        worse=len(one.worse_markers()),
+        markers=sum(v.judged for v in one.per_marker.values()),
+        ahead_mm=float(ahead.model_mm),
+        zero_force_ahead_mm=float(ahead.zero_force_mm),
+    )
+
+
+def judge(ws, run_path: Path) -> Judged:
+    """The run's best model evaluated on ``ws``'s validation frames of the recording (one
+    step and ``--ahead`` frames ahead; the model's time from the fitted frames' first)."""
+    from ..identify.rundir import RunDir
+    from ..model import load_model
+    from ..report.evaluate import evaluate
+
+    model = load_model(RunDir(run_path).best_model_path)
+    found = evaluate(
+        model,
+        ws.recording,
+        frames=ws.split.validation,
+        horizon=ws.options.ahead,
+        origin=ws.split.fitted[0],
+    )
+    return judged_of(found)
