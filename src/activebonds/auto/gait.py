@@ -30,7 +30,6 @@ CHANGES = (
     ("harmonics", (4, 8)),
     ("decay", (1.0, 8.0)),
     ("quadrature", (False,)),
-    ("calibrate", (True,)),
 )
 BURN_IN = 10  # frames of the free runs' burn-in on the judged half
 
@@ -100,11 +99,17 @@ def judge(model, recording, frames, origin: int, ahead: int, variant) -> Judged:
 
 
 def choose(
-    recording, fitted: tuple[int, int], ahead: int, up=None, say: Callable[[str], None] = print
+    recording,
+    fitted: tuple[int, int],
+    ahead: int,
+    up=None,
+    say: Callable[[str], None] = print,
+    each: Callable[[str], None] | None = None,
 ) -> Chosen | None:
     """The gait model of ``recording``'s ``fitted`` frames, or None (said) where they are not
     rhythmic (:attr:`~activebonds.identify.discover.gait.Rhythm.rhythmic`) or no signal
-    repeats."""
+    repeats; ``each``: where each variant's scores are said (default ``say``)."""
+    each = say if each is None else each
     a, s = fitted
     m = a + (s - a) // 2
     x = np.asarray(recording.positions, np.float64)
@@ -124,9 +129,9 @@ def choose(
         if variant not in tried:
             rh, signals = built(a, m)
             spec = gait_spec(x[a:m], names, rh, signals, variant)
-            model = solve(spec, recording, (a, m), rh if variant.calibrate else None)
+            model = solve(spec, recording, (a, m))
             tried[variant] = judge(model, recording, (m, s), a, ahead, variant)
-            say(f"      gait {tried[variant].line()}")
+            each(f"      gait {tried[variant].line()}")
         return tried[variant]
 
     best = tried_on(START)
@@ -137,7 +142,7 @@ def choose(
                 best = candidate
     rhythm, signals = found
     spec = gait_spec(x[a:s], names, rhythm, signals, best.variant)
-    solved = solve(spec, recording, (a, s), rhythm if best.variant.calibrate else None)
+    solved = solve(spec, recording, (a, s))
     notes = (rhythm.line(), f"drive read from {signals[0].text(names)}")
     return Chosen(solved.spec, tuple(tried.values()), best, notes)
 

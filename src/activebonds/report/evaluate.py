@@ -164,8 +164,9 @@ def evaluate(
         raise InputError("--origin", f"must be a frame from 0 to the window's first, {start}")
     offset = 0 if origin is None else start - int(origin)
     data = select_data(model, recording, settings)
-    run = {"substeps": substeps, "method": integrator, "offset": offset}
-    options = {"starts": starts, "threshold_mm": threshold_mm}
+    before = _before(model, recording, settings, offset)
+    run = {"substeps": substeps, "method": integrator, "offset": offset, "before": before}
+    options = {"starts": starts, "threshold_mm": threshold_mm, "before": before}
     found = window_metrics(model, data, substeps, integrator, offset, **options)
     picked = _body(body, model.particle_names, data.markers)
     body_found = None
@@ -175,7 +176,7 @@ def evaluate(
         )
     gait_found = None
     if gait:
-        where = {"feet": feet, "up": up, "offset": offset, "first_frame": start}
+        where = {"feet": feet, "up": up, "offset": offset, "first_frame": start, "before": before}
         gait_found = gait_evaluation(model, data, substeps=substeps, integrator=integrator, **where)
     return Evaluation(
         model_name=model.name,
@@ -192,14 +193,27 @@ def evaluate(
         holds=holds(model, data),
         body_markers=tuple(model.particle_names[i] for i in picked),
         body=body_found,
-        burn_in=_burn_in(model, data, burn_in, substeps, integrator, offset),
+        burn_in=_burn_in(model, data, burn_in, substeps, integrator, offset, before),
     )
+
+
+def _before(model: Model, recording: Trajectory, settings, offset: int):
+    """The recorded frames from the model's time origin to the window (``offset`` of them,
+    the model's markers; NaN where missing), along which an entrained drive's phase is
+    tracked; None without any."""
+    if offset <= 0:
+        return None
+    from ..identify.problem import select_data
+
+    start, stop = settings.frames
+    wider = settings.model_copy(update={"frames": (start - offset, stop)})
+    return select_data(model, recording, wider).positions[:offset]
 
 
 BURN_IN_HORIZON = 100  # frames of each free run after a burn-in, at most (the window's rest)
 
 
-def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None:
+def _burn_in(model, data, frames, substeps, integrator, offset, before=None) -> BurnIn | None:
     """The free runs after a ``frames``-frame burn-in (None where not asked for); an
     InputError naming ``--burn-in`` where the window has no start with such a burn-in."""
     if frames is None:
@@ -214,6 +228,7 @@ def _burn_in(model, data, frames, substeps, integrator, offset) -> BurnIn | None
             substeps=substeps,
             method=integrator,
             offset=offset,
+            before=before,
         )
     except ValueError as e:
         raise InputError("--burn-in", str(e)) from None

@@ -293,18 +293,23 @@ def gait_evaluation(
     starts: int = g.STARTS,
     strides: int = g.STRIDES,
     first_frame: int = 0,
+    before: np.ndarray | None = None,
 ) -> GaitEvaluation:
     """The model's and zero force's free runs from ``starts`` frames of ``data`` (markers in
     the model's particle order), ``strides`` recorded periods each, scored as gaits against
     ``data`` (``offset``: frames from the model's time origin to ``data``'s first frame;
-    ``first_frame``: that frame's number in the recording, for the text).
+    ``first_frame``: that frame's number in the recording, for the text; ``before``: the
+    recorded frames between the origin and ``data``).
     Raises :class:`InputError` when the feet's heights have no period in ``data``."""
     rec = np.asarray(data.positions, np.float64)
     ref, (up_vec, up_from), (feet_idx, feet_from) = recorded_gait(model, data, feet, up)
     n = g.stride_frames(ref, strides)
     chosen = g.gait_starts(rec, starts)
     runs = np.stack(
-        [free_run_from(model, rec, data.dt, s, n, substeps, integrator, offset) for s in chosen]
+        [
+            free_run_from(model, rec, data.dt, s, n, substeps, integrator, offset, before=before)
+            for s in chosen
+        ]
     )
     zero = g.constant_velocity_runs(rec, chosen, n)
     return GaitEvaluation(

@@ -182,11 +182,13 @@ def predict(
     substeps: int = 1,
     method: str = "euler",
     offset: int = 0,
+    before: np.ndarray | None = None,
 ) -> Prediction:
     """One-step and free-run predictions of ``model`` along ``traj`` (markers already in the
     model's particle order). ``fit_frames``: length of the fitted window at the start of
     ``traj`` (default: all of it); ``offset``: frames from the model's time origin to
-    ``traj``'s first frame (:func:`~activebonds.identify.judge.predictions.one_step`)."""
+    ``traj``'s first frame (:func:`~activebonds.identify.judge.predictions.one_step`),
+    ``before`` the recorded frames between."""
     if traj.n_markers != model.topology.n_particles:
         raise ValueError(
             f"{traj.n_markers} markers for a model of {model.topology.n_particles} particles"
@@ -195,8 +197,10 @@ def predict(
     n = rec.shape[0]
     fit = n if fit_frames is None else max(1, min(int(fit_frames), n))
     dt = traj.dt
-    one = one_step(model, rec, dt, substeps, method, offset)
-    xs, vs, psis = free_run(model, rec, dt, n, substeps, method, with_phases=True, offset=offset)
+    one = one_step(model, rec, dt, substeps, method, offset, before)
+    xs, vs, psis = free_run(
+        model, rec, dt, n, substeps, method, with_phases=True, offset=offset, before=before
+    )
     act = activations(model, xs, vs, dt, psis, offset)
     pairs_of_bonds, neural = neural_bonds(model.topology)
     sat, per = saturation_share(act, neural)

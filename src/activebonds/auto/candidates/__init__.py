@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from ...registry import Registry
 from .base import MAX_SHOT, SHOOTING, Candidate, Proposal, Tried
+from .gait import GaitCandidate
 from .ground import GroundCandidate
 from .masses import MassesCandidate
 from .shot import ShotCandidate
@@ -16,7 +17,13 @@ from .structure import StructureCandidate
 
 CANDIDATES: Registry[Candidate] = Registry(
     "auto candidate",
-    [StructureCandidate(), GroundCandidate(), MassesCandidate(), ShotCandidate()],
+    [
+        StructureCandidate(),
+        GroundCandidate(),
+        MassesCandidate(),
+        GaitCandidate(),
+        ShotCandidate(),
+    ],
 )
 
 __all__ = ["CANDIDATES", "MAX_SHOT", "SHOOTING", "Candidate", "Proposal", "Tried"]

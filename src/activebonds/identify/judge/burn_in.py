@@ -150,11 +150,13 @@ def burn_in(
     offset: int = 0,
     starts: int = DEFAULT_STARTS,
     threshold_mm: float = THRESHOLD_MM,
+    before: np.ndarray | None = None,
 ) -> BurnIn:
     """The model's free runs of ``horizon`` frames after a ``frames``-frame burn-in, from
     starts spread over ``positions`` [F, P, D] (the model's particle order, NaN where
     missing), beside zero force's (see the module's docstring). ``offset``: frames from the
-    model's time origin to the first of ``positions``."""
+    model's time origin to the first of ``positions``; ``before``: the recorded ones between
+    (:func:`~.predictions.before_window`)."""
     if frames < 1 or horizon < 1:
         raise ValueError(
             f"the burn-in and the horizon need at least 1 frame, got {frames}, {horizon}"
@@ -166,7 +168,7 @@ def burn_in(
     window = np.stack([x[s - frames : s + 1] for s in picked])  # [S, N + 1, P, D]
     times = (np.asarray(picked) - frames + offset) * dt
     psis = None
-    phases = tracked_phases(model, x, dt, substeps, offset)
+    phases = tracked_phases(model, x, dt, substeps, offset, before)
     if phases is not None:
         psis = jnp.asarray(phases[np.asarray(picked) - frames])
     runs = np.asarray(

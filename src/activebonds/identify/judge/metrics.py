@@ -36,7 +36,13 @@ import numpy as np
 
 from ...data import Trajectory
 from ...model import Model
-from .predictions import free_run, one_step, tracked_phases, zero_force_predictions
+from .predictions import (
+    before_window,
+    free_run,
+    one_step,
+    tracked_phases,
+    zero_force_predictions,
+)
 from .verdict import Record
 
 THRESHOLD_MM = 50.0  # a free run is "off" once a marker is this far from its recording
@@ -226,6 +232,7 @@ def free_run_metrics(
     threshold_mm: float = THRESHOLD_MM,
     offset: int = 0,
     markers: Sequence[int] | None = None,
+    before: np.ndarray | None = None,
 ) -> FreeRunMetrics:
     """One-step RMS, free-run RMS and frames within ``threshold_mm`` of ``model`` along
     ``trajectory`` (markers in the model's particle order; ``substeps`` and ``method``: the
@@ -235,7 +242,9 @@ def free_run_metrics(
 
     ``offset``: frames from the model's time origin (the fitted window's first frame, where
     predictions take time 0) to ``trajectory``'s first frame, e.g. ``300`` for frames 300:400
-    validating a fit of 0:300; only a model whose forces depend on time sees it."""
+    validating a fit of 0:300; only a model whose forces depend on time sees it. ``before``:
+    the recorded frames between the origin and ``trajectory`` (an entrained drive's phase is
+    tracked along them, :func:`~.predictions.before_window`)."""
     if trajectory.n_markers != model.topology.n_particles:
         raise ValueError(
             f"{trajectory.n_markers} markers for a model of {model.topology.n_particles} particles"
@@ -244,8 +253,9 @@ def free_run_metrics(
     dt = trajectory.dt
     n = rec.shape[0]
     pad = max(int(offset), 0)
-    # unknown frames before the trajectory put its frames at their time from the origin
-    timed = np.concatenate([np.full((pad, *rec.shape[1:]), np.nan), rec])
+    # the frames before the trajectory (recorded or unknown) put its frames at their time
+    # from the origin
+    timed = before_window(rec, pad, before)
     one = one_step(model, timed, dt, substeps, method)[pad:]
     phases = tracked_phases(model, timed, dt, substeps)  # an entrained drive's, else None
 
@@ -269,6 +279,7 @@ def free_run_from(
     method: str = "euler",
     offset: int = 0,
     phases: np.ndarray | None = None,
+    before: np.ndarray | None = None,
 ) -> np.ndarray:
     """The model's free run from the recorded frames ``start - 1`` and ``start`` of
     ``positions`` [F, P, D] (complete), at their own time (``offset``: see
@@ -280,8 +291,7 @@ def free_run_from(
     pad = max(int(offset), 0)
     s = pad + int(start)
     if phases is None:  # an entrained drive's phase, tracked along the whole recording
-        timed = np.concatenate([np.full((pad, *x.shape[1:]), np.nan), x])
-        phases = tracked_phases(model, timed, dt, substeps)
+        phases = tracked_phases(model, before_window(x, pad, before), dt, substeps)
     # the recording hidden but for the start pair: the run starts there, at its time
     hidden = np.full((s + 1, *x.shape[1:]), np.nan)
     hidden[s - 1 :] = x[start - 1 : start + 1]
@@ -309,13 +319,25 @@ def zero_force_metrics(
 
 
 def window_metrics(
-    model: Model, trajectory: Trajectory, substeps: int, method: str, offset: int = 0, **options
+    model: Model,
+    trajectory: Trajectory,
+    substeps: int,
+    method: str,
+    offset: int = 0,
+    before: np.ndarray | None = None,
+    **options,
 ) -> dict[str, FreeRunMetrics]:
     """``{"model": ..., "zero_force": ...}`` on one window (``offset``: see
     :func:`free_run_metrics`; ``options``: starts, threshold_mm)."""
     return {
         "model": free_run_metrics(
-            model, trajectory, substeps=substeps, method=method, offset=offset, **options
+            model,
+            trajectory,
+            substeps=substeps,
+            method=method,
+            offset=offset,
+            before=before,
+            **options,
         ),
         "zero_force": zero_force_metrics(trajectory, **options),
     }

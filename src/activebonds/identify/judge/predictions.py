@@ -173,7 +173,12 @@ def _track(params, s, dt, topo: StaticTopology, substeps: int):
 
 @float64
 def tracked_phases(
-    model: Model, positions: np.ndarray, dt: float, substeps: int = 1, offset: int = 0
+    model: Model,
+    positions: np.ndarray,
+    dt: float,
+    substeps: int = 1,
+    offset: int = 0,
+    before: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """An entrained drive's phase at every frame [F] of a recording, tracked along its
     signal (:func:`~activebonds.physics.phase.track`) from the start phase at the model's
@@ -181,7 +186,9 @@ def tracked_phases(
     The frames before the signal's marker is first recorded (the ``offset`` frames
     included) get its first period repeated backwards
     (:func:`~activebonds.physics.phase.extended_back`; the period from the signal's
-    autocorrelation, else the drive's frequency)."""
+    autocorrelation, else the drive's frequency). ``before``: the recorded positions of
+    those ``offset`` frames (its last ones count; :func:`before_window`), where the recording
+    has them: the phase is tracked along them instead."""
     topo = model.topology
     if not phase.entrained(topo):
         return None
@@ -190,11 +197,23 @@ def tracked_phases(
     if not np.isfinite(phase.signal(topo, x, np)).any():
         return np.full(x.shape[0], float(np.asarray(phase.start_phase(params, topo))))
     offset = max(int(offset), 0)
-    if offset:  # the frames from the model's origin, unrecorded here
-        x = np.concatenate([np.full((offset, *x.shape[1:]), np.nan), x])
+    if offset:  # the frames from the model's origin, recorded or not
+        x = before_window(x, offset, before)
     s = phase.recorded_signal(topo, x, period=phase.period_frames(params, topo, dt))
     psi = np.asarray(_track(params, jnp.asarray(s), float(dt), StaticTopology(topo), substeps))
     return psi[offset:]
+
+
+def before_window(x: np.ndarray, offset: int, before: np.ndarray | None = None) -> np.ndarray:
+    """Positions ``x`` [F, P, D] with the ``offset`` frames before them prepended: the last
+    ``offset`` frames of ``before`` where given (the recording from the model's time origin),
+    NaN for any it does not have."""
+    x = np.asarray(x, np.float64)
+    pad = np.full((max(int(offset), 0), *x.shape[1:]), np.nan)
+    if before is not None and pad.shape[0]:
+        b = np.asarray(before, np.float64)[-pad.shape[0] :]
+        pad[pad.shape[0] - b.shape[0] :] = b
+    return np.concatenate([pad, x])
 
 
 @float64
@@ -205,6 +224,7 @@ def one_step(
     substeps: int = 1,
     method: str = "euler",
     offset: int = 0,
+    before: np.ndarray | None = None,
 ) -> np.ndarray:
     """Prediction of every frame t >= 2 from the recorded frames t - 1 and t - 2, [F, P, D].
 
@@ -219,7 +239,7 @@ def one_step(
     ok = np.isfinite(prev).all(axis=(1, 2)) & np.isfinite(prev2).all(axis=(1, 2))
     x0 = np.where(ok[:, None, None], prev, 0.0)
     x_prev = np.where(ok[:, None, None], prev2, 0.0)
-    psi = tracked_phases(model, x, dt, substeps, offset)
+    psi = tracked_phases(model, x, dt, substeps, offset, before)
     psis = None if psi is None else (psi[:-2], psi[1:-1])
     times = (np.arange(1, x.shape[0] - 1) + max(int(offset), 0)) * float(dt)
     pred = runs_from(model, x_prev, x0, times, dt, 1, substeps, method, psis, last=True)[1]
@@ -239,6 +259,7 @@ def free_run(
     phases: np.ndarray | None = None,
     with_phases: bool = False,
     offset: int = 0,
+    before: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
     """Free run from the first two complete consecutive recorded frames.
 
@@ -262,7 +283,7 @@ def free_run(
     s = int(starts[0])
     xs[: s + 1] = x[: s + 1]
     if phases is None:
-        phases = tracked_phases(model, x, dt, substeps, offset)
+        phases = tracked_phases(model, x, dt, substeps, offset, before)
     psis = None
     if phases is not None:
         psis = (phases[s - 1], phases[s])
@@ -302,6 +323,7 @@ def model_ahead(
     substeps: int = 1,
     method: str = "euler",
     offset: int = 0,
+    before: np.ndarray | None = None,
 ) -> np.ndarray:
     """The model's prediction of each frame ``s + k`` from the recorded state at ``s``
     (:func:`ahead_starts`), aligned with the recording [F, P, D]: NaN where there is no
@@ -312,7 +334,7 @@ def model_ahead(
     starts = ahead_starts(rec, k)
     if starts.size == 0:
         return out
-    psi = tracked_phases(model, rec, dt, substeps, offset)  # an entrained drive's, else None
+    psi = tracked_phases(model, rec, dt, substeps, offset, before)  # entrained, else None
     psis = None if psi is None else (psi[starts - 1], psi[starts])
     times = (starts + int(offset)) * float(dt)
     pred = runs_from(

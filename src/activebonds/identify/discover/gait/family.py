@@ -28,31 +28,25 @@ from .signals import Signal, balanced_gain, gain_for, partner
 
 # The coefficients' bounds: this many times a marker's mass times its largest acceleration
 FORCE_REACH = 3.0
-CALIBRATIONS = 5  # the drive frequency's bisection steps, at most
-CALIBRATION_REACH = 0.15  # and its reach, a share of the recording's stride frequency
-CALIBRATED = 0.003  # the free run's stride within this share of the recording's: done
 
 
 @dataclass(frozen=True)
 class GaitVariant:
     """One model of the family: ``harmonics`` of the periodic forces, the coupling strength
     ``kappa`` (0: a clock), the anchors' damping floor in e-folds per stride (``decay``) and
-    whether the drive also reads the first signal's quarter-stride partner; ``calibrate``:
-    the drive's frequency set for the free run's stride (:func:`calibrated`)."""
+    whether the drive also reads the first signal's quarter-stride partner."""
 
     harmonics: int = 6
     kappa: float = 0.16
     decay: float = 4.0
     quadrature: bool = True
-    calibrate: bool = False
 
     def text(self) -> str:
         pair = " with its quarter-stride partner" if self.quadrature else ""
         drive = "a clock" if self.kappa == 0 else f"coupling strength {self.kappa:g}{pair}"
-        calibrated = ", frequency calibrated" if self.calibrate else ""
         return (
             f"{self.harmonics} harmonics, {drive}, anchors' damping {self.decay:g} e-folds a "
-            f"stride{calibrated}"
+            "stride"
         )
 
 
@@ -139,100 +133,12 @@ def _periodic(name: str, harmonics: int, bound: float, dimension: int) -> dict:
     return out
 
 
-def solve(spec, recording, frames: tuple[int, int], rhythm: Rhythm | None = None):
+def solve(spec, recording, frames: tuple[int, int]):
     """The model of ``spec`` with every stiffness, damping and coefficient at the exact one-step
     least squares on ``frames`` of ``recording`` (the drive's phase tracked along it): a
-    Model. With ``rhythm`` (the recording's over ``frames``), the drive's frequency is
-    calibrated too (:func:`calibrated`)."""
+    Model."""
     from ....model import build
     from ...settings import FitSettings
     from ..structure import structure_of
 
-    model = build(structure_of(build(spec), recording, FitSettings(frames=frames), 0, False).spec)
-    if rhythm is None or spec.drive.coupling is None:
-        return model
-    return calibrated(model, recording, frames, rhythm)
-
-
-def calibrated(model, recording, frames: tuple[int, int], rhythm: Rhythm):
-    """The solved gait ``model`` with its drive's frequency f set so that its free run keeps
-    the recording's stride: the one-step least squares tracks the phase along the recording,
-    where the body's signal holds it to the recorded stride whatever f, so it cannot tell f;
-    in a free run the model's own signal pulls the phase, and the loop's stride is not f's.
-    The free run's stride (:func:`free_frequency`) is brought to the recording's by bisection
-    of f within :data:`CALIBRATION_REACH` of it (the model solved again at each f, up to
-    :data:`CALIBRATIONS` times); the model whose free stride is nearest the recording's is
-    kept (the loop may lock to the body's own rhythm, its stride jumping past the
-    recording's)."""
-    x = np.asarray(recording.positions, np.float64)[frames[0] : frames[1]]
-    target = rhythm.frequency
-    seen = []
-
-    def at(f: float):
-        m = model if f == target else _with_frequency(model, f, recording, frames)
-        run = free_frequency(m, x, rhythm)
-        seen.append((abs(run / target - 1.0) if np.isfinite(run) else np.inf, len(seen), m))
-        return run
-
-    run = at(target)
-    if not np.isfinite(run) or abs(run / target - 1.0) <= CALIBRATED:
-        return model
-    # within half the coupling's lock range: the phase tracked along the recording stays locked
-    reach = min(CALIBRATION_REACH, 0.5 * _kappa(model, x, rhythm))
-    lo, hi = (target, target * (1 + reach))
-    if run > target:
-        lo, hi = target * (1 - reach), target
-    for _ in range(CALIBRATIONS):
-        mid = 0.5 * (lo + hi)
-        run = at(mid)
-        if not np.isfinite(run) or abs(run / target - 1.0) <= CALIBRATED:
-            break
-        lo, hi = (mid, hi) if run < target else (lo, mid)
-    return min(seen, key=lambda t: t[:2])[2]
-
-
-def _kappa(model, positions: np.ndarray, rhythm: Rhythm) -> float:
-    """The coupling strength of ``model``'s first signal over ``positions``: sigma A / 2 /
-    (2 pi f), A its fundamental's amplitude at the recorded stride."""
-    from .signals import fundamental
-
-    c = model.spec.drive.coupling
-    gain = float(getattr(c.gain, "value", c.gain))
-    topo = model.topology.drive
-    s = _signal_values(topo, positions)
-    _, amplitude, _ = fundamental(s, rhythm.frequency, rhythm.rate)
-    return gain * amplitude / 2.0 / (2.0 * np.pi * rhythm.frequency)
-
-
-def _signal_values(signal, positions: np.ndarray) -> np.ndarray:
-    x = np.asarray(positions, np.float64)
-    if len(signal.particles) == 1:
-        return x[:, signal.particles[0], signal.axis]
-    a, b = signal.particles
-    return np.linalg.norm(x[:, b] - x[:, a], axis=-1)
-
-
-def _with_frequency(model, f: float, recording, frames):
-    """``model``'s spec at drive frequency ``f``, solved again."""
-    from ....model import build
-    from ...settings import FitSettings
-    from ..structure import structure_of
-
-    drive = model.spec.drive.model_copy(update={"frequency": float(f)})
-    spec = build(model.spec.model_copy(update={"drive": drive}))
-    return build(structure_of(spec, recording, FitSettings(frames=frames), 0, False).spec)
-
-
-def free_frequency(model, positions: np.ndarray, rhythm: Rhythm, strides: float = 6.0) -> float:
-    """The stride frequency (Hz) of ``model``'s free run from the first two frames of
-    ``positions`` (the drive's phase tracked there): its phase's mean rate over the run's last
-    two thirds (the first third lets it settle) over 2 pi; NaN where the run fails."""
-    from ...judge.predictions import free_run
-
-    dt = 1.0 / rhythm.rate
-    n = int(np.ceil(strides * rhythm.period)) + 2
-    _, _, psi = free_run(model, positions[:3], dt, n, with_phases=True)
-    k = n // 3
-    if not np.isfinite(psi[[k, n - 1]]).all():
-        return float("nan")
-    return float((psi[n - 1] - psi[k]) / ((n - 1 - k) * dt) / (2.0 * np.pi))
+    return build(structure_of(build(spec), recording, FitSettings(frames=frames), 0, False).spec)
