@@ -26,11 +26,17 @@ steps) as soft observations, weighed by the PCA fill's cross-validated error aga
 first fit's scaled residual SD (``identify.fill.pca_prior``); one call gives both, ``model``
 being its first fit.
 
-``--model gait`` (the horse recordings) replaces the spring body by the gait model of
-``scripts/horse_gait.py`` (an anchor and a periodic force per marker, the drive's phase
-entrained by the left fore hoof; the variant that script chose per gait, :data:`GAIT_VARIANTS`),
-built and solved on the other half alone; its fill tracks the phase along the recording
-(``identify.fill.fill_phases``).
+``--model gait`` replaces the spring body by the gait family's model of the other half
+(:mod:`activebonds.identify.discover.gait`: an anchor and a periodic force per marker, the
+drive's phase entrained by the body's most periodic signal; the variant chosen on that half,
+:func:`gait_half`); its fill tracks the phase along the recording
+(``identify.fill.fill_phases``). (Before issue 44 it was the hand-written
+``scripts/horse_gait.py`` of commit 950449b, which ``gaps_gait.json`` and
+``gaps_gait_springs.json`` were run with.)
+
+``--model kept`` replaces it by the model ``activebonds auto`` keeps with its default options
+on the other half (``auto RECORDING --frames A:B``, :func:`kept_half`): a gait where the
+half is rhythmic and the gait judges best. ``--recordings`` also takes files (any format).
 
 ``--model auto`` replaces the spring body by ``activebonds auto``'s linear model of the half
 (complete graph and an anchor per marker, the variant chosen on the half's validation tail,
@@ -67,11 +73,43 @@ MODEL_METHODS = ("model", "model+pca")
 RECORDINGS = ("horse-trot", "horse-walk", "human-walk")
 
 
-def recording(name: str):
-    from activebonds.data import read_trajectory
+def recording_path(name: str) -> Path:
+    """A bundled recording's file, or ``name`` itself where it is a file (any format)."""
     from activebonds.data.bundled import dataset
 
-    return read_trajectory(dataset(name).path)
+    return Path(name) if Path(name).is_file() else Path(dataset(name).path)
+
+
+def recording(name: str):
+    from activebonds.data import read_trajectory
+
+    return read_trajectory(recording_path(name))
+
+
+def kept_half(name: str, traj, frames: tuple[int, int]):
+    """The model ``activebonds auto`` keeps with its default options on ``frames`` alone
+    (``auto RECORDING --frames A:B``: it fits the first 80 % of them, holds out the rest,
+    and keeps the candidate its rule judges best, :mod:`activebonds.auto`); (model, its
+    one-step RMS mm on ``frames``)."""
+    import tempfile
+
+    from activebonds import auto
+    from activebonds.identify.judge.predictions import one_step, rms_mm
+    from activebonds.identify.rundir import RunDir
+    from activebonds.model import load_model
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "auto"
+        outcome = auto.run(
+            recording_path(name), out, auto.Options(frames=frames), say=lambda line: None,
+            verbose=False,
+        )  # fmt: skip
+        kept = out / outcome.state["steps"]["fit"]["run"]
+        model = load_model(RunDir(kept).best_model_path)
+    print(f"{name} {frames[0]}:{frames[1]}: auto kept {kept.name}", flush=True)
+    part = traj.select(list(model.markers)).window(*frames)
+    one = one_step(model, np.asarray(part.positions), part.dt)
+    return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
 
 def spring_model(name: str, traj):
@@ -103,30 +141,19 @@ def auto_half(traj, frames: tuple[int, int]):
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
 
 
-# The gait model's variant per horse recording (signal, harmonics, coupling gain rad/s per m,
-# anchor damping floor in e-folds a stride): the ones scripts/horse_gait.py chose on frames
-# 150-299 of each gait after a fit on 0-149
-GAIT_VARIANTS = {"horse-trot": ("height", 6, 50.0, 4.0), "horse-walk": ("length", 6, 25.0, 4.0)}
-
-
-def gait_half(name: str, traj, frames: tuple[int, int], springs: str = "anchors"):
-    """The gait model of ``scripts/horse_gait.py`` (an anchor and a periodic force per marker,
-    the drive's phase entrained by the left fore hoof) built and solved by the exact least
-    squares on ``frames`` alone (anchors, stride frequency, signal offset and the anchors'
-    damping floor from them too);
-    (model, its one-step RMS mm on ``frames``). ``springs``: the script's "anchors" (no spring
-    between markers), "fixed" or "free" (springs between every pair too)."""
-    if name not in GAIT_VARIANTS:
-        raise SystemExit(
-            f"--model gait: no gait model for {name} (only {', '.join(GAIT_VARIANTS)})"
-        )
-    sys.path.insert(0, str(ROOT.parent / "scripts"))
-    from horse_gait import build_and_solve
-
+def gait_half(name: str, traj, frames: tuple[int, int]):
+    """The gait family's model of ``frames`` alone (:func:`activebonds.auto.gait.choose`: its
+    rhythm, signals and variant found on them, the variant fitted on their first half and
+    judged on the second, solved on all of them); (model, its one-step RMS mm on
+    ``frames``). SystemExit where they are not rhythmic."""
+    from activebonds.auto.gait import choose
     from activebonds.identify.judge.predictions import one_step, rms_mm
+    from activebonds.model import build
 
-    signal, harmonics, gain, decay = GAIT_VARIANTS[name]
-    model = build_and_solve(traj, harmonics, gain, springs, frames, signal, decay)
+    chosen = choose(traj, frames, 10, say=lambda line: None)
+    if chosen is None:
+        raise SystemExit(f"--model gait: {name} {frames[0]}:{frames[1]} is not rhythmic")
+    model = build(chosen.spec)
     part = traj.window(*frames)
     one = one_step(model, np.asarray(part.positions), part.dt)
     return model, float(np.sqrt(np.nanmean(np.square(rms_mm(one, part.positions)))))
@@ -195,6 +222,8 @@ def fill_one(method, model, traj, marker: int, start: int, length: int, context,
             both = {"model": found.pure, "model+pca": found.values}
             return {m: v[start : start + length, column] for m, v in both.items()}, extra
         values = found.values
+        # the fill's stated uncertainty of the gap (3-D SD per sample): its RMS, mm
+        extra["stated_mm"] = float(np.sqrt(np.mean(np.square(found.uncertainty[0]))) * 1000.0)
     else:
         values = fill_baseline(method, plan.positions, plan.mask, plan.local())
     return values[start : start + length, column], extra
@@ -210,6 +239,26 @@ def summary(errors: list[float]) -> dict:
         "median_mm": float(np.median(e)),
         "mean_mm": float(np.mean(e)),
         "p90_mm": float(np.percentile(e, 90)),
+    }
+
+
+def _coverage(gaps: list[dict]) -> dict:
+    """The model fill's stated uncertainty against its error, over gaps of one length: the
+    median of error / stated (both RMS over the gap, 3-D; about 1 where the uncertainty is
+    right) and the share of gaps whose error is within twice the stated one."""
+    pairs = [
+        (g["error_mm"]["model"], g["stated_mm"])
+        for g in gaps
+        if "stated_mm" in g and "model" in g["error_mm"] and g["stated_mm"] > 0
+    ]
+    if not pairs:
+        return {"n": 0}
+    ratio = np.asarray([e / s for e, s in pairs])
+    return {
+        "n": len(pairs),
+        "median_error_over_stated": float(np.median(ratio)),
+        "within_twice_stated": float(np.mean(ratio <= 2.0)),
+        "median_stated_mm": float(np.median([s for _, s in pairs])),
     }
 
 
@@ -241,11 +290,16 @@ def summarize(traj, fits, gaps, args) -> dict:
         }
         for length in lengths
     }
+    coverage = {
+        str(length): _coverage([g for g in gaps if g["length"] == length])
+        for length in lengths
+    }
     return {
         "frames": traj.n_frames,
         "markers": list(traj.markers),
         "fits": fits,
         "by_length": by_length,
+        "coverage": coverage,
         "by_marker": by_marker,
         "gaps": gaps,
     }
@@ -263,7 +317,6 @@ def run(args) -> dict:
             "horizon": args.horizon,
             "model": args.model,
             "fitted_on": args.fitted_on,
-            "gait_springs": args.gait_springs,
             "command": " ".join(sys.argv),
         },
         "recordings": {},
@@ -281,8 +334,10 @@ def run(args) -> dict:
             other = halves[1 - h] if args.fitted_on == "other" else frames
             if args.model == "auto":
                 model, rms = auto_half(traj, other)
+            elif args.model == "kept":
+                model, rms = kept_half(name, traj, other)
             elif args.model == "gait":
-                model, rms = gait_half(name, traj, other, args.gait_springs)
+                model, rms = gait_half(name, traj, other)
             else:
                 model, rms = fit_half(base, traj, other)
             models.append(model)
@@ -417,18 +472,12 @@ def main() -> None:
     )
     p.add_argument(
         "--model",
-        choices=("springs", "auto", "gait"),
+        choices=("springs", "auto", "gait", "kept"),
         default="springs",
         help="the fitted model: the spring body, auto's linear model (complete graph and "
-        "anchors, issue 25), or the horse's gait model (anchors, periodic forces, an entrained "
-        "phase: scripts/horse_gait.py, issue 28; horse recordings only)",
-    )
-    p.add_argument(
-        "--gait-springs",
-        choices=("anchors", "fixed", "free"),
-        default="anchors",
-        help="--model gait: anchors only (the script's trot model), or springs between every "
-        "pair of markers too, at the fit half's mean distances (fixed) or free",
+        "anchors, issue 25), the gait model (anchors, periodic forces, an entrained "
+        "phase: the gait family found on the other half), or the model "
+        "activebonds auto keeps with its default options on the other half (kept)",
     )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(

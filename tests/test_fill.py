@@ -427,6 +427,21 @@ def test_filled_file_reads_back_without_the_filled_gaps(tmp_path, ext):
     assert json.loads(info.stdout)["gaps"] == {"A": 5, "B": 0, "C": 35}
 
 
+@pytest.mark.parametrize("ext", [".mat", ".c3d"])
+def test_fill_without_out_keeps_the_recordings_format_beside_it(tmp_path, ext):
+    """No --out: the filled file is the recording's name with _filled, in its own format
+    (a Qualisys .mat stays a .mat), the filled samples the model's."""
+    src, truth = _gappy(tmp_path, ext)
+    res = cli_in_process("fill", TRIANGLE, src, "--max-gap", "30")
+    assert res.returncode == 0, res.stderr
+    out = tmp_path / f"gappy_filled{ext}"
+    back = read_trajectory(out)
+    assert back.markers == ("A", "B", "C") and back.mask[40:70, 1].all()
+    err = np.abs(back.positions[40:70, 1] - truth.positions[40:70, 1]).max()
+    assert err < 1e-6 + 1e-4  # (C3D: float32 millimetres)
+    assert (tmp_path / "gappy_filled.gaps.csv").exists()
+
+
 @pytest.mark.parametrize(
     ("args", "line"),
     [

@@ -84,7 +84,7 @@ def test_describe():
 
 
 # ----------------------------------------------------------------------------- round trips
-@pytest.mark.parametrize("ext", ["csv", "trc", "npz", "c3d"])
+@pytest.mark.parametrize("ext", ["csv", "trc", "npz", "c3d", "mat"])
 def test_round_trip_with_gaps(tmp_path, ext):
     t = synthetic()
     path = write_trajectory(t, tmp_path / f"t.{ext}")
@@ -101,7 +101,7 @@ def test_round_trip_with_gaps(tmp_path, ext):
     assert [p.name for p in tmp_path.iterdir()] == [f"t.{ext}"]  # no temp files left
 
 
-@pytest.mark.parametrize("ext", ["csv", "trc", "npz", "c3d"])
+@pytest.mark.parametrize("ext", ["csv", "trc", "npz", "c3d", "mat"])
 def test_round_trip_real_data(tmp_path, ext):
     t = read_trajectory(HUMAN)
     back = read_trajectory(write_trajectory(t, tmp_path / f"h.{ext}"))

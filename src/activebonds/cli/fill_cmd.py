@@ -20,11 +20,13 @@ def fill(
     model: FittedModel,
     traj: Annotated[Path, typer.Argument(help="Recorded trajectory with gaps.")],
     out_path: Annotated[
-        Path,
+        Path | None,
         typer.Option(
-            "--out", help="File to write (.csv, .trc, .c3d, .npz), every marker and frame."
+            "--out",
+            help="File to write (.csv, .trc, .c3d, .npz, .mat), every marker and frame "
+            "(default: the recording's name with _filled, in its own format).",
         ),
-    ] = ...,
+    ] = None,
     method: Annotated[
         str,
         typer.Option(
@@ -142,6 +144,8 @@ def fill(
             substeps=substeps,
         )
         check_page(report)
+        if out_path is None:  # the recording's own format, beside it
+            out_path = traj.with_name(f"{traj.stem}_filled{traj.suffix}")
         filled = fill_file(model, traj, out_path, settings, record=record)
         if report is not None:
             from ..report.files import write_html

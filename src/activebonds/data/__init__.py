@@ -1,7 +1,7 @@
 """Trajectory layer: marker positions over time, read from and written to files.
 
 ``read_trajectory`` and ``write_trajectory`` dispatch on the file extension
-(.csv, .trc, .c3d, .npz); :func:`describe` summarises a trajectory for the ``info``
+(.csv, .trc, .c3d, .npz, .mat); :func:`describe` summarises a trajectory for the ``info``
 command.
 """
 

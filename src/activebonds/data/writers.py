@@ -150,11 +150,38 @@ def render_c3d(traj: Trajectory, path: Path) -> bytes:
     return bytes(data)
 
 
+def render_mat(traj: Trajectory, path: Path) -> bytes:
+    """MATLAB v5 in Qualisys QTM's layout (what :mod:`.read_mat` reads): one struct named
+    after the file with ``FrameRate``, ``StartFrame`` and ``Trajectories.Labeled`` (``Data``
+    [markers, 4, frames] in mm, NaN and a residual of -1 where missing; ``Labels``)."""
+    from scipy.io import savemat
+
+    _require_3d(traj, path, "MAT")
+    mm = np.where(traj.mask[..., None], traj.positions * 1000.0, np.nan)  # [F, M, 3]
+    data = np.concatenate([mm, np.where(traj.mask, 0.0, -1.0)[..., None]], axis=2)
+    labels = np.empty((1, traj.n_markers), dtype=object)
+    labels[0, :] = list(traj.markers)
+    name = "".join(c if c.isalnum() else "_" for c in path.stem) or "recording"
+    if not name[0].isalpha():
+        name = "r" + name
+    struct = {
+        "FrameRate": float(traj.rate),
+        "StartFrame": float(round(traj.start_time * traj.rate) + 1),
+        "Frames": float(traj.n_frames),
+        "Trajectories": {"Labeled": {"Count": float(traj.n_markers), "Labels": labels,
+                                     "Data": np.transpose(data, (1, 2, 0))}},
+    }  # fmt: skip
+    buffer = io.BytesIO()
+    savemat(buffer, {name[:63]: struct}, do_compression=True)
+    return buffer.getvalue()
+
+
 WRITERS: dict[str, Callable[[Trajectory, Path], bytes]] = {
     ".csv": render_csv,
     ".trc": render_trc,
     ".c3d": render_c3d,
     ".npz": render_npz,
+    ".mat": render_mat,
 }
 
 

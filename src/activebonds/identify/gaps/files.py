@@ -90,7 +90,7 @@ def fill_file(
     record: str | Path | None = None,
 ) -> FilledFile:
     """Fill the gaps of the model's markers in ``recording`` and write every marker and frame
-    to ``out`` (.csv, .trc, .c3d, .npz), with the sidecar CSV ``record`` (default: OUT's name
+    to ``out`` (.csv, .trc, .c3d, .npz, .mat), with the sidecar CSV ``record`` (default: OUT's name
     with .gaps.csv) listing every sample of every gap, filled or left. ``settings``: the
     method, markers, frames and the model fit's options (default: :class:`FillSettings`'s).
 
