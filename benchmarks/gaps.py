@@ -34,8 +34,8 @@ drive's phase entrained by the body's most periodic signal; the variant chosen o
 ``scripts/horse_gait.py`` of commit 950449b, which ``gaps_gait.json`` and
 ``gaps_gait_springs.json`` were run with.)
 
-``--model kept`` replaces it by the model ``activebonds auto`` keeps with its default options
-on the other half (``auto RECORDING --frames A:B``, :func:`kept_half`): a gait where the
+``--model kept`` replaces it by the model ``activebonds auto`` keeps on the other half
+(``auto RECORDING --frames A:B --held-out 0.05``, :func:`kept_half`): a gait where the
 half is rhythmic and the gait judges best. ``--recordings`` also takes files (any format).
 
 ``--model auto`` replaces the spring body by ``activebonds auto``'s linear model of the half
@@ -86,11 +86,16 @@ def recording(name: str):
     return read_trajectory(recording_path(name))
 
 
+# auto's held-out share on a half (its own tail, at least 10 frames): the half is the model's
+# to fit, as the other methods' fits have all of it
+KEPT_HELD_OUT = 0.05
+
+
 def kept_half(name: str, traj, frames: tuple[int, int]):
-    """The model ``activebonds auto`` keeps with its default options on ``frames`` alone
-    (``auto RECORDING --frames A:B``: it fits the first 80 % of them, holds out the rest,
-    and keeps the candidate its rule judges best, :mod:`activebonds.auto`); (model, its
-    one-step RMS mm on ``frames``)."""
+    """The model ``activebonds auto`` keeps on ``frames`` alone (``auto RECORDING --frames
+    A:B --held-out`` :data:`KEPT_HELD_OUT`, its other options the defaults: it fits all but
+    its smallest held-out tail of them and keeps the candidate its rule judges best,
+    :mod:`activebonds.auto`); (model, its one-step RMS mm on ``frames``)."""
     import tempfile
 
     from activebonds import auto
@@ -101,7 +106,8 @@ def kept_half(name: str, traj, frames: tuple[int, int]):
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "auto"
         outcome = auto.run(
-            recording_path(name), out, auto.Options(frames=frames), say=lambda line: None,
+            recording_path(name), out, auto.Options(frames=frames, held_out=KEPT_HELD_OUT),
+            say=lambda line: None,
             verbose=False,
         )  # fmt: skip
         kept = out / outcome.state["steps"]["fit"]["run"]

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .... import bonds
 from .rhythm import Rhythm
 from .signals import Signal, balanced_gain, gain_for, partner
 
@@ -77,12 +78,12 @@ def gait_spec(
     t = np.arange(x.shape[0]) * dt
     centre = np.nanmean(x - u * t[:, None, None], axis=0)  # [P, D]: the anchors at t = 0
     floor = 2.0 * mass * f * variant.decay
-    bonds = []
+    held = []
     for i, n in enumerate(names):
         acc = np.linalg.norm(np.diff(x[:, i], 2, axis=0), axis=-1) / dt**2
         bound = FORCE_REACH * mass * float(np.nanmax(acc)) if np.isfinite(acc).any() else 1.0
-        bonds.append(_anchor(n, centre[i], u, mass, rhythm, floor))
-        bonds.append(_periodic(n, variant.harmonics, bound, x.shape[2]))
+        held.append(_anchor(n, centre[i], u, mass, rhythm, floor))
+        held.append(_periodic(n, variant.harmonics, bound, x.shape[2]))
     particles = [
         {"name": n, "mass": mass, "position": _first(x[:, i]), "velocity": [0.0] * x.shape[2]}
         for i, n in enumerate(names)
@@ -93,7 +94,7 @@ def gait_spec(
             "dimension": x.shape[2],
             "drive": {"frequency": f, "coupling": coupling},
             "particle": particles,
-            "bond": bonds,
+            "bond": held,
         }
     )
 
@@ -113,7 +114,7 @@ def _anchor(name: str, centre, velocity, mass: float, rhythm: Rhythm, floor: flo
     c_hi = max(20.0 * mass * rhythm.rate, 2.0 * floor)
     c_lo = max(floor, 2.0 * mass * rhythm.frequency / 100.0)
     out = {
-        "kind": "unary",
+        "kind": bonds.unary.KIND.name,
         "particles": [name],
         "optional": True,
         "anchor": [float(v) for v in centre],
@@ -126,7 +127,7 @@ def _anchor(name: str, centre, velocity, mass: float, rhythm: Rhythm, floor: flo
 
 
 def _periodic(name: str, harmonics: int, bound: float, dimension: int) -> dict:
-    out = {"kind": "periodic", "particles": [name], "optional": True}
+    out = {"kind": bonds.periodic.KIND.name, "particles": [name], "optional": True}
     for h in range(1, harmonics + 1):
         for wave in ("cos", "sin"):
             out[f"{wave}{h}"] = {"value": [0.0] * dimension, "min": -bound, "max": bound}
