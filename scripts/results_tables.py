@@ -608,6 +608,42 @@ def gaps(results: Results) -> str:
     )
 
 
+@table
+def gaps_kept(results: Results) -> str:
+    """Gap fills by the model ``auto`` keeps on the other half (gaps_kept.json), beside the
+    labs' fills, and the fill's stated uncertainty against its error."""
+    body = []
+    record = results("gaps_kept")["recordings"]
+    for recording, found in record.items():
+        for length, medians in sorted(found["by_length"].items(), key=lambda kv: int(kv[0])):
+            m = {k: v["median_mm"] for k, v in medians.items()}
+            cover = found["coverage"][length]
+            body.append(
+                [
+                    Path(recording).name,
+                    length,
+                    sig(m["model"], 3),
+                    sig(m["spline"], 3),
+                    sig(m["pca"], 3),
+                    f"{m['model'] / m['spline']:.2f} / {m['model'] / m['pca']:.2f}",
+                    f"{cover['median_error_over_stated']:.2f} / "
+                    f"{100 * cover['within_twice_stated']:.0f} %",
+                ]
+            )
+    return rows(
+        [
+            "recording",
+            "gap (frames)",
+            "kept model's fill (mm)",
+            "spline",
+            "PCA",
+            "model / spline, / PCA",
+            "error / stated (median), within 2x stated",
+        ],
+        body,
+    )
+
+
 # ------------------------------------------------------------------------------ the pages
 
 
