@@ -169,3 +169,24 @@ def test_a_window_after_the_origin_tracks_the_phase_along_the_recorded_frames_be
     )
     unknown = tracked_phases(model, x[a:b], dt, 1, a)
     assert np.max(np.abs(unknown - whole[a:])) > 1e-3  # what the recorded frames change
+
+
+def test_a_variant_judged_on_frames_too_short_for_its_gait_keeps_its_other_scores():
+    """auto's gait variants are judged with the gait metrics and a burn-in where the judged
+    frames allow them; a window too short for either is judged one step and ahead alone
+    (no gait target counted), not refused."""
+    from activebonds.auto.gait import judge
+
+    x, rate, period_s = _periodic(rate=100.0, period_s=0.9, seconds=6.0)
+    names = ("a", "b", "c")
+    rhythm = find_rhythm(x[:300], rate)
+    signals = survey(x[:300], rhythm.frequency, rate, (0, 1, 2))
+    data = Trajectory(x, np.ones(x.shape[:2], bool), names, rate)
+    model = solve(gait_spec(x[:300], names, rhythm, signals, GaitVariant(harmonics=2)), data,
+                  (0, 300))  # fmt: skip
+    short = judge(model, data, (300, 330), 0, 10, GaitVariant())
+    assert short.targets == 0 and short.worse_markers == 0
+    assert short.one_step_mm < short.zero_force_one_step_mm
+    assert short.ahead_mm < short.zero_force_ahead_mm
+    full = judge(model, data, (300, 600), 0, 10, GaitVariant())
+    assert full.targets == 5  # the four gait targets and the burn-in's

@@ -76,13 +76,17 @@ def _finite(v: float) -> float:
 
 def judge(model, recording, frames, origin: int, ahead: int, variant) -> Judged:
     """``model`` judged on ``frames`` of ``recording`` (its time from ``origin``)."""
+    from ..errors import InputError
     from ..report.evaluate import evaluate
 
-    record = evaluate(
-        model, recording, frames=frames, origin=origin, horizon=ahead, gait=True, burn_in=BURN_IN
-    ).record()
+    options = {"frames": frames, "origin": origin, "horizon": ahead}
+    try:
+        record = evaluate(model, recording, gait=True, burn_in=BURN_IN, **options).record()
+    except InputError:  # the judged frames too short for a burn-in, or feet with no period
+        record = evaluate(model, recording, **options).record()
     one, far = record["comparisons"][0], record["comparisons"][-1]
-    passes = dict(record["gait"]["model"]["passes"]) if "gait" in record else {}
+    gait = record.get("gait") or {}
+    passes = dict(gait["model"]["passes"]) if gait else {}
     burn = record.get("burn_in") or {}
     if burn.get("template_within") is not None:
         passes["burn_in"] = float(burn["model_within"]) >= float(burn["template_within"])
