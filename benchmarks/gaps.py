@@ -297,8 +297,7 @@ def summarize(traj, fits, gaps, args) -> dict:
         for length in lengths
     }
     coverage = {
-        str(length): _coverage([g for g in gaps if g["length"] == length])
-        for length in lengths
+        str(length): _coverage([g for g in gaps if g["length"] == length]) for length in lengths
     }
     return {
         "frames": traj.n_frames,

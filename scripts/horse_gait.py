@@ -45,8 +45,7 @@ def summary(record: dict) -> dict:
         "gait": {k: v for k, v in gait["model"].items() if k != "runs"},
         "gait_recording": {k: v for k, v in gait["recording"].items() if k != "runs"},
         "burn_in": {
-            k: burn[k]
-            for k in ("frames", "model_within", "zero_force_within", "template_within")
+            k: burn[k] for k in ("frames", "model_within", "zero_force_within", "template_within")
         }
         | {"model_100_mm": burn["model_mm"][-1], "template_100_mm": burn["template_mm"][-1]},
     }

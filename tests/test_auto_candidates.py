@@ -130,6 +130,43 @@ def test_a_candidate_that_insists_is_kept_and_evaluated(triangle, tmp_path):
     assert ahead.model_mm == pytest.approx(found.comparisons[1].model_mm)
 
 
+class Heavy(Damped):
+    """The damped model with gravity, insisting (as --up/--gravity insist on gravity)."""
+
+    def propose(self, ws, kept):
+        from activebonds.model import load_model, save_model
+
+        proposal = super().propose(ws, kept)
+        spec = load_model(proposal.model).spec
+        g = [0.0] * (spec.dimension - 1) + [-9.81]
+        save_model(spec.model_copy(update={"gravity": g}), proposal.model)
+        return proposal
+
+
+class Plain:
+    """The structure's model again, without gravity: better than the heavy one."""
+
+    name = "plain"
+
+    def propose(self, ws, kept):
+        return auto.Proposal("run-plain", ws.folder.structure, ws.one_step(), "the structure")
+
+
+def test_a_model_without_gravity_does_not_replace_one_gravity_was_insisted_on(triangle, tmp_path):
+    """Once --up or --gravity has kept a model with gravity, a later candidate without gravity
+    (the gait family has none) is not fitted, however it would score."""
+    said = []
+    with auto.CANDIDATES.registered(Heavy("heavy", insist=True)):
+        with auto.CANDIDATES.registered(Plain()):
+            outcome = auto.run(triangle, tmp_path / "out", OPTIONS, say=said.append)
+    fit = outcome.state["steps"]["fit"]
+    rows = {r["candidate"]: r for r in fit["candidates"]}
+    assert fit["run"] == "run-heavy" and "plain" not in rows
+    assert not (tmp_path / "out" / "run-plain").exists()
+    assert any(line.strip().startswith("plain: not fitted: --up or --gravity insists")
+               for line in said)  # fmt: skip
+
+
 def _ws(outcome, recording_path):
     """A workspace enough for :func:`auto.judge` on ``outcome``'s folder."""
     from types import SimpleNamespace

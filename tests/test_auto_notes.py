@@ -9,11 +9,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from activebonds.auto import STILL, fixed_masses_note, still_note
 from activebonds.errors import InputError
 from activebonds.identify.discover.scaffold import scaffold
 from activebonds.identify.judge.verdict import Verdict
 from activebonds.model import load_model
-from activebonds.auto import STILL, fixed_masses_note, still_note
 from activebonds.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,8 +73,8 @@ def test_frames_beyond_the_recording_are_refused_as_fit_evaluate_and_fill_refuse
     """`auto --frames 1100:5000` on a 1,200-frame file ran on 1100:1199 and exited 0; now one
     rule (data.trajectory.frame_window) refuses it for every command, in one line, and nothing
     is written."""
-    from activebonds.data import write_trajectory
     from activebonds.auto.folder import windows
+    from activebonds.data import write_trajectory
     from helpers import cli_in_process
 
     with pytest.raises(InputError, match=r"window stop 5000 is out of range for 1200 frames"):

@@ -249,7 +249,7 @@ def test_the_masses_candidate_fits_the_flight_and_proposes_its_masses_held(tmp_p
     )  # fmt: skip
     tried = auto.Tried("ground", kept, None)
     proposal = MassesCandidate().propose(ws, tried)
-    (flight_run, shooting), = fitted
+    ((flight_run, shooting),) = fitted
     assert flight_run == "run-flight" and shooting.frames == (0, 48)  # the fitted 80 %
     assert shooting.cost == "shooting" and shooting.horizon == (10,)
     assert any("frames 0:48 are in flight" in line for line in said)

@@ -152,7 +152,6 @@ def test_a_window_after_the_origin_tracks_the_phase_along_the_recorded_frames_be
     them (the frames unknown) the window's first period is repeated backwards, which a window
     shorter than a period cannot do well."""
     from activebonds.identify.judge.predictions import one_step, tracked_phases
-    from activebonds.model import build
 
     x, rate, period_s = _periodic(rate=100.0, period_s=0.9, seconds=6.0)
     names = ("a", "b", "c")

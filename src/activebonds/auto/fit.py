@@ -23,14 +23,27 @@ def decision(tried: Tried, kept: Tried | None, insist: bool) -> tuple[bool, str]
     return False, f"not kept: {why}"
 
 
+def _has_gravity(model_path) -> bool:
+    from ..model import load_model
+
+    return load_model(model_path).spec.gravity is not None
+
+
 def fit_step(ws) -> str:
     """Every candidate proposed, fitted, judged and kept or not (see the module's docstring);
     the table of them and the kept run's name recorded in the fit step (``steps.fit``)."""
     kept: Tried | None = None
+    insisted = False  # the kept model is one --up or --gravity insisted on (it has gravity)
     rows: list[dict] = []
     for candidate in CANDIDATES.entries():
         proposal = candidate.propose(ws, kept)
         if proposal is None:
+            continue
+        if insisted and not _has_gravity(proposal.model):
+            ws.say(
+                f"      {candidate.name}: not fitted: --up or --gravity insists on gravity, "
+                "which its model has none of"
+            )
             continue
         ws.say(f"      {candidate.name}: {proposal.what}")
         fitted_mm = ws.fit(proposal.run, proposal.model, proposal.settings)
@@ -43,6 +56,7 @@ def fit_step(ws) -> str:
         rows.append(table.row(tried.name, run.name, tried.judged, fitted_mm, keep, why))
         if keep:
             kept = tried
+            insisted = proposal.insist
     if kept is None:
         raise RuntimeError("no candidate model was proposed: nothing to fit")
     ws.note("fit", "run", kept.run.name)

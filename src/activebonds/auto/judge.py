@@ -54,12 +54,8 @@ def compared(new: Judged, old: Judged, old_name: str) -> str:
     """Why ``new`` is or is not better than ``old`` (the run ``old_name``), in words: the
     first of the rule's two scores that differs."""
     if new.worse != old.worse:
-        return (
-            f"{new.worse} marker(s) worse than zero force one step, {old_name} {old.worse}"
-        )
-    return (
-        f"{new.horizon} ahead {new.ahead_mm:.4g} mm, {old_name} {old.ahead_mm:.4g} mm"
-    )
+        return f"{new.worse} marker(s) worse than zero force one step, {old_name} {old.worse}"
+    return f"{new.horizon} ahead {new.ahead_mm:.4g} mm, {old_name} {old.ahead_mm:.4g} mm"
 
 
 def judged_of(evaluation) -> Judged:

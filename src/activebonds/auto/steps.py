@@ -81,15 +81,19 @@ STEPS: Registry[Step] = Registry(
         Step("scaffold", lambda ws: "a candidate model of the fitted frames", _scaffold),
         Step(
             "structure",
-            lambda ws: "which candidate bonds the fitted frames need (exact least squares, "
-            "BIC, a validation tail)",
+            lambda ws: (
+                "which candidate bonds the fitted frames need (exact least squares, "
+                "BIC, a validation tail)"
+            ),
             _structure,
         ),
         Step(
             "fit",
-            lambda ws: "the candidate models, each fitted and judged on the validation frames "
-            f"(population {ws.options.population}, {ws.options.generations} generations, then "
-            "the refinement)",
+            lambda ws: (
+                "the candidate models, each fitted and judged on the validation frames "
+                f"(population {ws.options.population}, {ws.options.generations} generations, then "
+                "the refinement)"
+            ),
             _fit,
             _table,
         ),

@@ -34,8 +34,13 @@ def lines(rows: list[dict]) -> list[str]:
     )  # fmt: skip
     body = [
         (
-            r["candidate"], r["run"], _mm(r["one_step_mm"]), _mm(r["zero_force_one_step_mm"]),
-            f"{r['worse']}/{r['markers']}", _mm(r["ahead_mm"]), _mm(r["zero_force_ahead_mm"]),
+            r["candidate"],
+            r["run"],
+            _mm(r["one_step_mm"]),
+            _mm(r["zero_force_one_step_mm"]),
+            f"{r['worse']}/{r['markers']}",
+            _mm(r["ahead_mm"]),
+            _mm(r["zero_force_ahead_mm"]),
             r["why"],
         )  # fmt: skip
         for r in rows

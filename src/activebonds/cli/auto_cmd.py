@@ -82,7 +82,12 @@ def auto(
             ahead=ahead,
         )
         outcome = auto_package.run(
-            traj, out_dir, options, overwrite=overwrite, say=say, fit_progress=_progress,
+            traj,
+            out_dir,
+            options,
+            overwrite=overwrite,
+            say=say,
+            fit_progress=_progress,
             verbose=verbose,
         )
     except InputError as e:

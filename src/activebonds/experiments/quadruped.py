@@ -64,9 +64,7 @@ def quadruped(
         warped = u + (2 * duty - 1) * np.sin(u)
         along = 0.5 * np.cos(warped)  # forward at touch-down, back at lift-off
         up = np.maximum(0.0, -np.sin(warped)) ** 1.5  # lifted in the swing only
-        x[:, 4 + j] = np.stack(
-            [ahead + step * along, side + 0.3 * sway, 0.02 + lift * up], axis=1
-        )
+        x[:, 4 + j] = np.stack([ahead + step * along, side + 0.3 * sway, 0.02 + lift * up], axis=1)
     x += 1e-3 * noise_mm * rng.standard_normal(x.shape)
     names = ("nose", "neck", "hip", "tail", "foot_a", "foot_b", "foot_c", "foot_d")
     return Trajectory(x, np.ones((n, 8), bool), names, float(rate))

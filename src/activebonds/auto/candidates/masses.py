@@ -80,9 +80,7 @@ def held_masses(ws, kept_name: str, spec) -> Proposal:
     hold = determined(record.get("estimates", []), genes)
     own = sum(g.owner == "bond" and g.type is None for g in genes)
     each = ", ".join(f"{p.name} {m:.4g}" for p, m in zip(spec.particle, masses, strict=True))
-    ws.say(
-        f"      masses: {each} kg (run-flight: their intervals in its uncertainty.csv)"
-    )
+    ws.say(f"      masses: {each} kg (run-flight: their intervals in its uncertainty.csv)")
     save_model(held(weighed.spec, masses, hold), ws.folder.masses)
     return Proposal(
         run="run-masses",

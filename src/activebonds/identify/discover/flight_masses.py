@@ -122,9 +122,7 @@ def held(spec: ModelSpec, masses: np.ndarray, hold: set[tuple[int, str]]) -> Mod
     kept = [
         b.model_copy(
             update={
-                name: _fixed(getattr(b, name))
-                for name in type(b).model_fields
-                if (i, name) in hold
+                name: _fixed(getattr(b, name)) for name in type(b).model_fields if (i, name) in hold
             }
         )
         for i, b in enumerate(spec.bond)

@@ -66,6 +66,10 @@ class Interrupted(KeyboardInterrupt):
         self.value, self.steps = value, steps
 
 
+# why a refinement stopped where no step lowers the cost (the solver's damping, not the model's)
+STALLED = "stopped: the Levenberg-Marquardt damping grew without bound (no step lowers the cost)"
+
+
 def _dot(a, b):
     return sum(jnp.vdot(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True))
 
@@ -148,7 +152,7 @@ def levenberg_marquardt(
         if not accept:
             damping, nu = damping * nu, 2.0 * nu
             if damping > 1e300:
-                return y, steps, "stopped: the damping grew without bound (no step lowers the cost)"
+                return y, steps, STALLED
             continue
         rho = change / predicted
         damping *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)

@@ -46,8 +46,7 @@ class GaitVariant:
         pair = " with its quarter-stride partner" if self.quadrature else ""
         drive = "a clock" if self.kappa == 0 else f"coupling strength {self.kappa:g}{pair}"
         return (
-            f"{self.harmonics} harmonics, {drive}, anchors' damping {self.decay:g} e-folds a "
-            "stride"
+            f"{self.harmonics} harmonics, {drive}, anchors' damping {self.decay:g} e-folds a stride"
         )
 
 
