@@ -152,6 +152,7 @@ class Plain:
         return auto.Proposal("run-plain", ws.folder.structure, ws.one_step(), "the structure")
 
 
+@pytest.mark.slow  # a third auto run (37 s): with the slow tests, on every landing
 def test_a_model_without_gravity_does_not_replace_one_gravity_was_insisted_on(triangle, tmp_path):
     """Once --up or --gravity has kept a model with gravity, a later candidate without gravity
     (the gait family has none) is not fitted, however it would score."""
