@@ -122,10 +122,17 @@ def choose(
     built = _builder(x, mask, names, recording.rate, up)
     found = built(a, s)
     if found is None:
+        say("      gait: not proposed: the fitted frames repeat nothing (no stride period)")
         return None
     rhythm, _ = found
     say(f"      gait: {rhythm.line()}")
-    if not rhythm.rhythmic or built(a, m) is None:
+    if not rhythm.rhythmic:
+        return None
+    if built(a, m) is None:
+        say(
+            "      gait: not proposed: the fitted frames' first half has no stride period of "
+            "its own to fit a variant on (fit more strides)"
+        )
         return None
     tried: dict[GaitVariant, Judged] = {}
 
