@@ -6,6 +6,7 @@ out."""
 from __future__ import annotations
 
 import json
+from html import unescape
 
 import pytest
 
@@ -31,3 +32,8 @@ def test_auto_finds_and_keeps_a_gait_on_a_simulated_quadruped(tmp_path):
     assert one.model_mm < one.zero_force_mm
     far = outcome.held_out.comparisons[-1]
     assert far.model_mm < 0.8 * far.zero_force_mm
+    # the report says how: the rhythm, the variants judged and the one chosen
+    gait = state["steps"]["fit"]["gait"]
+    assert gait["chosen"] in [line.split(": one step")[0] for line in gait["variants"]]
+    html = unescape((tmp_path / "out" / "report.html").read_text())
+    assert "gait: stride period" in html and f"gait chosen: {gait['chosen']}" in html

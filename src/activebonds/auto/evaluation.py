@@ -52,7 +52,8 @@ def write_evaluation(folder: Folder, held, fitted) -> str:
 
 def how_made(state: dict) -> list[str]:
     """How the kept model was made, for the report: the noise's line, the first three steps'
-    notes, the table of the candidates tried (kept or not, and why), the masses' note."""
+    notes, the table of the candidates tried (kept or not, and why), the gait candidate's
+    rhythm and variants, the masses' note."""
     from ..data.smoothing import Noise
     from . import table
 
@@ -61,6 +62,11 @@ def how_made(state: dict) -> list[str]:
     out += [f"{name}: {steps[name]['note']}" for name in ("scaffold", "structure", "fit")
             if name in steps]  # fmt: skip
     out += table.lines(steps.get("fit", {}).get("candidates", []))
+    gait = steps.get("fit", {}).get("gait")
+    if gait:  # the gait candidate's rhythm, its variants judged and the one chosen
+        out += [f"gait: {line}" for line in gait["notes"]]
+        out += [f"gait variant on the fitted frames' second half: {v}" for v in gait["variants"]]
+        out.append(f"gait chosen: {gait['chosen']}")
     if steps.get("fit", {}).get("masses"):
         out.append(steps["fit"]["masses"])
     return out

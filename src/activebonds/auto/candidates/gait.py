@@ -31,7 +31,15 @@ class GaitCandidate:
             return None
         path = ws.folder.path / "gait.toml"
         save_model(chosen.spec, path)
-        ws.note("fit", "gait", [j.line() for j in chosen.judged])
+        ws.note(
+            "fit",
+            "gait",
+            {
+                "notes": list(chosen.notes),
+                "variants": [j.line() for j in chosen.judged],
+                "chosen": chosen.best.variant.text(),
+            },
+        )
         smoothed = " (the positions smoothed as for the structure)" if ws.noise.window else ""
         return Proposal(
             run="run-gait",
