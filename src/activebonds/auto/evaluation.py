@@ -63,6 +63,8 @@ def how_made(state: dict) -> list[str]:
             if name in steps]  # fmt: skip
     out += table.lines(steps.get("fit", {}).get("candidates", []))
     gait = steps.get("fit", {}).get("gait")
+    if isinstance(gait, list):  # a run from before the rhythm was recorded: its variants
+        gait = {"notes": [], "variants": gait, "chosen": "(not recorded)"}
     if gait:  # the gait candidate's rhythm, its variants judged and the one chosen
         out += [f"gait: {line}" for line in gait["notes"]]
         out += [f"gait variant on the fitted frames' second half: {v}" for v in gait["variants"]]
