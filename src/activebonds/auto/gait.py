@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..identify.discover.gait import GaitVariant, find_rhythm, gait_spec, solve, survey
+from .judge import finite_or_inf
 
 START = GaitVariant()
 # one change at a time from the start, in this order, each kept where it judges better
@@ -48,7 +49,7 @@ class Judged:
     zero_force_ahead_mm: float
 
     def key(self) -> tuple:
-        return (self.worse_markers, -self.targets_met, _finite(self.ahead_mm))
+        return (self.worse_markers, -self.targets_met, finite_or_inf(self.ahead_mm))
 
     def line(self) -> str:
         return (
@@ -68,10 +69,6 @@ class Chosen:
     judged: tuple[Judged, ...]
     best: Judged
     notes: tuple[str, ...]
-
-
-def _finite(v: float) -> float:
-    return float(v) if np.isfinite(v) else np.inf
 
 
 def judge(model, recording, frames, origin: int, ahead: int, variant) -> Judged:
@@ -117,9 +114,8 @@ def choose(
     a, s = fitted
     m = a + (s - a) // 2
     x = np.asarray(recording.positions, np.float64)
-    mask = np.asarray(recording.mask, bool) if recording.mask is not None else None
     names = list(recording.markers)
-    built = _builder(x, mask, names, recording.rate, up)
+    built = _builder(x, recording.rate, up)
     found = built(a, s)
     if found is None:
         say("      gait: not proposed: the fitted frames repeat nothing (no stride period)")
@@ -158,14 +154,15 @@ def choose(
     return Chosen(solved.spec, tuple(tried.values()), best, notes)
 
 
-def _builder(x, mask, names, rate, up):
-    """(rhythm, signals) of frames a:b, cached; None where nothing repeats there."""
+def _builder(x, rate, up):
+    """(rhythm, signals) of frames a:b of positions ``x`` (NaN where missing), cached; None
+    where nothing repeats there."""
     cache: dict[tuple[int, int], object] = {}
     axes = tuple(range(x.shape[2])) if up is None else (int(np.argmax(np.abs(up))),)
 
     def built(a: int, b: int):
         if (a, b) not in cache:
-            window = x[a:b] if mask is None else np.where(mask[a:b, :, None], x[a:b], np.nan)
+            window = x[a:b]
             rhythm = find_rhythm(window, rate, None, up)
             if rhythm is None:
                 cache[(a, b)] = None

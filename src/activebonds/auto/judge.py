@@ -37,7 +37,8 @@ class Judged:
                 out.items()}  # fmt: skip
 
 
-def _finite(x: float) -> float:
+def finite_or_inf(x: float) -> float:
+    """``x``, or infinity where it is not a finite number (a failed prediction ranks last)."""
     return x if isinstance(x, int | float) and math.isfinite(x) else math.inf
 
 
@@ -47,7 +48,7 @@ def better(new: Judged, old: Judged) -> bool:
     any)."""
     if new.worse != old.worse:
         return new.worse < old.worse
-    return _finite(new.ahead_mm) < _finite(old.ahead_mm)
+    return finite_or_inf(new.ahead_mm) < finite_or_inf(old.ahead_mm)
 
 
 def compared(new: Judged, old: Judged, old_name: str) -> str:
