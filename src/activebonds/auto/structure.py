@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .folder import Folder, Options, Windows
 
-MAX_DECIDED = 40  # candidate bonds: above, structure keeps them all (no elimination)
+MAX_DECIDED = 300  # candidate bonds: above, structure keeps them all (no elimination)
 
 
 def structure_step(folder: Folder, recording, split: Windows, options: Options, say) -> str:
