@@ -100,14 +100,17 @@ def verdict_columns(prefix: str, record: dict) -> dict:
 def _least_squares_rms_mm(model, data) -> float | None:
     """The exact least-squares optimum's RMS (mm) of the model's family, where every free
     parameter is linear in the forces (None otherwise, or where it cannot be formed)."""
-    from ..costs.windows import make_windows
+    from ..costs.windows import make_windows, neighbours_of
     from ..solvers.lsq import least_squares, nonlinear_genes
 
     if nonlinear_genes(model):
         return None
     try:
         return float(
-            least_squares(model, make_windows(data.positions, data.mask, data.dt, 1)).rms_mm
+            least_squares(
+                model,
+                make_windows(data.positions, data.mask, data.dt, 1, 0, neighbours_of(model)),
+            ).rms_mm
         )
     except InputError:
         return None
