@@ -443,9 +443,10 @@ def structure_of(
     (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
     the pipeline of ``activebonds structure``."""
     from ...data.smoothing import smooth_positions
-    from ..costs.windows import make_windows
+    from ..costs.windows import make_windows, neighbours_of
     from ..problem import select_data
 
     data = select_data(model, recording, settings)
     positions = smooth_positions(data.positions, data.mask, smooth) if smooth else data.positions
-    return identify_structure(model, make_windows(positions, data.mask, data.dt, 1), eliminate)
+    windows = make_windows(positions, data.mask, data.dt, 1, neighbours=neighbours_of(model))
+    return identify_structure(model, windows, eliminate)
