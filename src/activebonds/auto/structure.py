@@ -167,7 +167,7 @@ def _decide(model, recording, split: Windows, say):
     if not eliminate:
         say(
             f"      structure: {n} candidate bonds, more than {MAX_DECIDED}: no elimination "
-            f"(its exact least squares grow with the square of the candidates, hours here); "
+            "(backward elimination's solves grow with the square of the candidates); "
             "every candidate kept, at its exact least-squares optimum"
         )
     result = structure_of(model, recording, FitSettings(frames=split.fitted), 0, eliminate)
