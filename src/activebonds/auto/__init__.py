@@ -124,15 +124,19 @@ def run(
     say: Callable[[str], None] = print,
     fit_progress=None,
     verbose: bool = True,
+    hide_numpy_warnings: bool = True,
 ) -> Outcome:
     """Every step of ``activebonds auto`` (see the module's docstring), each announced by
     ``say``; ``fit_progress(generations, starting)``: a context manager yielding the fit's
     progress (with a ``status``), or None; ``verbose``: each fit's summary said (else one
     line a fit). Bad input raises InputError before anything is
     written. numpy's RuntimeWarnings (a mean of no frames on a gappy recording) are not
-    shown: what they mean is said in the scores."""
+    shown: what they mean is said in the scores (``hide_numpy_warnings=False``: shown, for
+    the tests that check none arises on the recordings they make)."""
     import numpy as np
 
+    if not hide_numpy_warnings:
+        return _run(recording_path, out, options, overwrite, say, fit_progress, verbose)
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
         return _run(recording_path, out, options, overwrite, say, fit_progress, verbose)

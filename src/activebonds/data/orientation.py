@@ -42,6 +42,7 @@ import numpy as np
 
 from ..axes import AXES  # noqa: F401 (the table, named here for the readers of orientation)
 from ..errors import InputError
+from ..nanstats import nanmean
 from .trajectory import Trajectory
 
 CLEAR = 0.5  # the flattest axis must score at most this fraction of the next one
@@ -190,7 +191,7 @@ def _guess_ground(traj: Trajectory) -> Ground | None:
     if x.shape[1] < 2 or x.shape[0] < 2:
         return None
     d = x.shape[2]
-    means = np.nanmean(x, axis=0)  # [P, D]
+    means = nanmean(x, axis=0)  # [P, D]
     present = ~np.isnan(x).any(axis=2)
     rows = present.sum(axis=1) >= 2
     if rows.sum() < 2:

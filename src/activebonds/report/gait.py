@@ -46,6 +46,7 @@ import numpy as np
 
 from ..data.period import dominant_period
 from ..identify.judge.predictions import constant_velocity
+from ..nanstats import nanmean
 
 STRIDES = 5  # strides of each free run
 STARTS = 10  # free runs, from start frames spread over the window
@@ -72,7 +73,7 @@ def vertical(positions: np.ndarray, up: Sequence[float]) -> np.ndarray:
 def lowest_markers(positions: np.ndarray, up: Sequence[float], share: float = 0.25) -> list[int]:
     """The markers whose mean height lies in the lowest ``share`` of the range of the
     markers' mean heights (the feet of a standing or walking body)."""
-    h = np.nanmean(vertical(positions, up), axis=0)
+    h = nanmean(vertical(positions, up), axis=0)
     lo, hi = np.nanmin(h), np.nanmax(h)
     return [int(i) for i in np.flatnonzero(h <= lo + share * (hi - lo))]
 
@@ -120,7 +121,7 @@ def best_shift(cycle: np.ndarray, template: np.ndarray) -> tuple[int, float]:
     index = (np.arange(m)[None, :] - np.arange(m)[:, None]) % m  # [shift, bin]
     d2 = np.sum((cycle[index] - template[None]) ** 2, axis=-1)  # [shift, bins, P]
     with np.errstate(invalid="ignore"):
-        mean = np.nanmean(d2.reshape(m, -1), axis=1)
+        mean = nanmean(d2.reshape(m, -1), axis=1)
     if not np.isfinite(mean).any():
         return 0, float("inf")
     s = int(np.nanargmin(mean))
@@ -143,16 +144,16 @@ def mean_gait(
     nan = float("nan")
     if c.shape[0] == 0:
         return np.full((PHASE_BINS, *np.shape(positions)[1:]), np.nan), nan, nan
-    template = np.nanmean(c, axis=0)
+    template = nanmean(c, axis=0)
     for _ in range(rounds):
         c = np.stack([np.roll(ci, best_shift(ci, template)[0], axis=0) for ci in c])
-        template = np.nanmean(c, axis=0)
+        template = nanmean(c, axis=0)
     if c.shape[0] < 2:
         return template, nan, nan
-    shape = (c - np.nanmean(c, axis=1, keepdims=True)) - (template - np.nanmean(template, 0))
+    shape = (c - nanmean(c, axis=1, keepdims=True)) - (template - nanmean(template, 0))
     with np.errstate(invalid="ignore"):
-        spread = np.sqrt(np.nanmean(np.sum((c - template) ** 2, axis=-1))) * 1000.0
-        spread_shape = np.sqrt(np.nanmean(np.sum(shape**2, axis=-1))) * 1000.0
+        spread = np.sqrt(nanmean(np.sum((c - template) ** 2, axis=-1))) * 1000.0
+        spread_shape = np.sqrt(nanmean(np.sum(shape**2, axis=-1))) * 1000.0
     return template, float(spread), float(spread_shape)
 
 
@@ -195,7 +196,7 @@ def features(
     body = tuple(i for i in range(x.shape[1]) if i not in feet)
     h = vertical(x, up)[:, list(feet)]
     t = dominant_period(h) if period is None else float(period)
-    mean = np.nanmean(x, axis=0)
+    mean = nanmean(x, axis=0)
     gait, spread, spread_shape = mean_gait(x, t)
     return GaitFeatures(
         up=tuple(float(u) for u in up),
@@ -263,7 +264,7 @@ def score_run(run: np.ndarray, ref: GaitFeatures) -> RunScore:
     avg = cycle_average(x, t if np.isfinite(t) else ref.period_frames)
     if np.isfinite(avg).all():
         rms = best_shift(avg, ref.gait)[1]
-        shape = best_shift(avg - avg.mean(axis=0), ref.gait - np.nanmean(ref.gait, axis=0))[1]
+        shape = best_shift(avg - avg.mean(axis=0), ref.gait - nanmean(ref.gait, axis=0))[1]
     else:
         rms = shape = float("inf")
     return RunScore(t, tuple(float(e) for e in ex), dist, rms, shape)
@@ -398,8 +399,8 @@ def template_runs(
     cands = played(phases, k_burn)  # [bins, burn + 1, P, D]
     for s in starts:
         window = x[s - burn : s + 1]  # [burn + 1, P, D]
-        offset = np.nanmean(window[None] - cands, axis=(1, 2))  # [bins, D]
-        err = np.nanmean(np.sum((window[None] - cands - offset[:, None, None]) ** 2, -1), (1, 2))
+        offset = nanmean(window[None] - cands, axis=(1, 2))  # [bins, D]
+        err = nanmean(np.sum((window[None] - cands - offset[:, None, None]) ** 2, -1), (1, 2))
         best = int(np.nanargmin(err))
         out.append(played(phases[best : best + 1], k_ahead)[0] + offset[best])
     return np.stack(out)

@@ -12,6 +12,7 @@ import numpy as np
 from ... import bonds
 from ...data.orientation import AXES
 from ...errors import InputError
+from ...nanstats import nanmean
 from .model_text import quoted, searched, vector
 
 G = 9.81  # m/s^2
@@ -169,7 +170,7 @@ def contact_blocks(x, mask, names, axis, sign, total, dt, notes) -> list[str]:
     on = near[1:] & near[:-1]
     tangential = [vel[on[:, i], i] for i in touching]
     tangential = np.concatenate(tangential) if tangential else np.zeros((0, d))
-    body = np.nanmean(vel, axis=1)  # [F-1, D] the markers' mean velocity
+    body = nanmean(vel, axis=1)  # [F-1, D] the markers' mean velocity
     with_body = [body[on[:, i]] for i in touching]
     with_body = np.concatenate(with_body) if with_body else np.zeros((0, d))
     belt = None

@@ -79,6 +79,7 @@ import numpy as np
 from ... import bonds
 from ...data.orientation import AXES
 from ...errors import InputError
+from ...nanstats import nanmean
 from .gravity import G, contact_blocks, gravity_axis
 from .model_text import quoted, searched, vector
 
@@ -356,7 +357,7 @@ def _pair_block(graph: _Graph, bounds: _Bounds, names, i: int, j: int, why, dt: 
     stretch = series - l0
     acc = (series[2:] - 2 * series[1:-1] + series[:-2]) / dt**2
     acc = acc[np.isfinite(acc)]
-    rms_s = float(np.sqrt(np.nanmean(stretch**2)))
+    rms_s = float(np.sqrt(nanmean(stretch**2)))
     rms_a = float(np.sqrt(np.mean(acc**2))) if acc.size else 0.0
     mu, (k_lo, k_hi), (c_lo, c_hi) = bounds.mu, bounds.k, bounds.c
     k0, c0 = _start_values(mu, rms_a, rms_s, (k_lo, k_hi), (c_lo, c_hi))

@@ -54,6 +54,7 @@ from ...data.coverage import present_windows
 from ...data.orientation import MIN_PHASE
 from ...model import Model, build
 from ...model.schema import ModelSpec
+from ...nanstats import nanmean
 
 TRAIN = 0.8  # the share of the fitted frames each variant is fitted on; the rest is the tail
 # variants within this share of the lowest tail RMS are tied: the fewest bonds win. At 1 % the
@@ -172,7 +173,7 @@ def acceleration_masses(positions: np.ndarray, dt: float, total: float) -> np.nd
     acc = (x[2:] - 2 * x[1:-1] + x[:-2]) / dt**2
     a2 = np.sum(acc**2, axis=-1)  # [F - 2, P], NaN where missing
     with np.errstate(invalid="ignore"):
-        rms = np.sqrt(np.nanmean(a2, axis=0))
+        rms = np.sqrt(nanmean(a2, axis=0))
     if not np.all(np.isfinite(rms) & (rms > 0)):
         return np.full(x.shape[1], total / x.shape[1])
     inverse = 1.0 / rms

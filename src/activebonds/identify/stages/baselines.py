@@ -13,6 +13,7 @@ import numpy as np
 
 from ...document import Section, Table
 from ...errors import InputError
+from ...nanstats import nanmean
 from ...physics.integrators import Integrator
 from ..costs.windows import neighbours_of
 from ..judge.ahead import DEFAULT_AHEAD, comparisons
@@ -153,8 +154,8 @@ def table(record: dict, pred, scored: tuple[float, float] | None = None) -> Tabl
     fitted frames."""
     fit = pred.fit_frames
     beyond = pred.extended and pred.n_frames - fit >= 1
-    model_fit = float(np.sqrt(np.nanmean(pred.one_step_rms_mm**2)))
-    model_beyond = float(np.sqrt(np.nanmean(pred.one_step_rms_mm_beyond**2))) if beyond else None
+    model_fit = float(np.sqrt(nanmean(pred.one_step_rms_mm**2)))
+    model_beyond = float(np.sqrt(nanmean(pred.one_step_rms_mm_beyond**2))) if beyond else None
     zero_beyond = None
     if beyond and scored is not None:  # one figure for one run: the summary's
         model_beyond, zero_beyond = (float(x) for x in scored)

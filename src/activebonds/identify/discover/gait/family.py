@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .... import bonds
+from ....nanstats import nanmean
 from .rhythm import Rhythm
 from .signals import Signal, balanced_gain, gain_for, partner
 
@@ -75,7 +76,7 @@ def gait_spec(
         coupling["quadrature"] = second.table(names, balanced_gain(first, gain, second))
     u = np.asarray(rhythm.velocity, np.float64)
     t = np.arange(x.shape[0]) * dt
-    centre = np.nanmean(x - u * t[:, None, None], axis=0)  # [P, D]: the anchors at t = 0
+    centre = nanmean(x - u * t[:, None, None], axis=0)  # [P, D]: the anchors at t = 0
     floor = 2.0 * mass * f * variant.decay
     held = []
     for i, n in enumerate(names):

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ....data.period import detrended, peak_height, recording_period
+from ....nanstats import nanmean
 
 MIN_CONFIDENCE = 0.5  # the autocorrelation at the period, at least
 MIN_STRIDES = 3.0  # strides in the frames, at least (a period judged on fewer is a guess)
@@ -94,13 +95,13 @@ def body_velocity(positions: np.ndarray, rate: float) -> tuple[float, ...]:
     straight line in time, zero where that line moves it less than :data:`TRAVEL_SHARE` of
     its size over the frames (a treadmill's sway, a swing)."""
     x = np.asarray(positions, np.float64)
-    centre = np.nanmean(x, axis=1)  # [F, D]
+    centre = nanmean(x, axis=1)  # [F, D]
     ok = np.isfinite(centre).all(axis=1)
     if ok.sum() < 3:
         return (0.0,) * x.shape[2]
     t = np.arange(x.shape[0], dtype=np.float64) / rate
     slope = np.polyfit(t[ok], centre[ok], 1)[0]  # [D] m/s
-    size = float(np.sqrt(np.nanmean(np.sum((x - centre[:, None]) ** 2, axis=-1))))
+    size = float(np.sqrt(nanmean(np.sum((x - centre[:, None]) ** 2, axis=-1))))
     drift = float(np.linalg.norm(slope) * (t[ok][-1] - t[ok][0]))
     if not drift > TRAVEL_SHARE * size:
         return (0.0,) * x.shape[2]

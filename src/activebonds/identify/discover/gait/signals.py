@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ....axes import AXES
+from ....nanstats import nanmean
 
 QUARTER_TOLERANCE = np.radians(30.0)
 
@@ -94,7 +95,7 @@ def survey(
             continue
         share, amplitude, theta = fundamental(s, frequency, rate)
         if amplitude > 0:
-            out.append(Signal(particles, axis, float(np.nanmean(s)), amplitude, theta, share))
+            out.append(Signal(particles, axis, float(nanmean(s)), amplitude, theta, share))
     return sorted(out, key=lambda s: -s.share)
 
 

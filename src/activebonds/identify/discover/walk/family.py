@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .... import bonds
+from ....nanstats import nanmean
 from ..gait.family import FORCE_REACH, _periodic
 from .stride import Stride
 
@@ -86,7 +87,7 @@ def segment_bonds(x: np.ndarray, names, spread: float, mass: float, rate: float)
     """Damped springs at their mean length between the markers whose distance over ``x``
     [F, P, D] varies (standard deviation) by at most ``spread`` of its mean."""
     d = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1)
-    mean, sd = np.nanmean(d, axis=0), np.nanstd(d, axis=0)
+    mean, sd = nanmean(d, axis=0), np.nanstd(d, axis=0)
     k_hi, c_hi = 10.0 * mass * (np.pi * rate) ** 2, 20.0 * mass * rate
     out = []
     for i in range(len(names)):

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ....nanstats import nanmean
 from ..gravity import CONTACT_REACH, CONTACT_SHARE
 
 # the body walks where it moves over the floor by more than this share of its size (the RMS
@@ -98,13 +99,13 @@ def find_floor(positions: np.ndarray, rate: float, names: Sequence[str], up=None
         vf = vf[np.isfinite(vf).all(axis=1)]
         if len(vf):
             surface[flat] = np.median(vf[:, flat], axis=0)
-    centre = np.nanmean(x, axis=1)
+    centre = nanmean(x, axis=1)
     ok = np.isfinite(centre).all(axis=1)
     body = np.zeros(d)
     if ok.sum() >= 3:
         t = np.arange(f, dtype=np.float64) / rate
         body[flat] = np.polyfit(t[ok], centre[ok][:, flat], 1)[0]
-    size = float(np.sqrt(np.nanmean(np.sum((x - centre[:, None]) ** 2, axis=-1))))
+    size = float(np.sqrt(nanmean(np.sum((x - centre[:, None]) ** 2, axis=-1))))
     return Floor(
         axis, sign, float(height), feet, tuple(surface.tolist()), tuple((body - surface).tolist()),
         size,

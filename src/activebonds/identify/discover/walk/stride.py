@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ....nanstats import nanmean
+
 SHORTEST = 0.4  # s: no stride of a legged body is shorter (a running human's is ~0.7 s)
 MIN_STRIDES = 1.25  # strides the frames must hold: the lag compares this share of them at least
 MAX_MISMATCH = 0.25  # the mismatch at the period, at most (1: no repetition)
@@ -59,17 +61,17 @@ class Stride:
 def shape(positions: np.ndarray) -> np.ndarray:
     """The markers about their centre in each frame [F, P, D] (NaN where missing)."""
     x = np.asarray(positions, np.float64)
-    return x - np.nanmean(x, axis=1, keepdims=True)
+    return x - nanmean(x, axis=1, keepdims=True)
 
 
 def mismatch(y: np.ndarray, lag: int) -> float:
     """The mean squared change of shape ``y`` [F, P, D] over ``lag`` frames over twice its
     variance (NaN samples left out)."""
-    var = float(np.nanmean(np.sum((y - np.nanmean(y, axis=0)) ** 2, axis=-1)))
+    var = float(nanmean(np.sum((y - nanmean(y, axis=0)) ** 2, axis=-1)))
     if not var > 0:
         return np.inf
     d = np.sum((y[lag:] - y[:-lag]) ** 2, axis=-1)
-    return float(np.nanmean(d)) / (2.0 * var) if np.isfinite(d).any() else np.inf
+    return float(nanmean(d)) / (2.0 * var) if np.isfinite(d).any() else np.inf
 
 
 def find_stride(positions: np.ndarray, rate: float) -> Stride | None:
