@@ -50,6 +50,7 @@ from ..costs.windows import (
 )
 from ..problem import Identification
 from ..settings import FitSettings
+from .box import Box
 from .stage import (  # noqa: F401 (the stage's parts, where callers have found them)
     BOUNDS,
     EDGE,
@@ -58,7 +59,6 @@ from .stage import (  # noqa: F401 (the stage's parts, where callers have found 
     MODEL,
     WARM_STEPS,
     Bounded,
-    Box,
     Stage,
     StageInterrupted,
     solve,
