@@ -61,6 +61,7 @@ def run(ident, settings, genome, steps: int, bounds: str) -> dict:
     refinement = Refinement(ident, settings, bounds=bounds)
     stage = refinement.stage(1, genome, max_steps=steps)
     seconds = time.perf_counter() - t
+    print(f"  {bounds}: {stage.steps} steps, {seconds:.1f} s: {stage.message}", file=sys.stderr)
     g = np.asarray(stage.genome)
     lo, hi = np.asarray(ident.problem.lower), np.asarray(ident.problem.upper)
     near = np.minimum(g - lo, hi - g) <= 0.01 * (hi - lo)
