@@ -18,7 +18,7 @@ each one's final objective (m^2), RMS, steps, seconds and message, and the new/o
 
 Measured (2 shared cores, loaded), ``--steps 20``, 2 substeps, start lsq: old 0.035602 m^2
 (2.4141 mm) in 210.8 s, new 0.035333 m^2 (2.4050 mm) in 215.5 s (ratios 0.9925, 1.02): the
-same steps cost the same (the Jacobian dominates), the new ones lower the cost 14 times as
+same steps cost the same (the Jacobian dominates), the new ones lower the cost 2.3 times as
 much (0.00047 against 0.00020 m^2 from 0.035805). The 500-step comparison was not measured.
 """
 
