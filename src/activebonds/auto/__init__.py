@@ -13,7 +13,10 @@ The steps (:data:`~.steps.STEPS`), each one's output in the output folder ``OUT`
 3. **fit** (:mod:`~.fit`): every registered candidate (:data:`~.candidates.CANDIDATES`:
    ``structure``, the structure from its exact optimum on the one-step cost, ``OUT/run``;
    ``ground``, ``OUT/run-ground``; ``masses``, the flight's masses held, ``OUT/run-masses``;
-   ``shot``, multiple shooting where the noise dominates, ``OUT/run-shot``) proposes a model
+   ``gait``, a drive and periodic forces where the motion repeats, ``OUT/run-gait``;
+   ``walk``, a periodic force per marker in the stride's phase where the body walks over a
+   floor, ``OUT/run-walk``; ``shot``, multiple shooting where the noise dominates,
+   ``OUT/run-shot``) proposes a model
    against the one kept so far; it is fitted, judged on the validation frames (the last 20 %
    of the fitted frames: :attr:`Windows.validation`) by one rule (:mod:`~.judge`: fewer
    markers worse than zero force one step, then a lower RMS ``--ahead`` frames ahead) and

@@ -53,7 +53,7 @@ def write_evaluation(folder: Folder, held, fitted) -> str:
 def how_made(state: dict) -> list[str]:
     """How the kept model was made, for the report: the noise's line, the first three steps'
     notes, the table of the candidates tried (kept or not, and why), the gait candidate's
-    rhythm and variants, the masses' note."""
+    rhythm and variants, the walk candidate's stride and floor, the masses' note."""
     from ..data.smoothing import Noise
     from . import table
 
@@ -69,6 +69,10 @@ def how_made(state: dict) -> list[str]:
         out += [f"gait: {line}" for line in gait["notes"]]
         out += [f"gait variant on the fitted frames' second half: {v}" for v in gait["variants"]]
         out.append(f"gait chosen: {gait['chosen']}")
+    walk = steps.get("fit", {}).get("walk")
+    if walk:  # the walk candidate's stride and floor, and its model
+        out += [f"walk: {line}" for line in walk["notes"]]
+        out.append(f"walk model: {walk['variant']}")
     if steps.get("fit", {}).get("masses"):
         out.append(steps["fit"]["masses"])
     return out

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .folder import Folder, Options, Windows
 
-MAX_DECIDED = 40  # candidate bonds: above, structure keeps them all (no elimination)
+MAX_DECIDED = 300  # candidate bonds: above, structure keeps them all (no elimination)
 
 
 def structure_step(folder: Folder, recording, split: Windows, options: Options, say) -> str:
@@ -61,7 +61,7 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     squares does not solve (ground contacts), its linear parameters solved again with the
     contacts held: OUT/ground.toml, or None where the scaffold has neither."""
     from .. import bonds
-    from ..identify.costs.windows import make_windows
+    from ..identify.costs.windows import make_windows, neighbours_of
     from ..identify.discover.structure import exact_optimum
     from ..identify.discover.structure_choice import criterion
     from ..identify.problem import select_data
@@ -76,7 +76,8 @@ def _ground(folder: Folder, scaffolded, decided, recording, split: Windows) -> d
     spec = decided.model_copy(update={"gravity": scaffolded.gravity, "bond": decided.bond + extra})
     model = build(spec)
     data = select_data(model, recording, FitSettings(frames=split.fitted))
-    solved, _ = exact_optimum(model, make_windows(data.positions, data.mask, data.dt, 1))
+    windows = make_windows(data.positions, data.mask, data.dt, 1, neighbours=neighbours_of(model))
+    solved, _ = exact_optimum(model, windows)
     save_model(solved, folder.ground)
     # its one-step RMS as the fit and `evaluate` score it (the exact optimum's own residual
     # holds the contacts at their start and is not the model's prediction)
@@ -166,7 +167,7 @@ def _decide(model, recording, split: Windows, say):
     if not eliminate:
         say(
             f"      structure: {n} candidate bonds, more than {MAX_DECIDED}: no elimination "
-            f"(its exact least squares grow with the square of the candidates, hours here); "
+            "(backward elimination's solves grow with the square of the candidates); "
             "every candidate kept, at its exact least-squares optimum"
         )
     result = structure_of(model, recording, FitSettings(frames=split.fitted), 0, eliminate)

@@ -134,7 +134,9 @@ def _columns(values, index, topology, x, v, unknowns):
     for b in range(len(pairs)):
         dvec = x[:, j[b]] - x[:, i[b]]
         length = np.linalg.norm(dvec, axis=-1)[:, None]
-        u = dvec / length
+        # two coincident ends (e.g. two missing markers at one filled place in a restart
+        # state whose rows do not count): no direction, no force
+        u = np.divide(dvec, length, out=np.zeros_like(dvec), where=length > 0)
         rate = np.sum((v[:, j[b]] - v[:, i[b]]) * u, axis=-1)[:, None]
         gk, gl = int(index["stiffness"][b]), int(index["rest_length"][b])
         gc = int(index["damping"][b])

@@ -25,7 +25,7 @@ def baselines(
     the momentum floor of internal-force models, and the exact bounded least-squares optimum of
     the model's linear parameters (neural gains at 0)."""
     from ..data import read_trajectory
-    from ..identify.costs.windows import make_windows
+    from ..identify.costs.windows import make_windows, neighbours_of
     from ..identify.judge.baselines import model_floor_rms_mm, zero_force_rms_mm
     from ..identify.problem import select_data, variant
     from ..identify.settings import parse_frames, parse_markers
@@ -42,7 +42,7 @@ def baselines(
         )
         m = variant(load_model(model), settings.bonds)
         data = select_data(m, read_trajectory(traj), settings)
-        windows = make_windows(data.positions, data.mask, data.dt, 1)
+        windows = make_windows(data.positions, data.mask, data.dt, 1, 0, neighbours_of(m))
         result = {
             "frames": [settings.frames[0], settings.frames[0] + data.n_frames],
             "zero_force_rms_mm": zero_force_rms_mm(data.positions, data.mask, data.dt),

@@ -11,7 +11,7 @@ import numpy as np
 from ..data.trajectory import Trajectory
 from ..errors import InputError
 from ..model import Model, as_neural, as_standard
-from .costs.windows import Windows, join_windows, make_cost, make_windows
+from .costs.windows import Windows, join_windows, make_cost, make_windows, neighbours_of
 from .search.es import Problem
 from .search.population_cost import make_population_cost
 from .settings import FitSettings
@@ -96,9 +96,14 @@ def identification(
     recordings = (traj,) if isinstance(traj, Trajectory) else tuple(traj)
     data = select_recordings(model, recordings, settings)
 
+    acting = neighbours_of(model)
+
     def cut(horizon):
         return join_windows(
-            [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in data]
+            [
+                make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth, acting)
+                for d in data
+            ]
         )
 
     windows = cut(settings.es_horizon)
@@ -152,7 +157,8 @@ def check_predictions(spec: Model, recordings: Sequence[Trajectory], settings: F
     from .costs.windows import count_predictions
 
     data = select_recordings(spec, recordings, settings)
-    counts = [count_predictions(d.mask, settings.es_horizon) for d in data]
+    acting = neighbours_of(spec)
+    counts = [count_predictions(d.mask, settings.es_horizon, acting) for d in data]
     kept, possible = sum(k for k, _ in counts), sum(p for _, p in counts)
     removed = possible - kept
     frames = range(recordings[0].n_frames)[slice(*settings.frames)]

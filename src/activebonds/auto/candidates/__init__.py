@@ -14,6 +14,7 @@ from .ground import GroundCandidate
 from .masses import MassesCandidate
 from .shot import ShotCandidate
 from .structure import StructureCandidate
+from .walk import WalkCandidate
 
 CANDIDATES: Registry[Candidate] = Registry(
     "auto candidate",
@@ -22,6 +23,7 @@ CANDIDATES: Registry[Candidate] = Registry(
         GroundCandidate(),
         MassesCandidate(),
         GaitCandidate(),
+        WalkCandidate(),
         ShotCandidate(),
     ],
 )

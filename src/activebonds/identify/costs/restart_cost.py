@@ -15,7 +15,7 @@ from jax.flatten_util import ravel_pytree
 from ...physics.integrate import stiff
 from ..solvers import stage as lm
 from .base import ResidualFunction
-from .windows import join_windows, make_residuals, make_windows, rms_mm
+from .windows import join_windows, make_residuals, make_windows, neighbours_of, rms_mm
 
 NAME = "restart"
 
@@ -90,7 +90,12 @@ class RestartCost:
         model, data = ident.model, ident.all_data
         log = jnp.asarray(model.layout.log)
         windows = join_windows(
-            [make_windows(d.positions, d.mask, d.dt, horizon, settings.smooth) for d in data]
+            [
+                make_windows(
+                    d.positions, d.mask, d.dt, horizon, settings.smooth, neighbours_of(model)
+                )
+                for d in data
+            ]
         )
         residuals = make_residuals(model, windows, settings.substeps, settings.integrator)
 

@@ -7,7 +7,10 @@ predicts. From the *real* state at a start frame s, the model
 is integrated H steps; every predicted position is compared with the recorded one. Starts are
 s = 1, 1 + H, 1 + 2H, ... so H = 1 is the paper's one-step cost and H = window length a free run.
 The local cost of particle p is its own share; the global cost is their sum. A prediction whose
-inputs (the state at s and s - 1) or target are missing contributes nothing. Each restart
+inputs or target are missing contributes nothing: without a model's bond graph (``neighbours``
+None) its inputs are every particle at s and s - 1; with it (:func:`neighbours_of`), only the
+particles that can act on p before the target (:func:`_terms`), so a recording whose markers
+are seldom all present together still gives most of its samples. Each restart
 knows its time, ``s * dt`` from the window's first frame, for forces that depend on time (a
 unary bond's moving anchor); a model whose drive is entrained starts each restart with the
 drive's phase tracked along the record (:func:`start_phases`).
@@ -68,23 +71,69 @@ class Windows:
         return int(self.target.shape[1])
 
 
+def neighbours_of(model) -> np.ndarray:
+    """[P, P] bool of a :class:`~activebonds.model.Model` (or its
+    :class:`~activebonds.model.params.Topology`): ``[p, q]`` True where particle q (q != p)
+    can exert a force on p, i.e. q shares a bond of an active kind with p (a binary bond's
+    other end, a ternary bond's two others). Unary bonds, ground contacts, periodic forces and
+    the uniform field act on one particle and add nothing; a disabled kind neither."""
+    topo = getattr(model, "topology", model)
+    n = topo.n_particles
+    out = np.zeros((n, n), bool)
+    for kind in topo.active():
+        members = np.asarray(topo.particles(kind))
+        if members.ndim != 2 or members.shape[1] < 2:
+            continue
+        for a in range(members.shape[1]):
+            for b in range(members.shape[1]):
+                if a != b:
+                    out[members[:, a], members[:, b]] = True
+    np.fill_diagonal(out, False)
+    return out
+
+
+def fill_missing(positions: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Positions [F, P, D] with each particle's missing samples filled: linear in time
+    between its recorded samples, held before its first and after its last (0 for a particle
+    never recorded). Finite everywhere, so that forces computed from a restart state with a
+    missing particle stay finite; no term that reads a filled value counts."""
+    out = np.where(mask[..., None], positions, 0.0).astype(np.float64)
+    frames = np.arange(positions.shape[0])
+    for p in range(positions.shape[1]):
+        seen = mask[:, p]
+        if seen.all() or not seen.any():
+            continue
+        for c in range(positions.shape[2]):
+            out[~seen, p, c] = np.interp(frames[~seen], frames[seen], positions[seen, p, c])
+    return out
+
+
 def make_windows(
-    positions: np.ndarray, mask: np.ndarray, dt: float, horizon: int = 1, smooth: int = 0
+    positions: np.ndarray,
+    mask: np.ndarray,
+    dt: float,
+    horizon: int = 1,
+    smooth: int = 0,
+    neighbours: np.ndarray | None = None,
 ) -> Windows:
     """Cut restart windows from positions [F, P, D] (NaN where missing) and mask [F, P].
 
     ``smooth``: a Savitzky-Golay window (frames; 0: off) applied to the restart states only
     (the positions at and one frame before each start, hence the velocities), never to the
-    targets: see :mod:`activebonds.data.smoothing`."""
+    targets: see :mod:`activebonds.data.smoothing`. ``neighbours``: the model's [P, P] who
+    acts on whom (:func:`neighbours_of`); a prediction then needs only the particles that
+    can act on it present at the start (:func:`_terms`); None: every particle. The restart
+    states' missing samples are filled (:func:`fill_missing`; they count in no term)."""
     n_frames = positions.shape[0]
     if n_frames < 3:
         raise ValueError("the cost needs at least 3 frames (two to start, one to predict)")
     horizon = max(1, min(int(horizon), n_frames - 2))
     x = np.where(mask[..., None], positions, 0.0)
-    inputs = x
+    inputs = positions
     if smooth:
-        inputs = np.where(mask[..., None], smooth_positions(positions, mask, smooth), 0.0)
-    starts, frames_c, weight, _ = _terms(mask, horizon)
+        inputs = smooth_positions(positions, mask, smooth)
+    inputs = fill_missing(inputs, mask)
+    starts, frames_c, weight, _ = _terms(mask, horizon, neighbours)
     x0 = inputs[starts]
     v0 = (inputs[starts] - inputs[starts - 1]) / dt
     target = x[frames_c]
@@ -102,32 +151,66 @@ def make_windows(
     )
 
 
-def _terms(mask: np.ndarray, horizon: int):
+def _reach(neighbours: np.ndarray, horizon: int) -> list[np.ndarray]:
+    """[R_1, ..., R_H], R_k [P, P] bool: ``R_k[p, q]`` where q is p or within k bonds of it
+    (the particles whose start state can move p within k frames of one Euler substep)."""
+    n = np.asarray(neighbours, bool)
+    if n.ndim != 2 or n.shape[0] != n.shape[1]:
+        raise ValueError(f"neighbours must be a [P, P] matrix, not {n.shape}")
+    step = n | np.eye(n.shape[0], dtype=bool)
+    out = [step]
+    for _ in range(horizon - 1):
+        out.append((out[-1].astype(np.int64) @ step.astype(np.int64)) > 0)
+    return out
+
+
+def _terms(mask: np.ndarray, horizon: int, neighbours: np.ndarray | None = None):
     """(starts [S], target frames [S, H] clipped to the window, weight [S, H, P] float, the
     terms inside the window [S, H] bool) of :func:`make_windows`: the prediction of particle p
-    at frame s + k (1 <= k <= H) from start s counts when every particle is present at s and
-    s - 1 (the start state) and p at s + k (the target)."""
-    n_frames = mask.shape[0]
+    at frame s + k (1 <= k <= H) from start s counts when p is present at s + k (the target)
+    and, at both s and s - 1 (the start state):
+
+    * without ``neighbours``: every particle;
+    * with ``neighbours`` [P, P] (:func:`neighbours_of`): p and every particle within k bonds
+      of p (for k = 1, p's bonded neighbours; none beyond p for a particle held only by
+      unary bonds, contacts or the field). One Euler substep moves a particle by the forces
+      of its neighbours alone, so the prediction then reads no other particle's start
+      state; with several substeps (or a start velocity solved over the frame) particles
+      further away enter it at higher order in the frame time, through the filled values
+      (:func:`fill_missing`) where they are missing."""
+    n_frames, n_p = mask.shape
     starts = np.arange(1, n_frames - 1, horizon)
-    ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
     frames = starts[:, None] + np.arange(1, horizon + 1)[None, :]  # [S, H]
     inside = frames < n_frames
     frames_c = np.minimum(frames, n_frames - 1)
-    weight = (mask[frames_c] & inside[..., None] & ok_start[:, None, None]).astype(np.float64)
+    if neighbours is None:
+        ok_start = mask[starts].all(axis=1) & mask[starts - 1].all(axis=1)
+        ok = np.broadcast_to(ok_start[:, None, None], (len(starts), horizon, n_p))
+    else:
+        if np.shape(neighbours) != (n_p, n_p):
+            raise ValueError(f"neighbours {np.shape(neighbours)} for {n_p} particles")
+        missing = (~(mask[starts] & mask[starts - 1])).astype(np.int64)  # [S, P]
+        ok = np.stack(
+            [(missing @ r.T.astype(np.int64)) == 0 for r in _reach(neighbours, horizon)], 1
+        )
+    weight = (mask[frames_c] & inside[..., None] & ok).astype(np.float64)
     return starts, frames_c, weight, inside
 
 
-def count_predictions(mask: np.ndarray, horizon: int = 1) -> tuple[int, int]:
+def count_predictions(
+    mask: np.ndarray, horizon: int = 1, neighbours: np.ndarray | None = None
+) -> tuple[int, int]:
     """(kept, possible): the cost's terms (one predicted particle position each) in a window
     with presence ``mask`` [F, P], and as many as it would hold without gaps; exactly
-    :func:`make_windows`'s ``n_terms`` and its count with every marker present. NumPy only,
-    nothing compiled: the ``fit`` command checks a window with it before it starts."""
+    :func:`make_windows`'s ``n_terms`` (with the same ``neighbours``) and its count with every
+    marker present. NumPy only, nothing compiled: the ``fit`` command checks a window with it
+    before it starts."""
     mask = np.asarray(mask, bool)
     n_frames = mask.shape[0]
     if n_frames < 3:
         return 0, 0
     horizon = max(1, min(int(horizon), n_frames - 2))
-    _, _, weight, inside = _terms(mask, horizon)
+    _, _, weight, inside = _terms(mask, horizon, neighbours)
     return int(weight.sum()), int(inside.sum()) * mask.shape[1]
 
 

@@ -37,6 +37,8 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+from threadpoolctl import threadpool_limits
 
 from ... import bonds
 from ...errors import InputError
@@ -170,6 +172,7 @@ class _Subsets:
         self.norm = np.where(norm > 0, norm, 1.0)
         self.r, self.c = compress(problem.columns / self.norm, problem.target - problem.offset)
         self.genes = [_genes(n) for n in problem.names]
+        self.optima: dict[frozenset, tuple[list[int], np.ndarray]] = {}
 
     @classmethod
     def of(cls, scorer: _Scorer, pool: list[int]) -> _Subsets | None:
@@ -198,6 +201,47 @@ class _Subsets:
         )
         return cls(problem, owner) if same else None
 
+    def lower_bounds(self, present: frozenset, scorer: _Scorer) -> dict[int, float] | None:
+        """For each candidate in ``present``, a lower bound of the BIC of ``present`` without
+        it, every one from the present structure's bounded optimum t and one Cholesky
+        factorisation of its normal matrix G. The cost f(t + d) = f(t) + g.d + d^T G d
+        (g = 2 A^T (A t - c)); removing a candidate sets its unknowns J to 0, d_J = -t_J;
+        at a bounded optimum g.d >= 0 over the other candidates' feasible moves (each
+        candidate's constraints are its own), and the quadratic over the other unknowns, free,
+        is at least ``t_J^T (G^-1)_JJ^-1 t_J`` (the Schur complement). So the RSS without it
+        is at least ``f(t) - g_J.t_J + t_J^T (G^-1)_JJ^-1 t_J``: the exact change where the
+        removal moves no other unknown onto a bound. None where the normal matrix is too
+        ill-conditioned for that arithmetic."""
+        if present not in self.optima:
+            self.solve(present)
+        keep, theta = self.optima[present]
+        if not keep:
+            return None
+        a = self.r[:, keep]
+        try:
+            factor = cho_factor(a.T @ a, check_finite=False)
+        except np.linalg.LinAlgError:
+            return None
+        diagonal = np.abs(np.diag(factor[0]))
+        if not np.all(np.isfinite(diagonal)) or diagonal.min() < 1e-6 * diagonal.max():
+            return None  # condition number above 1e12: the downdates lose their digits
+        inverse = cho_solve(factor, np.eye(len(keep)), check_finite=False)
+        resid = a @ theta - self.c
+        rss, gradient = float(resid @ resid), 2.0 * (a.T @ resid)
+        columns: dict[int, list[int]] = {}
+        for j, k in enumerate(keep):
+            columns.setdefault(self.owner[k], []).append(j)
+        genes = {o: set().union(*(self.genes[keep[j]] for j in js)) for o, js in columns.items()}
+        total = sum(len(g) for g in genes.values())  # each candidate's genes are its own
+        bounds = {}
+        for i in present:
+            mine = columns.get(i, [])
+            t = theta[mine]
+            raised = float(t @ np.linalg.solve(inverse[np.ix_(mine, mine)], t)) if mine else 0.0
+            low = rss - float(gradient[mine] @ t) + max(raised, 0.0)
+            bounds[i] = scorer._score(max(low, 0.0), total - len(genes.get(i, ())))[1]
+        return bounds
+
     def solve(self, present: frozenset) -> tuple[float, int]:
         """(RSS, free linear genes) of the structure with the candidates ``present``."""
         keep = [k for k, o in enumerate(self.owner) if o is None or o in present]
@@ -214,9 +258,43 @@ class _Subsets:
             n_terms=p.n_terms,
         )
         theta, _ = solve(sub)
+        self.optima[present] = (keep, theta * self.norm[keep])  # scaled, as ``r``'s columns
         resid = sub.columns @ theta - sub.target
         genes = set().union(*(self.genes[k] for k in keep)) if keep else set()
         return float(resid @ resid), len(genes)
+
+
+def best_removal(score: _Scorer, present: frozenset, ceiling: float) -> tuple[int | None, float]:
+    """(the candidate whose removal from ``present`` gives the lowest BIC, that BIC): backward
+    elimination's step, the first such candidate in index order on a tie; (None, inf) where
+    no removal can give a BIC below ``ceiling`` (the current one).
+
+    Where :meth:`_Subsets.lower_bounds` gives every removal a lower bound of its BIC (the
+    unconstrained least squares of the structure without it, from one factorisation: the
+    bounded optimum costs at least as much), the removals are solved exactly in the order of
+    their bounds, until the best solved is below every bound left: the same choice as
+    solving every removal (branch and bound), by one or two bounded solves a step where the
+    bounds are seldom active. Otherwise every removal is solved."""
+    order = sorted(present)
+    bounds = score.subsets.lower_bounds(present, score) if score.subsets is not None else None
+    if bounds is None:
+        trials = {i: score(present - {i})[1] for i in order}
+        best = min(trials, key=trials.get)
+        return best, trials[best]
+    best, best_bic = None, math.inf
+    for i in sorted(order, key=lambda i: (bounds[i], i)):
+        if bounds[i] > min(best_bic, ceiling) + _slack(min(best_bic, ceiling)):
+            break
+        trial = score(present - {i})[1]
+        if trial < best_bic or (trial == best_bic and i < best):
+            best, best_bic = i, trial
+    return best, best_bic
+
+
+def _slack(bic: float) -> float:
+    """How far a lower bound may exceed the BIC it bounds by rounding (the bound and the exact
+    solve reach the same optimum by different arithmetic where no bound is active)."""
+    return 1e-9 * abs(bic) + 1e-9
 
 
 def _genes(name: str) -> tuple[int, ...]:
@@ -288,6 +366,14 @@ def exact_optimum(model: Model, windows: Windows) -> tuple[ModelSpec, float]:
 
 
 def identify_structure(model: Model, windows: Windows, eliminate: bool = True) -> Structure:
+    """:func:`_identify` with one BLAS thread: its solves are of a few hundred unknowns each,
+    where threads cost more than they give, and on a loaded machine (threads waiting for a
+    core) a hundred times more (``benchmarks/structure.py``)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _identify(model, windows, eliminate)
+
+
+def _identify(model: Model, windows: Windows, eliminate: bool = True) -> Structure:
     """Backward elimination of the optional bonds of ``model`` under the BIC, each structure
     solved by exact least squares on ``windows`` (horizon 1). InputError when the model has
     no optional bond or is outside the families the exact least squares solves.
@@ -311,11 +397,10 @@ def identify_structure(model: Model, windows: Windows, eliminate: bool = True) -
     rss_full, bic = score(present)
     removed: list[int] = []
     while present and eliminate:
-        trials = {i: score(present - {i})[1] for i in sorted(present)}
-        best = min(trials, key=trials.get)
-        if not trials[best] < bic:
+        best, best_bic = best_removal(score, present, bic)
+        if best is None or not best_bic < bic:
             break
-        present, bic = present - {best}, trials[best]
+        present, bic = present - {best}, best_bic
         removed.append(best)
     rss, bic = score(present)
     _, final, genome = score.fitted(present)
@@ -358,9 +443,10 @@ def structure_of(
     (its positions smoothed first by a Savitzky-Golay window of ``smooth`` frames; 0: off):
     the pipeline of ``activebonds structure``."""
     from ...data.smoothing import smooth_positions
-    from ..costs.windows import make_windows
+    from ..costs.windows import make_windows, neighbours_of
     from ..problem import select_data
 
     data = select_data(model, recording, settings)
     positions = smooth_positions(data.positions, data.mask, smooth) if smooth else data.positions
-    return identify_structure(model, make_windows(positions, data.mask, data.dt, 1), eliminate)
+    windows = make_windows(positions, data.mask, data.dt, 1, neighbours=neighbours_of(model))
+    return identify_structure(model, windows, eliminate)

@@ -32,28 +32,32 @@ __all__ = [  # zero force's predictions are predictions.py's, named here too for
 ]
 
 
-def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float):
-    w = make_windows(positions, mask, dt, 1)
+def _one_step_terms(positions: np.ndarray, mask: np.ndarray, dt: float, neighbours=None):
+    w = make_windows(positions, mask, dt, 1, neighbours=neighbours)
     inertial = constant_velocity(w.x0, w.v0, dt)  # x_t + dt v_t = 2 x_t - x_{t-1}
     return w, w.target[:, 0] - inertial, w.weight[:, 0]  # [S, P, D], [S, P]
 
 
-def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float) -> float:
-    """RMS one-step error (mm) of the constant-velocity predictor over ``positions``' frames."""
-    _, resid, weight = _one_step_terms(positions, mask, dt)
+def zero_force_rms_mm(positions: np.ndarray, mask: np.ndarray, dt: float, neighbours=None) -> float:
+    """RMS one-step error (mm) of the constant-velocity predictor over ``positions``' frames,
+    on the terms the cost counts (``neighbours``: a model's bond graph,
+    :func:`~activebonds.identify.costs.windows.neighbours_of`; None: every marker present at
+    the start)."""
+    _, resid, weight = _one_step_terms(positions, mask, dt, neighbours)
     n = weight.sum()
     if n == 0:
         return float("nan")
     return float(np.sqrt(np.sum(weight[..., None] * resid**2) / n) * 1000.0)
 
 
-def zero_force_rms_mm_of(recordings) -> float:
+def zero_force_rms_mm_of(recordings, neighbours=None) -> float:
     """The zero-force baseline's RMS (mm) over every one-step term of several recordings
-    (trajectories; a fit on several at once adds their costs)."""
+    (trajectories; a fit on several at once adds their costs), counted as the cost counts
+    them (``neighbours``: as :func:`zero_force_rms_mm`)."""
     sq = n = 0.0
     for d in recordings:
-        terms = make_windows(d.positions, d.mask, d.dt, 1).n_terms
-        sq += zero_force_rms_mm(d.positions, d.mask, d.dt) ** 2 * terms
+        terms = make_windows(d.positions, d.mask, d.dt, 1, neighbours=neighbours).n_terms
+        sq += zero_force_rms_mm(d.positions, d.mask, d.dt, neighbours) ** 2 * terms
         n += terms
     return float(np.sqrt(sq / max(n, 1)))
 

@@ -14,6 +14,7 @@ import numpy as np
 from ...document import Section, Table
 from ...errors import InputError
 from ...physics.integrators import Integrator
+from ..costs.windows import neighbours_of
 from ..judge.ahead import DEFAULT_AHEAD, comparisons
 from ..judge.baselines import model_floor_rms_mm, zero_force_rms_mm, zero_force_rms_mm_of
 from ..judge.metrics import FreeRunMetrics, censored_text, window_metrics
@@ -40,7 +41,9 @@ class BaselinesStage:
     def run(self, fit: Fit, saved: dict | None, arrays: dict) -> Outcome:
         ident, s = fit.ident, fit.settings
         data = ident.data
-        record: dict = {"zero_force_rms_mm": zero_force_rms_mm_of(ident.all_data)}
+        record: dict = {
+            "zero_force_rms_mm": zero_force_rms_mm_of(ident.all_data, neighbours_of(ident.model))
+        }
         model = fit.model
         if s.es_horizon == 1 and Integrator(s.es_integrator, s.es_substeps).exact_backward:
             record["momentum_floor_rms_mm"] = model_floor_rms_mm(
@@ -100,14 +103,17 @@ def verdict_columns(prefix: str, record: dict) -> dict:
 def _least_squares_rms_mm(model, data) -> float | None:
     """The exact least-squares optimum's RMS (mm) of the model's family, where every free
     parameter is linear in the forces (None otherwise, or where it cannot be formed)."""
-    from ..costs.windows import make_windows
+    from ..costs.windows import make_windows, neighbours_of
     from ..solvers.lsq import least_squares, nonlinear_genes
 
     if nonlinear_genes(model):
         return None
     try:
         return float(
-            least_squares(model, make_windows(data.positions, data.mask, data.dt, 1)).rms_mm
+            least_squares(
+                model,
+                make_windows(data.positions, data.mask, data.dt, 1, 0, neighbours_of(model)),
+            ).rms_mm
         )
     except InputError:
         return None

@@ -224,10 +224,11 @@ def _starts(fit: Fit, genome) -> str | None:
     s = fit.settings
     if s.substeps == 1:
         return None
-    from ..costs.windows import join_windows, make_windows, starts_line
+    from ..costs.windows import join_windows, make_windows, neighbours_of, starts_line
 
+    acting = neighbours_of(fit.ident.model)
     windows = join_windows(
-        [make_windows(d.positions, d.mask, d.dt, 1, s.smooth) for d in fit.ident.all_data]
+        [make_windows(d.positions, d.mask, d.dt, 1, s.smooth, acting) for d in fit.ident.all_data]
     )
     return starts_line(fit.ident.model, windows, genome, s.substeps, s.integrator)
 

@@ -1,0 +1,105 @@
+"""The walk family: a body that walks, each marker pushed by a force periodic in the phase of
+the gait, nothing holding it to a place in the room.
+
+Walking repeats: a marker's acceleration at a given phase of the stride is much the same each
+stride (the swing leg's pendulum, the heel strike, the pelvis' rise and fall), and it is what
+the zero-force (constant-velocity) predictor misses. Each marker carries a periodic force
+(:mod:`~activebonds.bonds.periodic`), a Fourier series of ``harmonics`` in the drive's phase
+``psi = 2 pi f t``, ``f`` the stride's frequency found from the data
+(:mod:`.stride`), the model's time from the fitted frames' first. There is no anchor and no
+spring to the room: the forces move the body as the gait does wherever it walks, overground or
+on a treadmill. Optionally (``segments``) the markers of one body segment (pairs whose distance
+varies by at most that share of its mean over the fitted frames) are joined by damped
+springs at their mean distance.
+
+Given the phase, every force is linear in its parameters: the exact one-step least squares
+solves every coefficient (and the segments' stiffnesses and dampings) at once
+(:func:`~..gait.family.solve`). Nothing here reads a marker's name, the rate or the frame count
+but as numbers of the data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .... import bonds
+from ..gait.family import FORCE_REACH, _periodic
+from .stride import Stride
+
+
+@dataclass(frozen=True)
+class WalkVariant:
+    """One model of the family: the periodic forces' ``harmonics`` and the segments' spread
+    (0: no segment springs)."""
+
+    harmonics: int = 8
+    segments: float = 0.0
+
+    def text(self) -> str:
+        seg = (
+            f", markers of a segment (distance spread within {100 * self.segments:g} %) "
+            "joined by damped springs"
+            if self.segments
+            else ""
+        )
+        return f"a periodic force per marker, {self.harmonics} harmonics of the stride{seg}"
+
+
+def walk_spec(
+    positions: np.ndarray,
+    names: Sequence[str],
+    stride: Stride,
+    variant: WalkVariant = WalkVariant(),
+    mass: float = 1.0,
+    name: str = "walk",
+):
+    """The model of ``variant`` for ``positions`` [F, P, D] (the frames it will be fitted on,
+    NaN where missing; ``names``: one per particle, the markers'), its drive a clock at
+    ``stride``'s frequency: a ModelSpec to solve (:func:`~..gait.family.solve`)."""
+    from ....model.schema import ModelSpec
+
+    x = np.asarray(positions, np.float64)
+    dt = 1.0 / stride.rate
+    held = []
+    for i, n in enumerate(names):
+        acc = np.linalg.norm(np.diff(x[:, i], 2, axis=0), axis=-1) / dt**2
+        bound = FORCE_REACH * mass * float(np.nanmax(acc)) if np.isfinite(acc).any() else 1.0
+        held.append(_periodic(n, variant.harmonics, max(bound, 1e-6), x.shape[2]))
+    if variant.segments > 0:
+        held += segment_bonds(x, names, variant.segments, mass, stride.rate)
+    particles = [{"name": n, "mass": mass} for n in names]
+    return ModelSpec.model_validate(
+        {
+            "name": name,
+            "dimension": x.shape[2],
+            "drive": {"frequency": stride.frequency},
+            "particle": particles,
+            "bond": held,
+        }
+    )
+
+
+def segment_bonds(x: np.ndarray, names, spread: float, mass: float, rate: float) -> list[dict]:
+    """Damped springs at their mean length between the markers whose distance over ``x``
+    [F, P, D] varies (standard deviation) by at most ``spread`` of its mean."""
+    d = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1)
+    mean, sd = np.nanmean(d, axis=0), np.nanstd(d, axis=0)
+    k_hi, c_hi = 10.0 * mass * (np.pi * rate) ** 2, 20.0 * mass * rate
+    out = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if np.isfinite(mean[i, j]) and mean[i, j] > 0 and sd[i, j] <= spread * mean[i, j]:
+                out.append(
+                    {
+                        "kind": bonds.binary.KIND.name,
+                        "particles": [names[i], names[j]],
+                        "optional": True,
+                        "rest_length": float(mean[i, j]),
+                        "stiffness": {"value": 0.0, "min": 0.0, "max": k_hi},
+                        "damping": {"value": 0.0, "min": 0.0, "max": c_hi},
+                    }
+                )
+    return out
