@@ -144,13 +144,7 @@ def box_levenberg_marquardt(
     ``secant``: a :class:`.hybrid.Hybrid` (dense systems only), else Gauss-Newton's model."""
     if stop is None:
         from ...runtime import stop_requested as stop
-    lower = jax.tree.map(jnp.asarray, lower)
-    upper = jax.tree.map(jnp.asarray, upper)
-    y = jax.tree.map(lambda x, lo, hi: jnp.clip(jnp.asarray(x), lo, hi), y0, lower, upper)
-    r = residual(y)
-    loss = 0.5 * float(_dot(r, r))
-    unknowns = sum(leaf.size for leaf in jax.tree.leaves(y0))
-    dof = max(1, sum(leaf.size for leaf in jax.tree.leaves(r)) - unknowns)
+    lower, upper, y, r, loss, dof = _start(residual, y0, lower, upper)
     system, grad = linearize(y, r)
     scaling = diagonal(system)
     hold = _held(y, grad, lower, upper)
@@ -161,12 +155,7 @@ def box_levenberg_marquardt(
         if stop():
             raise Interrupted(y, steps)
         big = HOLD * float(scale(system)) if scale is not None else HOLD
-        damp = _damping(damping, scaling, hold, big)
-        model = system if secant is None else secant.model(system)
-        d = step(model, damp)
-        if secant is not None and model is not system and not _finite(d):
-            secant.fallback()
-            model, d = system, step(system, damp)
+        model, d = _trial(system, secant, step, _damping(damping, scaling, hold, big))
         y_new, taken = _project(y, d, hold, lower, upper)
         r_new = residual(y_new)
         loss_new, g_d, done = (
@@ -177,10 +166,7 @@ def box_levenberg_marquardt(
             on_step(steps, loss_new)
         predicted = g_d + 0.5 * float(curvature(model, taken))
         threshold = 0.5 * precision**2 * (2.0 * loss / dof)
-        if abs(predicted) < threshold or not np.isfinite(predicted):
-            flat += 1
-        elif predicted < 0:
-            flat = 0
+        flat = _flat(flat, predicted, threshold)
         change = loss_new - loss if np.isfinite(loss_new) else np.inf
         accept = predicted < 0 and change <= LOW * predicted
         if not accept:
@@ -204,22 +190,56 @@ def box_levenberg_marquardt(
         hold = _held(y, grad, lower, upper)
         if flat >= FLAT_STEPS:
             return y, steps, flat_message(threshold / max(loss, 1e-300))
-        if scale is not None and -change < 0.5 * (2.0 * loss / dof):
+        variance = 2.0 * loss / dof
+        if scale is not None and -change < 0.5 * variance:
             jitter = JITTER * float(scale(system))
-            gauss_newton = step(
-                system, _damping(jitter, jax.tree.map(jnp.ones_like, scaling), hold, big)
-            )
-            gauss_newton = jax.tree.map(lambda x, h: jnp.where(h, 0.0, x), gauss_newton, hold)
-            distance = -float(_dot(grad, gauss_newton)) / (2.0 * loss / dof)
-            if distance < precision**2:
-                return (
-                    y,
-                    steps,
-                    f"converged to {precision:g} of a standard deviation "
-                    "(a Gauss-Newton step, the genes on their bounds held, would move the "
-                    "estimate less)",
-                )
+            if _precise(system, grad, step, hold, scaling, jitter, big, variance, precision):
+                return y, steps, PRECISE.format(precision)
     return y, steps, f"stopped at the step limit ({max_steps}) before converging"
+
+
+PRECISE = (
+    "converged to {:g} of a standard deviation (a Gauss-Newton step, the genes on their "
+    "bounds held, would move the estimate less)"
+)
+
+
+def _start(residual, y0, lower, upper):
+    """(lower, upper, the start clipped to them, its residuals, loss, degrees of freedom)."""
+    lower = jax.tree.map(jnp.asarray, lower)
+    upper = jax.tree.map(jnp.asarray, upper)
+    y = jax.tree.map(lambda x, lo, hi: jnp.clip(jnp.asarray(x), lo, hi), y0, lower, upper)
+    r = residual(y)
+    unknowns = sum(leaf.size for leaf in jax.tree.leaves(y0))
+    dof = max(1, sum(leaf.size for leaf in jax.tree.leaves(r)) - unknowns)
+    return lower, upper, y, r, 0.5 * float(_dot(r, r)), dof
+
+
+def _flat(flat: int, predicted: float, threshold: float) -> int:
+    """Trial steps in a row whose predicted gain is under ``threshold`` (a step predicting a
+    real gain resets the count)."""
+    if abs(predicted) < threshold or not np.isfinite(predicted):
+        return flat + 1
+    return 0 if predicted < 0 else flat
+
+
+def _trial(system, secant, step, damp):
+    """(the model the step is solved on, the step): the hybrid's choice where there is one,
+    Gauss-Newton's where its step is not finite."""
+    model = system if secant is None else secant.model(system)
+    d = step(model, damp)
+    if secant is not None and model is not system and not _finite(d):
+        secant.fallback()
+        model, d = system, step(system, damp)
+    return model, d
+
+
+def _precise(system, grad, step, hold, scaling, jitter, big, variance, precision) -> bool:
+    """Whether a Gauss-Newton step, the held genes held, would move the estimate by less than
+    ``precision`` standard deviations (the precision test of :mod:`.lm`)."""
+    gauss_newton = step(system, _damping(jitter, jax.tree.map(jnp.ones_like, scaling), hold, big))
+    gauss_newton = jax.tree.map(lambda x, h: jnp.where(h, 0.0, x), gauss_newton, hold)
+    return -float(_dot(grad, gauss_newton)) / variance < precision**2
 
 
 def _finite(tree) -> bool:
