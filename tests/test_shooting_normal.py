@@ -26,6 +26,7 @@ from activebonds.identify.solvers.refine import Bounded, Refinement
 from activebonds.identify.solvers.shooting_normal import (
     FLOOR,
     block_tridiagonal_solve,
+    curvature,
     damped_step,
     make_normal,
     marginal_information,
@@ -201,3 +202,15 @@ def test_structured_and_dense_levenberg_marquardt_end_at_the_same_parameters():
     # d standard deviations from the optimum raise the loss by d^2 sigma^2 / 2 over a loss of
     # about dof sigma^2 / 2: at d = 0.05 and ~300 degrees of freedom, 1e-5 relative at most
     assert structured.end_rms_mm == pytest.approx(dense.end_rms_mm, rel=1e-5)
+
+
+def test_the_curvature_of_a_step_is_its_dense_quadratic_form(problem):
+    """d^T J^T J d from the blocks (the prediction of a step projected onto the bounds, which
+    is not the damped solve's) is the dense matrix's, for an arbitrary step."""
+    p, k, n = problem["p"], problem["k"], problem["n"]
+    a = problem["jac"].T @ problem["jac"]
+    rng = np.random.default_rng(5)
+    du, ds = rng.normal(size=p), rng.normal(size=(k, n))
+    got = float(curvature(problem["normal"], (jnp.asarray(du), jnp.asarray(ds))))
+    d = np.concatenate([du, ds.ravel()])
+    assert got == pytest.approx(float(d @ a @ d), rel=1e-9)

@@ -66,6 +66,8 @@ class RestartCost:
                         r.bounded.interior,
                         r.jacobian(horizon),
                         r.steps(part, max_steps),
+                        r.bounded.box,  # positional: callers' stand-ins take *args
+                        r.model,
                     )
             except lm.Interrupted as stop:
                 stopped = stop

@@ -97,6 +97,7 @@ class ShootingCost:
                     r.bounded.interior,
                     step,
                     r.steps("shooting", max_steps),
+                    r.bounded.box,
                 )
             except lm.Interrupted as stop:
                 stopped = stop

@@ -19,8 +19,12 @@ the previous stage's result), on the cost ``--cost`` names; the stage is the cos
   alone on the restart cost of that horizon). A shooting stage after another starts its
   states from the previous stage's trajectory.
 
-Bounds are kept through the search space: a gene is ``lo + (hi - lo) (1 + sin u) / 2`` of an
-unbounded variable u (the transform of MINUIT), so no step can leave them. A stage whose
+Bounds are kept by an active set (:mod:`.box`, the default ``bounds="active"``): the genes
+are the unknowns, a gene on its bound whose gradient points out is held, the steps are
+projected onto the box; the genes-only stage's model of the loss is NL2SOL's adaptive one
+(:mod:`.hybrid`). ``bounds="sine"`` keeps the earlier way, through the search space: a gene
+is ``lo + (hi - lo) (1 + sin u) / 2`` of an unbounded variable u (the transform of MINUIT),
+so no step can leave them (``benchmarks/solver.py`` compares the two). A stage whose
 result is non-finite, outside the bounds, or costs more than its start is rejected: the
 previous result is kept and the stage's record says why in one line.
 """
@@ -46,10 +50,13 @@ from ..costs.windows import (
 )
 from ..problem import Identification
 from ..settings import FitSettings
+from .box import Box
 from .stage import (  # noqa: F401 (the stage's parts, where callers have found them)
+    BOUNDS,
     EDGE,
     INITIAL_DAMPING,
     MAX_STEPS,
+    MODEL,
     WARM_STEPS,
     Bounded,
     Stage,
@@ -69,14 +76,30 @@ class Refinement:
     stage and the checks against constant velocity use them too), the per-frame states of
     the last stage that had them."""
 
-    def __init__(self, ident: Identification, settings: FitSettings, solver: str = "structured"):
+    def __init__(
+        self,
+        ident: Identification,
+        settings: FitSettings,
+        solver: str = "structured",
+        bounds: str | None = None,
+        model: str | None = None,
+    ):
         """``solver``: "structured" (normal equations by block, the states of a shooting
-        stage eliminated) or "dense" (optimistix on the whole Jacobian, for comparison)."""
+        stage eliminated) or "dense" (optimistix on the whole Jacobian, for comparison);
+        ``bounds``: "active" (:mod:`.box`) or "sine" (:class:`.stage.Bounded`; always with
+        "dense", which has no bounds of its own), default :data:`.stage.BOUNDS`; ``model``:
+        the genes-only stage's model with the active set, "hybrid" or "gauss-newton"
+        (default :data:`.stage.MODEL`)."""
         self.ident = ident
         self.settings = settings
         self.cost = costs.get(settings.cost)
         self.solver = solver
-        self.bounded = Bounded(ident.problem.lower, ident.problem.upper)
+        bounds = BOUNDS if bounds is None else bounds
+        if bounds not in ("active", "sine"):
+            raise ValueError(f"bounds must be 'active' or 'sine', got {bounds!r}")
+        self.model = MODEL if model is None else model
+        kind = Box if bounds == "active" and solver != "dense" else Bounded
+        self.bounded = kind(ident.problem.lower, ident.problem.upper)
         self.recordings = ident.all_data
         self.states = None  # per recording, per-frame states of the last shooting stage
         self._residuals: dict[int, tuple] = {}  # by horizon: (windows, jitted residuals)

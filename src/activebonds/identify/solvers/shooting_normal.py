@@ -249,3 +249,14 @@ def marginal_information(normal: Normal):
     # a jitter of T alone keeps its Cholesky defined where a state is unseen
     reduced, _, _ = eliminate(normal, 0.0, 1e-16 * scale)
     return 0.5 * (reduced + reduced.T)
+
+
+@jax.jit
+def curvature(normal: Normal, d):
+    """d^T (J^T J) d for a step d = (du [p], dS [K, n]), from the blocks (no dense matrix):
+    the prediction of a step that is not the damped solve's (projected onto bounds)."""
+    du, ds = d
+    states = jnp.einsum("ki,kij,kj->", ds, normal.diag, ds)
+    states += 2.0 * jnp.einsum("ki,kij,kj->", ds[:-1], normal.off, ds[1:])
+    cross = 2.0 * jnp.einsum("ki,kip,p->", ds, normal.cross, du)
+    return states + cross + du @ (normal.params @ du)

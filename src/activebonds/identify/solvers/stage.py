@@ -13,8 +13,10 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from .box import box_levenberg_marquardt
+from .hybrid import Hybrid, dense_curvature, dense_step
 from .lm import Interrupted, levenberg_marquardt
-from .shooting_normal import damped_step, floored, marquardt_diagonal
+from .shooting_normal import curvature, damped_step, floored, marquardt_diagonal
 
 MAX_STEPS = 500  # Levenberg-Marquardt steps per stage, at most
 # ... and of a shooting stage's warm start on the restart cost: a start for the shooting, not
@@ -26,6 +28,12 @@ WARM_STEPS = 50
 INITIAL_DAMPING = 1e-3
 RTOL, ATOL = 1e-10, 1e-12  # optimistix's step-size convergence test (search space)
 EDGE = 1e-9  # a start on a bound is moved this far (of the span) inside, where sin' != 0
+# how the bounds are kept: "active" (:mod:`.box`: the genes themselves, an active set, steps
+# projected onto the box) or "sine" (:class:`Bounded`: the transform, the solver unbounded)
+BOUNDS = "active"
+# the model of the genes-only stage's loss: "hybrid" (NL2SOL's, :mod:`.hybrid`) or
+# "gauss-newton"; the shooting stage's is Gauss-Newton's (its unknowns include the states)
+MODEL = "hybrid"
 
 
 @dataclass
@@ -64,7 +72,10 @@ class StageInterrupted(KeyboardInterrupt):
 
 
 class Bounded:
-    """The search space's box as an unbounded space: g = lo + span (1 + sin u) / 2."""
+    """The search space's box as an unbounded space: g = lo + span (1 + sin u) / 2 (``box``
+    None: the solver sees no bounds; :class:`.box.Box` for the active set)."""
+
+    box = None
 
     def __init__(self, lower, upper):
         self.lower = np.asarray(lower, np.float64)
@@ -128,16 +139,52 @@ def _dense_step(system, damping):
     return jnp.linalg.solve(jtj + jnp.diag(damp), -grad)
 
 
-def solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=None):
+def solve(
+    residual,
+    y0,
+    max_steps: int,
+    interior=None,
+    jacobian=None,
+    on_step=None,
+    box=None,
+    model: str = MODEL,
+):
     """Levenberg-Marquardt from y0 (a vector) on its normal equations (J^T J formed once per
     accepted step, each damping a solve of the parameters' size): as :func:`solve_dense`.
     ``jacobian``: ``y -> J`` (default: forward mode through ``residual``); ``on_step(steps,
-    loss)`` after every evaluation."""
+    loss)`` after every evaluation. ``box``: (lower, upper) of y, kept by :mod:`.box`'s active
+    set (y the genes themselves), on ``model``'s model of the loss ("hybrid":
+    :mod:`.hybrid`, or "gauss-newton"); None: y unbounded (the sine transform's u)."""
     if jacobian is None:
         jacobian = jax.jit(jax.jacfwd(lambda y: ravel_pytree(residual(y))[0]))
 
     def flat(y):
         return ravel_pytree(residual(y))[0]
+
+    if box is not None:
+
+        def linearize_box(y, r):
+            j = jacobian(y)
+            jtj, grad = _normal(j, r)
+            return (jtj, grad, j), grad
+
+        return box_levenberg_marquardt(
+            flat,
+            linearize_box,
+            dense_step,
+            dense_curvature,
+            y0,
+            box[0],
+            box[1],
+            max_steps,
+            RTOL,
+            ATOL,
+            scale=_dense_scale,
+            diagonal=_dense_diagonal,
+            damping=INITIAL_DAMPING,
+            on_step=on_step,
+            secant=Hybrid(int(np.size(y0))) if model == "hybrid" else None,
+        )
 
     def linearize(y, r):  # r: the residuals at y, already evaluated
         j = jacobian(y)
@@ -161,6 +208,11 @@ def solve(residual, y0, max_steps: int, interior=None, jacobian=None, on_step=No
 
 
 @jax.jit
+def _normal(j, r):
+    return j.T @ j, j.T @ r
+
+
+@jax.jit
 def _dense_scale(system):
     return jnp.max(jnp.diagonal(system[0]))
 
@@ -178,10 +230,18 @@ def _ravel(tree):
 
 
 def solve_shooting(
-    residual, normal, y0, max_steps: int, interior=None, step=damped_step, on_step=None
+    residual,
+    normal,
+    y0,
+    max_steps: int,
+    interior=None,
+    step=damped_step,
+    on_step=None,
+    box=None,
 ):
     """Levenberg-Marquardt on a shooting stage's structured normal equations
-    (:mod:`.shooting_normal`): as :func:`solve_dense`, y0 = (u, X [K, P, D], V [K, P, D])."""
+    (:mod:`.shooting_normal`): as :func:`solve_dense`, y0 = (u, X [K, P, D], V [K, P, D]).
+    ``box``: (lower, upper) of u, kept by :mod:`.box`'s active set (the states unbounded)."""
     u0, x0, v0 = y0
     k, shape = x0.shape[0], x0.shape
 
@@ -200,6 +260,25 @@ def solve_shooting(
 
     z0 = (u0, jnp.concatenate([x0.reshape(k, -1), v0.reshape(k, -1)], axis=1))
     try:
+        if box is not None:
+            free = jnp.full(z0[1].shape, jnp.inf)
+            z, steps, message = box_levenberg_marquardt(
+                flat,
+                linearize,
+                step,
+                curvature,
+                z0,
+                (jnp.asarray(box[0]), -free),
+                (jnp.asarray(box[1]), free),
+                max_steps,
+                RTOL,
+                ATOL,
+                scale=_normal_scale,
+                diagonal=marquardt_diagonal,
+                damping=INITIAL_DAMPING,
+                on_step=on_step,
+            )
+            return split(z), steps, message
         z, steps, message = levenberg_marquardt(
             flat,
             linearize,
