@@ -128,7 +128,14 @@ class _Scorer:
         self.floor = self.zero_force * RESOLUTION**2
         self.cache: dict[frozenset, tuple[float, float]] = {}
         self.fits: dict[frozenset, tuple[float, Model, np.ndarray]] = {}
-        self.subsets = _Subsets.of(self, pool)
+        self._subsets: _Subsets | None | bool = False  # built on first use (False: not yet)
+
+    @property
+    def subsets(self) -> _Subsets | None:
+        """The compressed problem of every candidate (:class:`_Subsets`), or None."""
+        if self._subsets is False:
+            self._subsets = _Subsets.of(self, self.pool)
+        return self._subsets
 
     def model(self, present: frozenset) -> Model:
         spec = with_presence(self.spec, {i: i in present for i in self.pool})
@@ -366,9 +373,12 @@ def exact_optimum(model: Model, windows: Windows) -> tuple[ModelSpec, float]:
 
 
 def identify_structure(model: Model, windows: Windows, eliminate: bool = True) -> Structure:
-    """:func:`_identify` with one BLAS thread: its solves are of a few hundred unknowns each,
-    where threads cost more than they give, and on a loaded machine (threads waiting for a
-    core) a hundred times more (``benchmarks/structure.py``)."""
+    """:func:`_identify`; the elimination with one BLAS thread: its solves are of a few
+    hundred unknowns each, where threads cost more than they give, and on a loaded machine
+    (threads waiting for a core) a hundred times more (``benchmarks/structure.py``). Without
+    elimination, one solve of every candidate (the BLAS library's own threads)."""
+    if not eliminate:
+        return _identify(model, windows, eliminate)
     with threadpool_limits(limits=1, user_api="blas"):
         return _identify(model, windows, eliminate)
 
@@ -394,6 +404,8 @@ def _identify(model: Model, windows: Windows, eliminate: bool = True) -> Structu
     model, windows = held_out_of_reach(model, windows)
     score = _Scorer(model, windows, pool)
     present = frozenset(pool)
+    if not eliminate:  # one solve: the model on its own, no compressed problem of subsets
+        score.fitted(present)
     rss_full, bic = score(present)
     removed: list[int] = []
     while present and eliminate:
