@@ -19,8 +19,8 @@ the previous stage's result), on the cost ``--cost`` names; the stage is the cos
   alone on the restart cost of that horizon). A shooting stage after another starts its
   states from the previous stage's trajectory.
 
-Bounds are kept by an active set (:mod:`.box`, the default ``bounds="active"``; a refinement
-on the shooting cost keeps the sine transform, :data:`SHOOTING`): the genes
+Bounds are kept by an active set (:mod:`.box`, the default ``bounds="active"``; a cost may
+name its own, the shooting cost keeps the sine transform): the genes
 are the unknowns, a gene on its bound whose gradient points out is held, the steps are
 projected onto the box; the genes-only stage's model of the loss is NL2SOL's adaptive one
 (:mod:`.hybrid`). ``bounds="sine"`` keeps the earlier way, through the search space: a gene
@@ -68,12 +68,6 @@ from .stage import (  # noqa: F401 (the stage's parts, where callers have found 
     sum_squares,
 )
 
-# the bounds of a refinement on the shooting cost: on MuJoCo's thrown body's flight (39
-# frames, the masses free under their total) the active set's shooting stage, on
-# Gauss-Newton's model, stopped at its 100 steps short of the optimum and the masses lost
-# auto's judge; the sine transform's converges there (tests/test_flight_masses.py)
-SHOOTING = "sine"
-
 
 class Refinement:
     """The stages of one identification's refinement, run one at a time, each on the cost its
@@ -101,8 +95,8 @@ class Refinement:
         self.settings = settings
         self.cost = costs.get(settings.cost)
         self.solver = solver
-        if bounds is None:  # a shooting refinement keeps the sine transform (:data:`SHOOTING`)
-            bounds = SHOOTING if settings.cost == "shooting" else BOUNDS
+        if bounds is None:  # the cost's own where it has one (the shooting cost's: "sine")
+            bounds = getattr(self.cost, "bounds", BOUNDS)
         if bounds not in ("active", "sine"):
             raise ValueError(f"bounds must be 'active' or 'sine', got {bounds!r}")
         self.model = MODEL if model is None else model
