@@ -22,6 +22,7 @@ LAYERS = (
     (
         "errors",
         "atomic",
+        "nanstats",
         "runtime",
         "document",
         "lazy",

@@ -137,6 +137,10 @@ class _Scorer:
             self._subsets = _Subsets.of(self, self.pool)
         return self._subsets
 
+    @subsets.setter
+    def subsets(self, value: _Subsets | None) -> None:  # None: every structure on its own
+        self._subsets = value
+
     def model(self, present: frozenset) -> Model:
         spec = with_presence(self.spec, {i: i in present for i in self.pool})
         return build(spec, disable=self.disabled)
