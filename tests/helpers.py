@@ -211,3 +211,18 @@ def figure_size_px(svg: Path, dpi: float) -> tuple[float, float]:
     root = ET.parse(svg).getroot()
     w, h = (float(root.attrib[k].removesuffix("pt")) for k in ("width", "height"))
     return w / 72 * dpi, h / 72 * dpi
+
+
+def assert_periodic_coefficients(got, want, harmonics: int = 3) -> None:
+    """A periodic force's cos/sin coefficients of the first ``harmonics`` equal (rtol 1e-5):
+    the gait and walk families' recovery tests."""
+    import numpy as np
+
+    for h in range(1, harmonics + 1):
+        for wave in ("cos", "sin"):
+            np.testing.assert_allclose(
+                getattr(got, f"{wave}{h}").value,
+                getattr(want, f"{wave}{h}").value,
+                rtol=1e-5,
+                atol=1e-6,
+            )

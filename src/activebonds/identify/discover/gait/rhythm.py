@@ -26,17 +26,13 @@ MIN_STRIDES = 3.0  # strides in the frames, at least (a period judged on fewer i
 TRAVEL_SHARE = 0.5
 
 
-@dataclass(frozen=True)
-class Rhythm:
-    """A recording's stride: ``period`` frames at ``rate`` Hz, ``confidence`` the
-    autocorrelation at that lag, the frames it was found on, and the body's mean velocity
-    (m/s per axis: zero where it stays in place)."""
+class Cadence:
+    """What a stride period of ``period`` frames means at ``rate`` Hz over ``frames`` frames
+    (a dataclass with those fields)."""
 
     period: float
-    confidence: float
     rate: float
     frames: int
-    velocity: tuple[float, ...]
 
     @property
     def frequency(self) -> float:
@@ -46,6 +42,19 @@ class Rhythm:
     @property
     def strides(self) -> float:
         return self.frames / self.period
+
+
+@dataclass(frozen=True)
+class Rhythm(Cadence):
+    """A recording's stride: ``period`` frames at ``rate`` Hz, ``confidence`` the
+    autocorrelation at that lag, the frames it was found on, and the body's mean velocity
+    (m/s per axis: zero where it stays in place)."""
+
+    period: float
+    confidence: float
+    rate: float
+    frames: int
+    velocity: tuple[float, ...]
 
     @property
     def rhythmic(self) -> bool:

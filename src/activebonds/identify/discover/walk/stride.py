@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ....nanstats import nanmean
+from ..gait.rhythm import Cadence
 
 SHORTEST = 0.4  # s: no stride of a legged body is shorter (a running human's is ~0.7 s)
 MIN_STRIDES = 1.25  # strides the frames must hold: the lag compares this share of them at least
@@ -28,7 +29,7 @@ MIN_OVERLAP = 8  # frames compared at a lag, at least
 
 
 @dataclass(frozen=True)
-class Stride:
+class Stride(Cadence):
     """A stride of ``period`` frames at ``rate`` Hz; ``mismatch`` the shape's change over
     one period (0: exact repetition), ``frames`` the frames it was found on."""
 
@@ -36,15 +37,6 @@ class Stride:
     mismatch: float
     rate: float
     frames: int
-
-    @property
-    def frequency(self) -> float:
-        """Strides per second (Hz)."""
-        return self.rate / self.period
-
-    @property
-    def strides(self) -> float:
-        return self.frames / self.period
 
     @property
     def trusted(self) -> bool:
