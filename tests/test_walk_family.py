@@ -96,6 +96,20 @@ def test_stepping_in_place_swinging_or_wandering_is_no_walk():
     assert "no stride" in recognise(wander, 100.0, _names(wander))
 
 
+@pytest.mark.parametrize("drift", [0.8, -2.0])
+def test_a_body_whose_feet_slide_over_the_floor_is_no_walk(drift):
+    """The treadmill walk carried along at ``drift`` m/s (the whole recording, belt and
+    body): the feet's surface moves and so does the body in the room, as a body sliding or
+    tumbling over a floor (a thrown box) does; the same walk without the drift is one."""
+    x, rate, _ = _walker(treadmill=True)
+    t = np.arange(x.shape[0]) / rate
+    assert isinstance(recognise(x, rate, _names(x)), Walk)
+    slid = x.copy()
+    slid[..., 0] += drift * t[:, None]
+    found = recognise(slid, rate, _names(x))
+    assert "do not stand" in found, found
+
+
 def test_the_floor_is_found_through_gaps():
     x, rate, _ = _walker(rate=150.0)
     gappy = x.copy()
@@ -191,3 +205,50 @@ def test_the_walk_candidate_is_proposed_where_the_body_walks_and_not_in_place(tm
     ws = _workspace(tmp_path, still, rate, (0, int(0.8 * still.shape[0])))
     assert candidate.propose(ws, None) is None
     assert any("walk: not proposed" in line for line in ws.said)
+
+
+def test_groups_no_force_joins_are_solved_apart_to_the_whole_models_optimum():
+    """The walk's markers fall into groups (the pelvis' three joined by segment springs, each
+    foot's heel and toe, every other marker alone); the solve group by group reaches the
+    optimum of one solve of the whole model, coefficient for coefficient, on a noisy walk."""
+    from activebonds.identify.discover.gait import family
+    from activebonds.model import build
+
+    rate = 100.0
+    x, _, period_s = _walker(rate=rate, seed=3)
+    names = _names(x)
+    stride = Stride(period_s * rate, 0.0, rate, x.shape[0])
+    spec = walk_spec(x, names, stride, WalkVariant(harmonics=3, segments=1e-3))
+    parts = family.groups(spec)
+    sizes = sorted(len(p) for p, _ in parts)
+    assert 1 < len(parts) < len(names) and sizes[-1] >= 2
+    assert sorted(k for p, _ in parts for k in p) == list(range(len(names)))
+    assert sorted(i for _, b in parts for i in b) == list(range(len(spec.bond)))
+    data = Trajectory(x, np.ones(x.shape[:2], bool), tuple(names), rate)
+    apart = family.solve(spec, data, (0, x.shape[0]))
+    whole = build(family._solved(spec, data, (0, x.shape[0])))
+    got, want = _numbers(apart.spec.bond), _numbers(whole.spec.bond)
+    assert len(got) == len(want) and np.abs(want).max() > 0.1  # a problem with an answer
+    np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9)
+    from activebonds.model.schema import GravityParam
+
+    free_gravity = GravityParam(value=9.8, min=5.0, max=12.0)  # one magnitude joins them all
+    assert len(family.groups(spec.model_copy(update={"gravity": free_gravity}))) == 1
+
+
+def _numbers(bonds) -> np.ndarray:
+    """Every number of the bonds' values, in order."""
+    out: list[float] = []
+
+    def walk(v):
+        if isinstance(v, dict):
+            for key in sorted(v):
+                walk(v[key])
+        elif isinstance(v, list):
+            for item in v:
+                walk(item)
+        elif isinstance(v, float):
+            out.append(v)
+
+    walk([b.model_dump() for b in bonds])
+    return np.array(out)

@@ -36,6 +36,7 @@ from ...model import Gene, Model
 from ...model.params import Params
 from ...physics.forces import total_force
 from ..costs.windows import Windows, start_phases
+from .lsq_blocks import blocks
 
 
 @dataclass(frozen=True)
@@ -243,8 +244,8 @@ def linear_problem(model: Model, windows: Windows) -> LinearProblem:
     scale = dt**2 / np.asarray(base.mass, np.float64)[None, :, None]
     names = tuple(cols)
     columns = np.zeros((int(rows.sum()), len(names)))  # no linear unknown: no column
-    for k, n in enumerate(names):
-        columns[:, k] = (cols[n] * scale).ravel()[rows]
+    for k, n in enumerate(names):  # each unknown's forces freed once it is a column
+        columns[:, k] = (cols.pop(n) * scale).ravel()[rows]
     target = (windows.target[:, 0] - (x + dt * v)).ravel()[rows]
     position = {n: k for k, n in enumerate(names)}
     return LinearProblem(
@@ -278,7 +279,8 @@ def _lstsq(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     well-conditioned triangular factor (as :func:`compress` gives), else by a rank-revealing
     QR (LAPACK gelsy)."""
     n = a.shape[1]
-    if a.shape[0] >= n and not np.tril(a[:n], -1).any():
+    # rows below the square: zero in a compressed factor, not in a subset of its columns
+    if a.shape[0] >= n and not np.tril(a[:n], -1).any() and not a[n:].any():
         diag = np.abs(np.diag(a))
         if n and diag.min() > 1e-10 * diag.max():
             return solve_triangular(a[:n], b[:n], check_finite=False)
@@ -286,6 +288,35 @@ def _lstsq(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, bool]:
+    """The least-squares unknowns (natural units) and whether the optimum is exact; block by
+    block where the problem falls apart (:func:`~.lsq_blocks.blocks`: the same optimum),
+    each block as :func:`_solve_block` solves it."""
+    parts = blocks(problem.columns, problem.pairs)
+    if len(parts) == 1:
+        return _solve_block(problem, bounded)
+    theta, exact = np.zeros(problem.columns.shape[1]), True
+    place = np.full(len(theta), -1)
+    for rows, unknowns in parts:
+        place[unknowns] = np.arange(len(unknowns))
+        pairs = tuple((place[k], place[p], lo, hi) for k, p, lo, hi in problem.pairs
+                      if place[k] >= 0)  # fmt: skip
+        sub = LinearProblem(
+            columns=problem.columns[np.ix_(rows, unknowns)],
+            offset=problem.offset[rows],
+            target=problem.target[rows],
+            names=tuple(problem.names[k] for k in unknowns),
+            lower=problem.lower[unknowns],
+            upper=problem.upper[unknowns],
+            pairs=pairs,
+            n_terms=problem.n_terms,
+        )
+        theta[unknowns], ok = _solve_block(sub, bounded)
+        exact = exact and ok
+        place[unknowns] = -1
+    return theta, exact
+
+
+def _solve_block(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, bool]:
     """The least-squares unknowns (natural units) and whether the optimum is exact.
 
     The system is compressed first (:func:`compress`, the same cost in K + 1 rows), its
@@ -302,6 +333,8 @@ def solve(problem: LinearProblem, bounded: bool = True) -> tuple[np.ndarray, boo
     rhs = problem.target - problem.offset
     if a.shape[1] == 0:
         return np.zeros(0), True
+    if a.shape[0] == 0:  # unknowns no prediction sees: any value in the bounds
+        return np.clip(0.0, problem.lower, problem.upper), True
     norm = np.linalg.norm(a, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
     a_s, c = compress(a / norm, rhs)  # scaled columns, compressed

@@ -137,9 +137,64 @@ def _periodic(name: str, harmonics: int, bound: float, dimension: int) -> dict:
 def solve(spec, recording, frames: tuple[int, int]):
     """The model of ``spec`` with every stiffness, damping and coefficient at the exact one-step
     least squares on ``frames`` of ``recording`` (the drive's phase tracked along it): a
-    Model."""
+    Model. Where the bonds split the particles into groups no force joins (:func:`groups`),
+    each group is solved on its own: the same optimum (the one-step cost is a sum over the
+    groups, their unknowns apart), a problem the size of one group at a time."""
+    from ....model import build
+
+    parts = groups(spec)
+    if len(parts) == 1:
+        return build(_solved(spec, recording, frames))
+    solved = list(spec.bond)
+    for particles, held in parts:
+        sub = spec.model_copy(
+            update={
+                "particle": [spec.particle[k] for k in particles],
+                "bond": [spec.bond[i] for i in held],
+            }
+        )
+        for i, bond in zip(held, _solved(sub, recording, frames).bond, strict=True):
+            solved[i] = bond
+    return build(spec.model_copy(update={"bond": solved}))
+
+
+def _solved(spec, recording, frames: tuple[int, int]):
     from ....model import build
     from ...settings import FitSettings
     from ..structure import structure_of
 
-    return build(structure_of(build(spec), recording, FitSettings(frames=frames), 0, False).spec)
+    return structure_of(build(spec), recording, FitSettings(frames=frames), 0, False).spec
+
+
+def groups(spec) -> list[tuple[list[int], list[int]]]:
+    """The particles of ``spec`` in groups no force joins, each with its bonds: (particle
+    indices, bond indices) per group, the connected components of the bonds. One group where
+    something else joins them: a drive entrained by the body (its phase reads markers), a
+    free gravity (one magnitude for all), bonds sharing parameters by type, or a bond with
+    no particle."""
+    from ....model.schema import GravityParam
+
+    coupled = spec.drive is not None and spec.drive.coupling is not None
+    if coupled or isinstance(spec.gravity, GravityParam) or any(b.type for b in spec.bond):
+        return [(list(range(len(spec.particle))), list(range(len(spec.bond))))]
+    index = {p.name: k for k, p in enumerate(spec.particle)}
+    root = list(range(len(spec.particle)))
+
+    def find(k: int) -> int:
+        while root[k] != k:
+            root[k] = root[root[k]]
+            k = root[k]
+        return k
+
+    for b in spec.bond:
+        ends = [index[n] for n in b.particles]
+        if not ends:
+            return [(list(range(len(spec.particle))), list(range(len(spec.bond))))]
+        for k in ends[1:]:
+            root[find(k)] = find(ends[0])
+    members: dict[int, tuple[list[int], list[int]]] = {}
+    for k in range(len(spec.particle)):
+        members.setdefault(find(k), ([], []))[0].append(k)
+    for i, b in enumerate(spec.bond):
+        members[find(index[b.particles[0]])][1].append(i)
+    return list(members.values())

@@ -26,6 +26,10 @@ from ..gravity import CONTACT_REACH, CONTACT_SHARE
 # the body walks where it moves over the floor by more than this share of its size (the RMS
 # distance of its markers from their centre) a stride
 TRAVEL_SHARE = 0.5
+# a stance foot stands still on the ground (the surface still) or on a belt under a body that
+# stays (the body still in the room): the slower of the two at most this share of the
+# body's speed over the surface
+STILL_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,18 @@ class Floor:
         """Whether the body travels over the floor by more than :data:`TRAVEL_SHARE` of its
         size in a stride of ``period_s`` seconds, on feet."""
         return bool(self.feet) and self.speed * period_s > TRAVEL_SHARE * self.size
+
+    @property
+    def room_speed(self) -> float:
+        """The body's speed in the room (m/s): over the surface plus the surface's."""
+        return float(np.linalg.norm(np.add(self.over, self.surface)))
+
+    def stands(self) -> bool:
+        """Whether the feet stand still on what they touch: the surface still (overground) or
+        the body still in the room (a treadmill), within :data:`STILL_SHARE` of the body's
+        speed over the surface. A body sliding or tumbling over the floor does neither."""
+        still = min(float(np.linalg.norm(self.surface)), self.room_speed)
+        return still <= STILL_SHARE * self.speed
 
     def line(self, names: Sequence[str]) -> str:
         feet = ", ".join(names[i] for i in self.feet) or "none"

@@ -1,7 +1,8 @@
 """Whether a recording is a walk, from its data alone: a stride repeats (:mod:`.stride`,
 trusted), markers touch a floor and the body travels over it by more than half its size a
-stride (:mod:`.floor`: overground the body moves, on a treadmill the belt). A body swinging
-or stepping in place, a recording with no floor under it or no repeating stride is no walk.
+stride (:mod:`.floor`: overground the body moves, on a treadmill the belt), while a stance
+foot stands still on the ground or on a belt under a body that stays. A body swinging,
+sliding or stepping in place, a recording with no floor under it or no repeating stride is no walk.
 """
 
 from __future__ import annotations
@@ -42,5 +43,11 @@ def recognise(positions: np.ndarray, rate: float, names: Sequence[str], up=None)
         return (
             f"the body does not travel over its floor: {floor.speed:.3g} m/s over it, "
             f"{floor.speed * period_s:.3g} m a stride for a body of {floor.size:.3g} m"
+        )
+    if not floor.stands():
+        return (
+            f"the feet do not stand on the floor: the surface under them moves at "
+            f"{np.linalg.norm(floor.surface):.3g} m/s and the body in the room at "
+            f"{floor.room_speed:.3g} m/s (a walk holds one of them still)"
         )
     return Walk(stride, floor)
