@@ -176,11 +176,13 @@ def _ws(outcome, recording_path):
 
     recording = read_trajectory(recording_path)
     split = auto.windows(recording.n_frames, OPTIONS.frames, OPTIONS.held_out)
-    return SimpleNamespace(recording=recording, split=split, options=OPTIONS)
+    return SimpleNamespace(
+        recording=recording, split=split, options=OPTIONS, noise=SimpleNamespace(window=0)
+    )
 
 
-def judged(worse: int, ahead: float, one: float = 1.0) -> Judged:
-    return Judged((80, 100), 10, one, 2.0, worse, 7, ahead, 20.0)
+def judged(worse: int, ahead: float, one: float = 1.0, noisy: bool = False) -> Judged:
+    return Judged((80, 100), 10, one, 2.0, worse, 7, ahead, 20.0, noisy)
 
 
 def test_the_rule_counts_markers_worse_than_zero_force_first_then_the_error_ahead():
@@ -199,6 +201,20 @@ def test_the_rule_counts_markers_worse_than_zero_force_first_then_the_error_ahea
         "10 ahead 4.9 mm, run-ground 5 mm"
     )
     assert judged(0, math.nan).record()["ahead_mm"] is None  # JSON has no NaN
+
+
+def test_where_the_noise_dominates_one_step_the_error_ahead_comes_first():
+    """A recording whose one-step score is its marker noise's (auto smooths it for the
+    structure): a marker is worse than zero force one step by its noise, so the lower RMS
+    ahead decides; the count of worse markers only breaks a tie ahead."""
+    assert better(judged(15, 8.5, noisy=True), judged(0, 9.3, noisy=True))
+    assert not better(judged(0, 9.3, noisy=True), judged(15, 8.5, noisy=True))
+    assert better(judged(0, 9.3, noisy=True), judged(15, 9.3, noisy=True))  # a tie ahead
+    assert not better(judged(0, math.nan, noisy=True), judged(9, 50.0, noisy=True))
+    assert compared(judged(15, 8.5, noisy=True), judged(0, 9.3, noisy=True), "run") == (
+        "10 ahead 8.5 mm, run 9.3 mm"
+    )
+    assert not better(judged(15, 8.5), judged(0, 9.3))  # not noisy: the markers first
 
 
 def test_the_validation_frames_are_the_structure_step_s_tail():

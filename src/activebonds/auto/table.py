@@ -55,9 +55,13 @@ def lines(rows: list[dict]) -> list[str]:
         ]
         return "  ".join([*out, str(cells[-1])])
 
+    rule = (
+        f"a lower RMS {h} frames ahead (the marker noise dominates one step)"
+        if rows[0].get("noisy")
+        else f"fewer markers worse than zero force one step ('worse'), then a lower RMS {h} "
+        "frames ahead"
+    )
     intro = (
-        f"candidates on the validation frames {a}:{b} (the fitted frames' tail), the rule: "
-        f"fewer markers worse than zero force one step ('worse'), then a lower RMS {h} frames "
-        "ahead"
+        f"candidates on the validation frames {a}:{b} (the fitted frames' tail), the rule: {rule}"
     )
     return [intro, line(head), *(line(c) for c in body)]
