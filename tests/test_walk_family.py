@@ -252,3 +252,29 @@ def _numbers(bonds) -> np.ndarray:
 
     walk([b.model_dump() for b in bonds])
     return np.array(out)
+
+
+def test_a_marker_seen_over_part_of_the_stride_gets_fewer_harmonics():
+    """Harmonics by the largest phase gap: a marker hidden over 40 % of the stride gets one
+    (its half cycle no longer than the gap), one hidden over 60 % none, one hidden a few
+    frames keeps them all; the gap measured where the one-step prediction counts."""
+    from activebonds.identify.discover.walk import harmonics_seen, phase_gaps
+
+    rate, period_s = 100.0, 1.0
+    x, _, _ = _walker(rate=rate, period_s=period_s, strides=1.8)
+    stride = Stride(period_s * rate, 0.0, rate, x.shape[0])
+    gappy = x.copy()
+    frames = np.arange(x.shape[0])
+    phase = (frames / (period_s * rate)) % 1.0
+    gappy[(phase > 0.3) & (phase < 0.7), 4] = np.nan  # 40 % of every stride hidden
+    gappy[(phase > 0.2) & (phase < 0.8), 5] = np.nan  # 60 %
+    gappy[50:53, 6] = np.nan  # a short dropout
+    gaps = phase_gaps(gappy, stride)
+    assert gaps[4] == pytest.approx(0.43, abs=0.015)  # the prediction needs both neighbours
+    assert gaps[5] == pytest.approx(0.63, abs=0.015) and gaps[0] == pytest.approx(0.01)
+    seen = harmonics_seen(gappy, stride, 8)
+    assert seen[4] == 1 and seen[5] == 0 and seen[6] == 8 and seen[0] == 8
+    spec = walk_spec(gappy, _names(x), stride, WalkVariant(harmonics=8))
+    forced = {b.particles[0]: b for b in spec.bond}
+    assert "m5" not in forced and hasattr(forced["m4"], "cos1")
+    assert not hasattr(forced["m4"], "cos2") or forced["m4"].cos2 is None

@@ -21,7 +21,13 @@ class WalkCandidate:
 
         from ...data.orientation import parse_up
         from ...identify.discover.gait import solve
-        from ...identify.discover.walk import Walk, WalkVariant, recognise, walk_spec
+        from ...identify.discover.walk import (
+            Walk,
+            WalkVariant,
+            harmonics_seen,
+            recognise,
+            walk_spec,
+        )
         from ...model import save_model
 
         recording = ws.structural
@@ -40,6 +46,13 @@ class WalkCandidate:
             ws.say(f"      walk: {line}")
         mass = ws.options.total_mass / len(names) if ws.options.total_mass else 1.0
         variant = WalkVariant()
+        seen = harmonics_seen(x[a:s], found.stride, variant.harmonics)
+        fewer = [f"{names[i]} {h}" for i, h in enumerate(seen) if h < variant.harmonics]
+        if fewer:
+            ws.say(
+                f"      walk: {len(fewer)} marker(s) predicted over part of the stride only: "
+                f"fewer harmonics (0: no force) ({', '.join(fewer)})"
+            )
         spec = walk_spec(x[a:s], names, found.stride, variant, mass)
         model = solve(spec, recording, (a, s))
         path = ws.folder.path / "walk.toml"

@@ -3,7 +3,7 @@ that repeats, :mod:`.stride`; a floor the body travels over, :mod:`.floor`) and 
 (:mod:`.family`: a force periodic in the stride's phase on every marker, nothing tying the
 body to the room)."""
 
-from .family import WalkVariant, segment_bonds, walk_spec
+from .family import WalkVariant, harmonics_seen, phase_gaps, segment_bonds, walk_spec
 from .floor import Floor, find_floor
 from .recognise import Walk, recognise
 from .stride import Stride, find_stride
@@ -15,6 +15,8 @@ __all__ = [
     "WalkVariant",
     "find_floor",
     "find_stride",
+    "harmonics_seen",
+    "phase_gaps",
     "recognise",
     "segment_bonds",
     "walk_spec",

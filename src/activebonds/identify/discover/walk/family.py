@@ -65,10 +65,14 @@ def walk_spec(
     x = np.asarray(positions, np.float64)
     dt = 1.0 / stride.rate
     held = []
-    for i, n in enumerate(names):
+    for i, (n, h) in enumerate(
+        zip(names, harmonics_seen(x, stride, variant.harmonics), strict=True)
+    ):
+        if h == 0:
+            continue  # too little of the stride seen: no force (constant velocity)
         acc = np.linalg.norm(np.diff(x[:, i], 2, axis=0), axis=-1) / dt**2
         bound = FORCE_REACH * mass * float(np.nanmax(acc)) if np.isfinite(acc).any() else 1.0
-        held.append(_periodic(n, variant.harmonics, max(bound, 1e-6), x.shape[2]))
+        held.append(_periodic(n, h, max(bound, 1e-6), x.shape[2]))
     if variant.segments > 0:
         held += segment_bonds(x, names, variant.segments, mass, stride.rate)
     particles = [{"name": n, "mass": mass} for n in names]
@@ -81,6 +85,32 @@ def walk_spec(
             "bond": held,
         }
     )
+
+
+def phase_gaps(positions: np.ndarray, stride: Stride) -> np.ndarray:
+    """Each marker's largest gap in the stride's phase (a share of the stride, 0-1) among
+    the frames of ``positions`` [F, P, D] where its one-step prediction counts (the frame
+    before, the frame itself and the frame after present), the phase from the first frame;
+    1 where it counts nowhere."""
+    present = np.isfinite(np.asarray(positions, np.float64)).all(axis=-1)
+    counts = present[:-2] & present[1:-1] & present[2:]  # [F-2, P]: frames 1..F-2
+    phase = (np.arange(1, present.shape[0] - 1) / stride.period) % 1.0
+    gaps = np.ones(present.shape[1])
+    for i in range(present.shape[1]):
+        seen = np.sort(phase[counts[:, i]])
+        if len(seen):
+            gaps[i] = float(np.diff(np.r_[seen, seen[0] + 1.0]).max())
+    return gaps
+
+
+def harmonics_seen(positions: np.ndarray, stride: Stride, harmonics: int) -> list[int]:
+    """Each marker's harmonics: at most ``harmonics``, and at most ``1 / (2 gap)`` for its
+    largest gap in the stride's phase (:func:`phase_gaps`): the highest harmonic's half
+    cycle no longer than any stretch of the stride it was not seen in (a marker hidden over
+    part of the stride, as a lab's cameras lose one, gets a smoother force there, not a
+    guess). 0: no force."""
+    gaps = phase_gaps(positions, stride)
+    return [int(min(harmonics, np.floor(0.5 / max(g, 1e-9)))) for g in gaps]
 
 
 def segment_bonds(x: np.ndarray, names, spread: float, mass: float, rate: float) -> list[dict]:
