@@ -386,3 +386,32 @@ def test_a_model_that_misses_forces_is_told_its_intervals_do_not_describe_the_mi
             assert f"{ratio:.3g} times" in found
         else:
             assert 0.9 < ratio < 1.1 and found is None
+
+
+def test_a_tall_jacobian_factored_a_block_at_a_time_gives_the_same_intervals(monkeypatch):
+    """The SVD of a tall Jacobian through its triangular factor, built a block of rows at a
+    time (uncertainty._triangle): the same singular values and right vectors as the SVD of
+    the whole scaled Jacobian, so the same intervals, directions and rank."""
+    from activebonds.identify.judge import uncertainty
+
+    rng = np.random.default_rng(2)
+    m, p = 3000, 12
+    jac = rng.standard_normal((m, p)) * np.logspace(-3, 2, p)
+    jac[:, 5] = jac[:, 4] * 2.0  # one direction not determined
+    resid = 1e-3 * rng.standard_normal(m)
+    names = [f"g{i}" for i in range(p)]
+    values, spans = np.ones(p), np.full(p, 1e6)
+    whole = uncertainty.from_jacobian(jac, resid, names, values, spans, m - p)
+    norms, sv, vt, ok = uncertainty._decompose(jac)
+    monkeypatch.setattr(uncertainty, "BLOCK_BYTES", 8 * p * 100)  # blocks of 100 rows: 30
+    assert uncertainty._triangle(jac, norms).shape == (p, p)
+    norms_b, sv_b, vt_b, ok_b = uncertainty._decompose(jac)
+    np.testing.assert_allclose(sv_b, sv, rtol=1e-10, atol=1e-12 * sv[0])
+    assert (ok_b == ok).all() and ok.sum() == p - 1
+    np.testing.assert_allclose(np.abs(vt_b[ok_b] @ vt[ok].T), np.eye(p - 1), atol=1e-8)
+    blocked = uncertainty.from_jacobian(jac, resid, names, values, spans, m - p)
+    assert blocked[1:4] == pytest.approx(whole[1:4], rel=1e-9)
+    for a, b in zip(blocked[0], whole[0], strict=True):
+        assert a.determined == b.determined
+        if a.determined:
+            assert a.std_error == pytest.approx(b.std_error, rel=1e-8)

@@ -45,6 +45,7 @@ RANK_RTOL = 1e-8  # singular values below this share of the largest: not determi
 Z95 = 1.959963984540054  # the normal quantile of a two-sided 95 % interval
 NAMED = 0.3  # a parameter is named in a direction where its component is at least this
 MAX_JACOBIAN_BYTES = 2**30  # a larger dense Jacobian (long shooting fits) is not formed
+BLOCK_BYTES = 2**27  # a tall Jacobian is factored a block of rows of about this size at a time
 
 
 @dataclass(frozen=True)
@@ -134,11 +135,30 @@ def _undetermined(names, values, note: str):
     return gone, 0, math.inf, math.nan, [note]
 
 
+def _triangle(jac: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """A matrix with the singular values and right singular vectors of ``jac / scale``
+    [m, p]: where m is well above p, the triangular factor of its QR decomposition, formed
+    a block of rows at a time (each block's rows stacked under the factor so far), so that
+    neither the scaled copy nor the SVD's left vectors ([m, p] each) are formed; else the
+    scaled matrix itself."""
+    from scipy.linalg import qr
+
+    m, p = jac.shape
+    step = max(4 * p, BLOCK_BYTES // (8 * max(p, 1)))  # rows a block: at least 4 p
+    if m <= 2 * step:
+        return jac / scale
+    r = np.zeros((0, p))
+    for a in range(0, m, step):
+        block = np.vstack([r, jac[a : a + step] / scale])
+        r = qr(block, mode="r", overwrite_a=True, check_finite=False)[0][:p]
+    return r
+
+
 def _decompose(jac: np.ndarray):
     """The SVD of the Jacobian with unit-norm columns: (column norms, singular values, V^T,
     the directions above RANK_RTOL)."""
     norms = np.linalg.norm(jac, axis=0)
-    _, sv, vt = np.linalg.svd(jac / np.where(norms == 0, 1.0, norms), full_matrices=False)
+    _, sv, vt = np.linalg.svd(_triangle(jac, np.where(norms == 0, 1.0, norms)), full_matrices=False)
     ok = sv > RANK_RTOL * (sv[0] if sv.size and sv[0] > 0 else 1.0)
     return norms, sv, vt, ok
 
