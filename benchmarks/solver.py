@@ -19,7 +19,19 @@ each one's final objective (m^2), RMS, steps, seconds and message, and the new/o
 Measured (2 shared cores, loaded), ``--steps 20``, 2 substeps, start lsq: old 0.035602 m^2
 (2.4141 mm) in 210.8 s, new 0.035333 m^2 (2.4050 mm) in 215.5 s (ratios 0.9925, 1.02): the
 same steps cost the same (the Jacobian dominates), the new ones lower the cost 2.3 times as
-much (0.00047 against 0.00020 m^2 from 0.035805). The 500-step comparison was not measured.
+much (0.00047 against 0.00020 m^2 from 0.035805).
+
+500 steps, 1 substep (the one-step cost ``auto`` refines on), 2026-12-07, other jobs on the
+machine (``--steps 500 --substeps 1 [--start model] --json ...``: docs/results/solver_*.json):
+
+* start lsq (``solver_lsq_start.json``; the crawl ``auto`` met: the refinement starts at the
+  exact optimum, which it cannot improve): old 0.0357217 m^2 after 174 steps, 216.3 s,
+  stopped as its damping grew without bound; new 0.0357217 m^2 in 2 steps, 5.4 s,
+  converged: the same cost in 0.025 of the time;
+* start model (``solver_model_start.json``; far from the optimum): old 0.0357221 m^2 at its
+  500-step limit, 960.0 s; new 0.0357226 m^2 at the same limit, 777.4 s (objective ratio
+  1.00002, time 0.81): both end within 3e-5 of the exact optimum's 0.0357217, the new one no
+  faster to the end there.
 """
 
 from __future__ import annotations

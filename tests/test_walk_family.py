@@ -278,3 +278,8 @@ def test_a_marker_seen_over_part_of_the_stride_gets_fewer_harmonics():
     forced = {b.particles[0]: b for b in spec.bond}
     assert "m5" not in forced and hasattr(forced["m4"], "cos1")
     assert not hasattr(forced["m4"], "cos2") or forced["m4"].cos2 is None
+    from activebonds.identify.discover.gait import solve
+
+    data = Trajectory(gappy, np.isfinite(gappy).all(axis=-1), tuple(_names(x)), rate)
+    solved = solve(spec, data, (0, x.shape[0]))  # m5 alone, no force: nothing to solve there
+    assert len(solved.spec.bond) == len(spec.bond) and len(solved.spec.particle) == len(_names(x))

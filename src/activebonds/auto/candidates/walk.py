@@ -54,6 +54,9 @@ class WalkCandidate:
                 f"fewer harmonics (0: no force) ({', '.join(fewer)})"
             )
         spec = walk_spec(x[a:s], names, found.stride, variant, mass)
+        if not spec.bond:
+            ws.say("      walk: not proposed: no marker is predicted over enough of the stride")
+            return None
         model = solve(spec, recording, (a, s))
         path = ws.folder.path / "walk.toml"
         save_model(model.spec, path)

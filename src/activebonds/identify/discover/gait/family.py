@@ -147,6 +147,8 @@ def solve(spec, recording, frames: tuple[int, int]):
         return build(_solved(spec, recording, frames))
     solved = list(spec.bond)
     for particles, held in parts:
+        if not held:  # a marker no force acts on: nothing to solve
+            continue
         sub = spec.model_copy(
             update={
                 "particle": [spec.particle[k] for k in particles],
