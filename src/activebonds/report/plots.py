@@ -243,6 +243,8 @@ def parameters(
     are marked. ``bounds``: the model whose bounds were searched (default ``model``)."""
     rows = parameter_rows(model, bounds=bounds)
     n = len(rows)
+    if n > LABELLED:
+        return _parameters_compact(rows, stem, title)
     fig, ax = _subplots(figsize=(7.5, max(1.6, 0.28 * n + 1.0)), layout="constrained")
     if n == 0:
         ax.text(0.5, 0.5, "no free parameter", ha="center", va="center", transform=ax.transAxes)
@@ -264,6 +266,29 @@ def parameters(
     ax.set_title(title + ("  (red: within 1 % of a bound)" if edge.any() else ""))
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
+    return save(fig, stem)
+
+
+# above this many parameters, one figure of fixed size without a label per parameter (a bar
+# each would make it hundreds of inches tall, and minutes to draw); the values are in the
+# report's table of parameters
+LABELLED = 80
+
+
+def _parameters_compact(rows, stem: str | Path, title: str) -> list[Path]:
+    """Every parameter's position within its bounds as a dot, in file order (red within 1 %
+    of a bound), on a figure of fixed size."""
+    n = len(rows)
+    pos = np.clip(np.nan_to_num(np.array([r.position for r in rows]), nan=0.5), 0.0, 1.0)
+    edge = np.array([r.bound is not None for r in rows])
+    fig, ax = _subplots(figsize=(7.5, 4.5), layout="constrained")
+    ax.scatter(pos, np.arange(n)[::-1], color=np.where(edge, "tab:red", "tab:blue"), s=5)
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_xticks([0, 0.5, 1], ["min", "mid", "max"])
+    ax.set_yticks([])
+    ax.set_ylabel(f"{n} parameters, in the model file's order")
+    ax.set_xlabel("position within the bounds (search space; log genes on a log scale)")
+    ax.set_title(f"{title}: {int(edge.sum())} of {n} within 1 % of a bound (red)")
     return save(fig, stem)
 
 

@@ -1,0 +1,46 @@
+"""The report's figure of identified parameters (report/plots.py): a labelled bar per
+parameter up to plots.LABELLED of them; above, one figure of fixed size whose dots still say
+which parameters sit on a bound (a 1,968-parameter walk model's bar chart was 550 inches
+tall and half of its report's minute)."""
+
+from __future__ import annotations
+
+from PIL import Image
+
+from activebonds.model import loads_model
+from activebonds.report import plots
+
+
+def _model(n_springs: int):
+    """A chain of ``n_springs`` + 1 particles, each spring's stiffness, rest length and
+    damping free: 3 parameters a spring; the first spring's stiffness on its upper bound."""
+    particles = "".join(f'[[particle]]\nname = "p{i}"\n' for i in range(n_springs + 1))
+    springs = "".join(
+        f'[[bond]]\nkind = "binary"\nparticles = ["p{i}", "p{i + 1}"]\n'
+        f"stiffness = {{ value = {100.0 if i == 0 else 50.0}, min = 1.0, max = 100.0 }}\n"
+        "rest_length = { value = 0.5, min = 0.1, max = 1.0 }\n"
+        "damping = { value = 1.0, min = 0.0, max = 10.0 }\n"
+        for i in range(n_springs)
+    )
+    return loads_model(f'name = "chain"\n{particles}{springs}', "<chain>")
+
+
+def test_many_parameters_make_one_figure_of_fixed_size_that_marks_the_bounds(tmp_path):
+    many = _model(60)  # 180 parameters
+    assert many.layout.n_genes == 180 > plots.LABELLED
+    png, svg = plots.parameters(many, tmp_path / "many")
+    assert _height(png) <= 4.5 * plots.DPI + 2
+    text = svg.read_text()
+    assert "1 of 180 within 1 % of a bound" in text
+    assert "stiffness" not in text  # no label per parameter
+
+    few = _model(5)  # 15 parameters: a labelled bar each
+    png, svg = plots.parameters(few, tmp_path / "few")
+    text = svg.read_text()
+    assert text.count("stiffness") >= 5
+    assert _height(png) > 0.28 * 15 * plots.DPI
+
+
+def _height(png) -> int:
+    with Image.open(png) as image:
+        return int(image.size[1])
