@@ -5,6 +5,7 @@ tall and half of its report's minute)."""
 
 from __future__ import annotations
 
+import numpy as np
 from PIL import Image
 
 from activebonds.model import loads_model
@@ -44,3 +45,21 @@ def test_many_parameters_make_one_figure_of_fixed_size_that_marks_the_bounds(tmp
 def _height(png) -> int:
     with Image.open(png) as image:
         return int(image.size[1])
+
+
+def test_a_large_body_s_trajectories_show_the_markers_predicted_worst():
+    """Above plots_large.SHOWN markers, the trajectories figure holds the SHOWN markers with
+    the largest one-step RMS (in file order) and says so; at or below, every marker."""
+    from types import SimpleNamespace
+
+    from activebonds.report.plots_large import SHOWN, shown_particles
+
+    rms = np.arange(30, dtype=float)[::-1].copy()  # marker 0 worst
+    rms[[3, 7]] = [1e3, np.nan]  # marker 3 worst of all, marker 7 unscored
+    pred = SimpleNamespace(recorded=np.zeros((5, 30, 3)), one_step_rms_mm=rms)
+    shown = shown_particles(pred)
+    assert len(shown) == SHOWN and shown == sorted(shown)
+    assert 3 in shown and 7 not in shown
+    assert shown == sorted([3, *[i for i in range(30) if i not in (3, 7)][: SHOWN - 1]])
+    few = SimpleNamespace(recorded=np.zeros((5, SHOWN, 3)), one_step_rms_mm=np.ones(SHOWN))
+    assert shown_particles(few) == list(range(SHOWN))

@@ -24,6 +24,7 @@ from ..identify.judge.predictions import neural_bonds, to_mm
 from ..identify.search.operators import VARIANTS
 from ..model import Model
 from ..model.names import parameter_label, parameter_rows
+from .plots_large import LABELLED, parameters_compact, shown_particles
 from .predict import Prediction, neural_weights
 from .runs import history_rms_mm
 
@@ -244,7 +245,7 @@ def parameters(
     rows = parameter_rows(model, bounds=bounds)
     n = len(rows)
     if n > LABELLED:
-        return _parameters_compact(rows, stem, title)
+        return save(parameters_compact(rows, title), stem)
     fig, ax = _subplots(figsize=(7.5, max(1.6, 0.28 * n + 1.0)), layout="constrained")
     if n == 0:
         ax.text(0.5, 0.5, "no free parameter", ha="center", va="center", transform=ax.transAxes)
@@ -266,29 +267,6 @@ def parameters(
     ax.set_title(title + ("  (red: within 1 % of a bound)" if edge.any() else ""))
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
-    return save(fig, stem)
-
-
-# above this many parameters, one figure of fixed size without a label per parameter (a bar
-# each would make it hundreds of inches tall, and minutes to draw); the values are in the
-# report's table of parameters
-LABELLED = 80
-
-
-def _parameters_compact(rows, stem: str | Path, title: str) -> list[Path]:
-    """Every parameter's position within its bounds as a dot, in file order (red within 1 %
-    of a bound), on a figure of fixed size."""
-    n = len(rows)
-    pos = np.clip(np.nan_to_num(np.array([r.position for r in rows]), nan=0.5), 0.0, 1.0)
-    edge = np.array([r.bound is not None for r in rows])
-    fig, ax = _subplots(figsize=(7.5, 4.5), layout="constrained")
-    ax.scatter(pos, np.arange(n)[::-1], color=np.where(edge, "tab:red", "tab:blue"), s=5)
-    ax.set_xlim(-0.02, 1.02)
-    ax.set_xticks([0, 0.5, 1], ["min", "mid", "max"])
-    ax.set_yticks([])
-    ax.set_ylabel(f"{n} parameters, in the model file's order")
-    ax.set_xlabel("position within the bounds (search space; log genes on a log scale)")
-    ax.set_title(f"{title}: {int(edge.sum())} of {n} within 1 % of a bound (red)")
     return save(fig, stem)
 
 
@@ -432,7 +410,9 @@ def trajectories_figure(
     start_time: float = 0.0,
 ):
     """The figure of :func:`trajectories` (unsaved)."""
-    n_p, dim = pred.recorded.shape[1], pred.recorded.shape[2]
+    dim = pred.recorded.shape[2]
+    shown = shown_particles(pred)
+    n_p = len(shown)
     fig, axes = _subplots(
         n_p,
         dim,
@@ -442,9 +422,9 @@ def trajectories_figure(
         layout="constrained",
     )
     t = frame_numbers(pred, first_frame)
-    for p in range(n_p):
+    for row, p in enumerate(shown):
         for d in range(dim):
-            ax = axes[p, d]
+            ax = axes[row, d]
             rec = to_mm(pred.recorded[:, p, d])
             ax.plot(t, rec, color=RECORDED, lw=1.5, label="recorded")
             ax.plot(
@@ -464,15 +444,18 @@ def trajectories_figure(
             if pred.extended:
                 ax.axvline(t[pred.fit_frames - 1], color="0.5", lw=0.8, ls=":")
             ax.tick_params(labelsize=7)
-            if p == 0:
+            if row == 0:
                 ax.set_title(f"{AXES[d]} (mm)", fontsize=9)
                 _time_axis(ax, pred, first_frame, start_time, fontsize=7)
             if d == 0:
                 ax.set_ylabel(pred.names[p], fontsize=9)
-            if p == n_p - 1:
+            if row == n_p - 1:
                 ax.set_xlabel("frame (of the recording)", fontsize=8)
     axes[0, 0].legend(fontsize=7, loc="best")
     note = "  (dotted line: end of the fitted window)" if pred.extended else ""
+    total = pred.recorded.shape[1]
+    if n_p < total:
+        note += f"\nthe {n_p} of {total} markers predicted worst one step on the fitted frames"
     fig.suptitle(title + note, fontsize=10)
     return fig
 
