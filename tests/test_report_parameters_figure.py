@@ -63,3 +63,14 @@ def test_a_large_body_s_trajectories_show_the_markers_predicted_worst():
     assert shown == sorted([3, *[i for i in range(30) if i not in (3, 7)][: SHOWN - 1]])
     few = SimpleNamespace(recorded=np.zeros((5, SHOWN, 3)), one_step_rms_mm=np.ones(SHOWN))
     assert shown_particles(few) == list(range(SHOWN))
+
+
+def test_a_large_body_s_gait_figure_shows_the_markers_whose_height_varies_most():
+    from activebonds.report.gait_plots import most_moving
+    from activebonds.report.plots_large import SHOWN
+
+    phase = np.linspace(0, 1, 50, endpoint=False)[:, None]
+    heights = np.sin(2 * np.pi * phase) * np.arange(20)[None, :]  # marker i: amplitude i
+    heights[:, 19] = np.nan  # never seen: last
+    assert most_moving(heights) == list(range(19 - SHOWN, 19))
+    assert most_moving(heights[:, :SHOWN]) == list(range(SHOWN))

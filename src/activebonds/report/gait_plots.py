@@ -11,6 +11,7 @@ import numpy as np
 
 from ..identify.judge.predictions import to_mm
 from .plots import FREE_RUN, RECORDED, _limits, _subplots, save
+from .plots_large import SHOWN
 
 
 def _free_run_line(ax, x, y, first: bool, label: str) -> None:
@@ -59,6 +60,20 @@ def gait_heights(found, stem: str | Path, *, first_frame: int = 0) -> list[Path]
     return save(fig, stem)
 
 
+def most_moving(heights: np.ndarray) -> list[int]:
+    """The markers of a gait figure: every one up to :data:`~.plots_large.SHOWN`, else the
+    :data:`~.plots_large.SHOWN` whose height ``heights`` [bins, P] varies most over the
+    stride (the legs and feet, what a gait is), in file order."""
+    n = heights.shape[1]
+    if n <= SHOWN:
+        return list(range(n))
+    seen = np.isfinite(heights)
+    high = np.where(seen, heights, -np.inf).max(axis=0)
+    low = np.where(seen, heights, np.inf).min(axis=0)
+    span = np.where(seen.any(axis=0), high - low, -1.0)
+    return sorted(int(i) for i in np.argsort(-span, kind="stable")[:SHOWN])
+
+
 def gait_cycle(found, stem: str | Path) -> list[Path]:
     """One panel per particle: its height (mm, along up) over one stride (phase 0-1) in the
     recording's mean gait (black) and each free run's cycle average after its best phase
@@ -69,7 +84,8 @@ def gait_cycle(found, stem: str | Path) -> list[Path]:
     names = found.particles
     phase = np.arange(g.PHASE_BINS) / g.PHASE_BINS
     mean_h = to_mm(g.vertical(ref.gait, ref.up))  # [bins, P]
-    n = len(names)
+    shown = most_moving(mean_h)
+    n = len(shown)
     cols = min(n, 4)
     rows = math.ceil(n / cols)
     fig, axes = _subplots(
@@ -87,11 +103,12 @@ def gait_cycle(found, stem: str | Path) -> list[Path]:
         avg = g.cycle_average(run, t)
         if np.isfinite(avg).all():
             averages.append(np.roll(avg, g.best_shift(avg, ref.gait)[0], axis=0))
-    for p in range(rows * cols):
-        ax = axes[p // cols, p % cols]
-        if p >= n:
+    for k in range(rows * cols):
+        ax = axes[k // cols, k % cols]
+        if k >= n:
             ax.set_visible(False)
             continue
+        p = shown[k]
         for i, avg in enumerate(averages):
             y = to_mm(g.vertical(avg, ref.up)[:, p])
             _free_run_line(ax, phase, y, i == 0, "model's cycle averages")
@@ -100,13 +117,18 @@ def gait_cycle(found, stem: str | Path) -> list[Path]:
             ax.set_ylim(*_limits(mean_h[:, p]))
         ax.set_title(names[p], fontsize=9)
         ax.tick_params(labelsize=7)
-        if p % cols == 0:
+        if k % cols == 0:
             ax.set_ylabel("height (mm)", fontsize=8)
-        if p // cols == rows - 1:
+        if k // cols == rows - 1:
             ax.set_xlabel("phase (strides)", fontsize=8)
     axes[0, 0].legend(fontsize=6, loc="best")
+    some = (
+        f"\nthe {n} of {len(names)} markers whose height varies most over the stride"
+        if n < len(names)
+        else ""
+    )
     fig.suptitle(
-        "One stride: the recorded mean gait and the free runs' cycle averages (best phase)",
+        "One stride: the recorded mean gait and the free runs' cycle averages (best phase)" + some,
         fontsize=10,
     )
     return save(fig, stem)
