@@ -184,3 +184,27 @@ def test_a_missing_neighbour_stops_a_prediction_an_unrelated_one_does_not(chain)
     # the old rule drops every particle there
     old = make_windows(positions, mask, data.dt, 1)
     assert old.n_terms == 198 * N - 2 * N - 1
+
+
+def test_evaluate_on_frames_without_two_complete_frames_in_a_row_does_not_fail(chain):
+    """Judged frames where no frame holds every marker (seed 2 of
+    scripts/gaitlab_recording.py left such a validation tail): `evaluate` returns, its
+    scores counting no term (they still need complete frames: the neighbour rule of the fit
+    is not yet theirs) instead of an IndexError from a zero-force free run with no start;
+    that run is empty, and from a start it is x_s + k (x_s - x_{s-1})."""
+    from activebonds.identify.judge.predictions import zero_force_predictions
+    from activebonds.report.evaluate import evaluate
+
+    model, data = chain
+    mask = rotating_gaps(data.n_frames)
+    gappy = Trajectory(np.where(mask[..., None], data.positions, np.nan), mask, data.markers,
+                       data.rate)  # fmt: skip
+    found = evaluate(model, gappy, frames=(100, 160), horizon=3, origin=0)
+    assert all(c.terms == 0 for c in found.comparisons)
+    rec = np.asarray(gappy.positions[100:160])
+    one, run = zero_force_predictions(rec, rec.shape[0])
+    assert np.isnan(run).all() and np.isnan(one).all()
+    full = np.asarray(data.positions[:20])
+    _, run = zero_force_predictions(full, 5)
+    np.testing.assert_allclose(run[9], full[5] + 4 * (full[5] - full[4]))
+    assert np.isnan(run[:6]).all()

@@ -377,8 +377,9 @@ def zero_force_predictions(positions: np.ndarray, start: int) -> tuple[np.ndarra
     complete = np.isfinite(rec).all(axis=(1, 2))
     one[2:][~(complete[1:-1] & complete[:-2])] = np.nan  # the terms the metrics count
     run = np.full_like(rec, np.nan)
-    steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
-    run[start + 1 :] = constant_velocity(rec[start], rec[start] - rec[start - 1], steps)
+    if 1 <= start < rec.shape[0]:  # else no start (no two complete frames): no free run
+        steps = np.arange(1, rec.shape[0] - start, dtype=np.float64)[:, None, None]
+        run[start + 1 :] = constant_velocity(rec[start], rec[start] - rec[start - 1], steps)
     return one, run
 
 
