@@ -186,12 +186,13 @@ def test_a_missing_neighbour_stops_a_prediction_an_unrelated_one_does_not(chain)
     assert old.n_terms == 198 * N - 2 * N - 1
 
 
-def test_evaluate_on_frames_without_two_complete_frames_in_a_row_does_not_fail(chain):
+def test_evaluate_scores_a_marker_where_it_and_its_neighbours_are_recorded(chain):
     """Judged frames where no frame holds every marker (seed 2 of
-    scripts/gaitlab_recording.py left such a validation tail): `evaluate` returns, its
-    scores counting no term (they still need complete frames: the neighbour rule of the fit
-    is not yet theirs) instead of an IndexError from a zero-force free run with no start;
-    that run is empty, and from a start it is x_s + k (x_s - x_{s-1})."""
+    scripts/gaitlab_recording.py left such a validation tail): `evaluate` counts a marker's
+    prediction k frames ahead where it and the particles within k bonds of it are recorded
+    at the start (the fit's rule), the model and zero force on the same terms: the truth
+    predicts them exactly, zero force does not; the counts equal the brute force of the
+    fit's windows. With every frame recorded, nothing changes."""
     from activebonds.identify.judge.predictions import zero_force_predictions
     from activebonds.report.evaluate import evaluate
 
@@ -200,11 +201,28 @@ def test_evaluate_on_frames_without_two_complete_frames_in_a_row_does_not_fail(c
     gappy = Trajectory(np.where(mask[..., None], data.positions, np.nan), mask, data.markers,
                        data.rate)  # fmt: skip
     found = evaluate(model, gappy, frames=(100, 160), horizon=3, origin=0)
-    assert all(c.terms == 0 for c in found.comparisons)
+    one, ahead = found.comparisons
+    neighbours = neighbours_of(model)
+    for c, k in ((one, 1), (ahead, 3)):
+        assert c.terms == brute_ahead(mask[100:160], k, neighbours) > 0
+        assert c.model_mm < 1e-6 < c.zero_force_mm
+    assert len(one.worse_markers()) == 0
+    whole = evaluate(model, data, frames=(100, 160), horizon=3, origin=0)
+    assert [c.terms for c in whole.comparisons] == [58 * 6, 56 * 6]  # every start, marker
     rec = np.asarray(gappy.positions[100:160])
-    one, run = zero_force_predictions(rec, rec.shape[0])
-    assert np.isnan(run).all() and np.isnan(one).all()
-    full = np.asarray(data.positions[:20])
-    _, run = zero_force_predictions(full, 5)
-    np.testing.assert_allclose(run[9], full[5] + 4 * (full[5] - full[4]))
-    assert np.isnan(run[:6]).all()
+    _, run = zero_force_predictions(rec, rec.shape[0])  # no start: an empty free run
+    assert np.isnan(run).all()
+
+
+def brute_ahead(mask: np.ndarray, k: int, neighbours: np.ndarray) -> int:
+    """Terms k frames ahead from every start s in 1..F-k-1: a marker whose target is
+    recorded and whose particles within k bonds are recorded at s - 1 and s."""
+    hops = _hops(neighbours)
+    n_frames, p = mask.shape
+    kept = 0
+    for s in range(1, n_frames - k):
+        for q in range(p):
+            needed = np.flatnonzero(hops[q] <= k)
+            if mask[s + k, q] and all(mask[s, r] and mask[s - 1, r] for r in needed):
+                kept += 1
+    return kept

@@ -1,10 +1,12 @@
 """K frames ahead: the model's free run from every recorded state, beside zero force's.
 
-From each start frame ``s`` whose frames ``s - 1`` and ``s`` are complete, the model runs K
-frames on its own (the start velocity from those two frames, as the fit cost's, so K = 1 is
+From each start frame ``s``, for each marker whose particles that can move it within K frames
+(itself, its bonded neighbours within K hops, K times the substeps) are recorded at frames
+``s - 1`` and ``s`` (the fit's rule: :mod:`~activebonds.identify.costs.windows`; the missing
+others filled, and never read by a counted term), the model runs K frames on its own (the start velocity from those two frames, as the fit cost's, so K = 1 is
 the one-step prediction) and its position at ``s + K`` is compared with the recording; the
-zero-force (constant-velocity) predictor gives ``x_s + K (x_s - x_{s-1})``. The RMS over every
-(start, marker) term whose target is recorded, overall and per marker, is a
+zero-force (constant-velocity) predictor gives ``x_s + K (x_s - x_{s-1})`` on the same terms.
+The RMS over every (start, marker) term whose target is recorded, overall and per marker, is a
 :class:`~activebonds.identify.judge.verdict.Comparison`; a non-finite prediction of a recorded
 target makes its marker's RMS, and the overall one, +inf.
 
@@ -21,7 +23,7 @@ import numpy as np
 
 from ...data import Trajectory
 from ...model import Model
-from .predictions import model_ahead, zero_force_ahead
+from .predictions import ahead_terms, model_ahead, zero_force_ahead
 from .verdict import Comparison
 
 DEFAULT_AHEAD = 10  # frames ahead in fit's summary and evaluate's default
@@ -47,10 +49,15 @@ def compare(model: Model, trajectory: Trajectory, k: int = 1, **run) -> Comparis
     """The model and zero force ``k`` frames ahead on ``trajectory`` (markers in the model's
     particle order; ``run``: ``substeps``, ``method`` and ``offset``, as
     :func:`~activebonds.identify.judge.predictions.model_ahead`'s)."""
+    from ..costs.windows import fill_missing, neighbours_of, reach_of
+
     rec = np.asarray(trajectory.positions, np.float64)
     k = int(k)
-    m, m_per, terms = _rms(model_ahead(model, rec, trajectory.dt, k, **run), rec)
-    z, z_per, _ = _rms(zero_force_ahead(rec, k), rec)
+    reach = reach_of(neighbours_of(model), k * int(run.get("substeps", 1)))
+    starts, counts = ahead_terms(rec, k, reach)
+    terms = (starts, counts, fill_missing(rec, np.isfinite(rec).all(axis=-1)))
+    m, m_per, n = _rms(model_ahead(model, rec, trajectory.dt, k, terms=terms, **run), rec)
+    z, z_per, _ = _rms(zero_force_ahead(rec, k, terms), rec)
     return Comparison(
         horizon=k,
         model_mm=m,
@@ -58,7 +65,7 @@ def compare(model: Model, trajectory: Trajectory, k: int = 1, **run) -> Comparis
         markers=tuple(trajectory.markers),
         model_per_marker=tuple(float(x) for x in m_per),
         zero_force_per_marker=tuple(float(x) for x in z_per),
-        terms=terms,
+        terms=n,
     )
 
 

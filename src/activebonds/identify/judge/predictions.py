@@ -314,6 +314,30 @@ def ahead_starts(positions: np.ndarray, k: int) -> np.ndarray:
     return s[complete[s] & complete[s - 1]] if s.size else s
 
 
+def ahead_terms(positions: np.ndarray, k: int, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start frames s [S], which particles' predictions of s + k count there [S, P]): a
+    particle's counts where every particle ``reach`` [P, P] says can move it within k frames
+    (itself among them) is recorded at s - 1 and s, as the fit's windows count them
+    (:func:`~activebonds.identify.costs.windows.make_windows`); the starts, those where one
+    counts. With every frame complete, :func:`ahead_starts` with every particle."""
+    present = np.isfinite(positions).all(axis=-1)  # [F, P]
+    s = np.arange(1, positions.shape[0] - k)
+    both = present[s] & present[s - 1]  # [S, P]
+    counts = ~((~both).astype(np.int64) @ np.asarray(reach, np.int64).T > 0)
+    keep = counts.any(axis=1)
+    return s[keep], counts[keep]
+
+
+def _inputs(rec: np.ndarray, k: int, terms) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """(starts, counts or None, the positions to start from): ``terms`` as given (starts,
+    counts, positions with the missing samples filled), else :func:`ahead_starts` on the
+    recording as it is."""
+    if terms is None:
+        return ahead_starts(rec, k), None, rec
+    starts, counts, filled = terms
+    return np.asarray(starts), np.asarray(counts, bool), np.asarray(filled, np.float64)
+
+
 @float64
 def model_ahead(
     model: Model,
@@ -324,23 +348,27 @@ def model_ahead(
     method: str = "euler",
     offset: int = 0,
     before: np.ndarray | None = None,
+    terms: tuple | None = None,
 ) -> np.ndarray:
     """The model's prediction of each frame ``s + k`` from the recorded state at ``s``
-    (:func:`ahead_starts`), aligned with the recording [F, P, D]: NaN where there is no
-    start (and +inf where the run went non-finite). Time and an entrained drive's phase as
-    :func:`one_step`'s."""
+    (:func:`ahead_starts`; ``terms``: (starts, which particles count at each [S, P], the
+    positions with the missing samples filled), :func:`ahead_terms`' rule), aligned with the
+    recording [F, P, D]: NaN where there is no start or term (and +inf where the run went
+    non-finite). Time and an entrained drive's phase as :func:`one_step`'s."""
     rec = np.asarray(positions, np.float64)
     out = np.full_like(rec, np.nan)
-    starts = ahead_starts(rec, k)
+    starts, counts, x = _inputs(rec, k, terms)
     if starts.size == 0:
         return out
     psi = tracked_phases(model, rec, dt, substeps, offset, before)  # entrained, else None
     psis = None if psi is None else (psi[starts - 1], psi[starts])
     times = (starts + int(offset)) * float(dt)
     pred = runs_from(
-        model, rec[starts - 1], rec[starts], times, dt, k, substeps, method, psis, last=True
+        model, x[starts - 1], x[starts], times, dt, k, substeps, method, psis, last=True
     )[1]
     pred[~np.isfinite(pred)] = np.inf  # a failed prediction: an infinite error, not a gap
+    if counts is not None:
+        pred[~counts] = np.nan
     out[starts + k] = pred
     return out
 
@@ -355,14 +383,17 @@ def constant_velocity(x, v, t):
     return x + t * v
 
 
-def zero_force_ahead(positions: np.ndarray, k: int) -> np.ndarray:
+def zero_force_ahead(positions: np.ndarray, k: int, terms: tuple | None = None) -> np.ndarray:
     """The zero-force prediction of each frame ``s + k`` from frames ``s - 1`` and ``s``
-    (:func:`ahead_starts`), ``x_s + k (x_s - x_{s-1})``, [F, P, D] (NaN where there is no
-    start)."""
+    (:func:`ahead_starts`, or a model's ``terms`` as :func:`model_ahead` takes them),
+    ``x_s + k (x_s - x_{s-1})``, [F, P, D] (NaN where there is no start or term)."""
     rec = np.asarray(positions, np.float64)
     out = np.full_like(rec, np.nan)
-    starts = ahead_starts(rec, k)
-    out[starts + k] = constant_velocity(rec[starts], rec[starts] - rec[starts - 1], k)
+    starts, counts, _ = _inputs(rec, k, terms)
+    pred = constant_velocity(rec[starts], rec[starts] - rec[starts - 1], k)
+    if counts is not None:  # the model's terms, for a comparison on the same ones
+        pred[~counts] = np.nan
+    out[starts + k] = pred
     return out
 
 
