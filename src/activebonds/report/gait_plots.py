@@ -11,7 +11,7 @@ import numpy as np
 
 from ..identify.judge.predictions import to_mm
 from .plots import FREE_RUN, RECORDED, _limits, _subplots, save
-from .plots_large import SHOWN
+from .plots_large import largest
 
 
 def _free_run_line(ax, x, y, first: bool, label: str) -> None:
@@ -63,15 +63,11 @@ def gait_heights(found, stem: str | Path, *, first_frame: int = 0) -> list[Path]
 def most_moving(heights: np.ndarray) -> list[int]:
     """The markers of a gait figure: every one up to :data:`~.plots_large.SHOWN`, else the
     :data:`~.plots_large.SHOWN` whose height ``heights`` [bins, P] varies most over the
-    stride (the legs and feet, what a gait is), in file order."""
-    n = heights.shape[1]
-    if n <= SHOWN:
-        return list(range(n))
+    stride (the legs and feet, what a gait is; a marker never seen last), in file order."""
     seen = np.isfinite(heights)
     high = np.where(seen, heights, -np.inf).max(axis=0)
     low = np.where(seen, heights, np.inf).min(axis=0)
-    span = np.where(seen.any(axis=0), high - low, -1.0)
-    return sorted(int(i) for i in np.argsort(-span, kind="stable")[:SHOWN])
+    return largest(np.where(seen.any(axis=0), high - low, np.nan))
 
 
 def gait_cycle(found, stem: str | Path) -> list[Path]:

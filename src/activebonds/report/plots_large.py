@@ -13,15 +13,20 @@ from matplotlib.figure import Figure
 SHOWN = 12  # markers in the trajectories figure, at most
 
 
+def largest(scores) -> list[int]:
+    """Every index of ``scores`` [P] up to :data:`SHOWN` of them, else the :data:`SHOWN`
+    with the largest scores (NaN last), in file order."""
+    score = np.nan_to_num(np.asarray(scores, np.float64), nan=-np.inf)
+    if score.size <= SHOWN:
+        return list(range(score.size))
+    return sorted(int(i) for i in np.argsort(-score, kind="stable")[:SHOWN])
+
+
 def shown_particles(pred) -> list[int]:
     """The particles of the trajectories figure: every one up to :data:`SHOWN`, else the
     :data:`SHOWN` with the largest one-step RMS on the fitted frames (a particle with none
     last), in file order."""
-    n = pred.recorded.shape[1]
-    if n <= SHOWN:
-        return list(range(n))
-    rms = np.nan_to_num(np.asarray(pred.one_step_rms_mm, np.float64), nan=-1.0)
-    return sorted(int(i) for i in np.argsort(-rms, kind="stable")[:SHOWN])
+    return largest(pred.one_step_rms_mm)
 
 
 # above this many parameters, one figure of fixed size without a label per parameter (a bar

@@ -53,7 +53,7 @@ class WalkCandidate:
                 f"      walk: {len(fewer)} marker(s) predicted over part of the stride only: "
                 f"fewer harmonics (0: no force) ({', '.join(fewer)})"
             )
-        spec = walk_spec(x[a:s], names, found.stride, variant, mass)
+        spec = walk_spec(x[a:s], names, found.stride, variant, mass, seen=seen)
         if not spec.bond:
             ws.say("      walk: not proposed: no marker is predicted over enough of the stride")
             return None

@@ -153,15 +153,7 @@ def make_windows(
 
 def reach_of(neighbours: np.ndarray, hops: int) -> np.ndarray:
     """[P, P] bool: ``[p, q]`` where q is p or within ``hops`` bonds of it."""
-    n = np.asarray(neighbours, bool)
-    step = (n | np.eye(n.shape[0], dtype=bool)).astype(np.int64)
-    out = step > 0
-    for _ in range(max(int(hops), 1) - 1):
-        wider = (out.astype(np.int64) @ step) > 0
-        if (wider == out).all():  # every particle's whole connected part reached
-            break
-        out = wider
-    return out
+    return _reach(neighbours, max(int(hops), 1))[-1]
 
 
 def _reach(neighbours: np.ndarray, horizon: int) -> list[np.ndarray]:

@@ -56,18 +56,20 @@ def walk_spec(
     variant: WalkVariant = WalkVariant(),
     mass: float = 1.0,
     name: str = "walk",
+    seen: Sequence[int] | None = None,
 ):
     """The model of ``variant`` for ``positions`` [F, P, D] (the frames it will be fitted on,
     NaN where missing; ``names``: one per particle, the markers'), its drive a clock at
-    ``stride``'s frequency: a ModelSpec to solve (:func:`~..gait.family.solve`)."""
+    ``stride``'s frequency: a ModelSpec to solve (:func:`~..gait.family.solve`). ``seen``:
+    each marker's harmonics where already found (:func:`harmonics_seen`)."""
     from ....model.schema import ModelSpec
 
     x = np.asarray(positions, np.float64)
     dt = 1.0 / stride.rate
     held = []
-    for i, (n, h) in enumerate(
-        zip(names, harmonics_seen(x, stride, variant.harmonics), strict=True)
-    ):
+    if seen is None:
+        seen = harmonics_seen(x, stride, variant.harmonics)
+    for i, (n, h) in enumerate(zip(names, seen, strict=True)):
         if h == 0:
             continue  # too little of the stride seen: no force (constant velocity)
         acc = np.linalg.norm(np.diff(x[:, i], 2, axis=0), axis=-1) / dt**2
