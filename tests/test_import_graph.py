@@ -131,7 +131,7 @@ def upward_arrows(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
 
 def test_the_graph_is_read_from_every_kind_of_import():
     graph = import_graph()
-    assert "activebonds.report.html" in graph["activebonds.report"]  # from .html import
+    assert "activebonds.bonds.registry" in graph["activebonds.bonds"]  # from .registry import
     assert "activebonds.identify.rundir" in graph["activebonds.identify.driver"]  # from . import
     assert (
         "activebonds.bonds" in graph["activebonds.identify.search.population_cost"]

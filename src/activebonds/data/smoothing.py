@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 ORDER = 3  # polynomial order: a cubic motion passes unchanged
 
@@ -35,6 +34,8 @@ def check_window(window: int) -> int:
 def smooth_positions(positions: np.ndarray, mask: np.ndarray, window: int) -> np.ndarray:
     """Positions [F, P, D] smoothed over ``window`` frames per marker and run of recorded
     frames (``mask`` [F, P]); NaN where missing, as given."""
+    from scipy.signal import savgol_filter  # here: scipy.signal takes half a second
+
     window = check_window(window)
     out = np.array(positions, dtype=np.float64, copy=True)
     if window == 0:
@@ -107,5 +108,7 @@ def noise_of(positions: np.ndarray) -> Noise:
 
 def _second_difference_gain(window: int) -> float:
     """How much a cubic Savitzky-Golay window scales white noise's second difference."""
+    from scipy.signal import savgol_coeffs  # here: scipy.signal takes half a second
+
     h = np.convolve(savgol_coeffs(window, ORDER), [1.0, -2.0, 1.0])
     return float(np.sqrt(np.sum(h**2) / 6.0))

@@ -10,7 +10,6 @@ from dataclasses import asdict, dataclass, field
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from .box import box_levenberg_marquardt
@@ -114,6 +113,8 @@ def _sum_squares_program(tree):  # one program, not three eager ones per leaf
 def solve_dense(residual, y0, max_steps: int):
     """Levenberg-Marquardt from y0 on the dense Jacobian: (y, number of steps, optimistix's
     result message)."""
+    import optimistix as optx  # here: its import costs a third of a second
+
     solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
     sol = optx.least_squares(lambda y, _: residual(y), solver, y0, max_steps=max_steps, throw=False)
     steps = int(sol.stats["num_steps"])
