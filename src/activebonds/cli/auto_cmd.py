@@ -16,7 +16,6 @@ from .shared_options import (
     Generations,
     Gravity,
     Population,
-    Recording,
     Seed,
     TotalMass,
     Up,
@@ -25,7 +24,13 @@ from .shared_options import (
 
 @app.command()
 def auto(
-    traj: Recording,
+    recordings: Annotated[
+        list[str],
+        typer.Argument(
+            help="Recorded trajectory; several (files, folders of recordings, globs): a "
+            "dataset, each trial in OUT/<its name>, OUT/summary.csv and OUT/index.html.",
+        ),
+    ],
     out_dir: Annotated[
         Path,
         typer.Option(
@@ -55,12 +60,23 @@ def auto(
     verbose: Annotated[
         bool, typer.Option("--verbose", help="Say each fit's summary, not one line a fit.")
     ] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="A dataset's trials at once on this machine (default: its CPUs)."),
+    ] = None,
+    address: Annotated[
+        str | None,
+        typer.Option(help="A dataset's trials on the Ray cluster at this address (or auto)."),
+    ] = None,
+    sequential: Annotated[
+        bool, typer.Option("--sequential", help="A dataset's trials one after another, no Ray.")
+    ] = False,
 ):
     """From a recording to an evaluated model: scaffold a candidate model of the fitted frames,
     decide its springs (structure), fit it (the cost as fit --cost auto), evaluate it on the
     held-out tail and the fitted frames beside zero force, write the report; the verdict last.
     Run again with the same recording and options, the finished steps are kept and an
-    interrupted fit resumes."""
+    interrupted fit resumes. Several recordings: each trial so, in parallel on Ray."""
     from .. import auto as auto_package
     from ..identify.rundir import RunWriteError
     from ..identify.settings import parse_frames, parse_markers
@@ -81,6 +97,12 @@ def auto(
             seed=seed,
             ahead=ahead,
         )
+        if len(recordings) > 1 or not Path(recordings[0]).is_file():
+            from .auto_dataset import run_dataset_command
+
+            run_dataset_command(recordings, out_dir, options, workers, address, sequential)
+            return
+        traj = Path(recordings[0])
         outcome = auto_package.run(
             traj,
             out_dir,
