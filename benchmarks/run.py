@@ -99,7 +99,7 @@ class Ours:
         self.population, self.block = population, self.loop.length
         init_key, self.gen_key = evolve.keys(seed)
         t0 = now()
-        init_c = self.loop.start_fn.lower(init_key).compile()
+        init_c = self.loop.compiled_start(init_key)
         t1 = now()
         self.state = jax.block_until_ready(init_c(init_key))
         t2 = now()

@@ -24,7 +24,7 @@ from .shared_options import (
 
 @app.command()
 def auto(
-    recordings: Annotated[
+    traj: Annotated[
         list[str],
         typer.Argument(
             help="Recorded trajectory; several (files, folders of recordings, globs): a "
@@ -97,14 +97,13 @@ def auto(
             seed=seed,
             ahead=ahead,
         )
-        if len(recordings) > 1 or not Path(recordings[0]).is_file():
+        if len(traj) > 1 or Path(traj[0]).is_dir() or any(c in traj[0] for c in "*?["):
             from .auto_dataset import run_dataset_command
 
-            run_dataset_command(recordings, out_dir, options, workers, address, sequential)
+            run_dataset_command(traj, out_dir, options, workers, address, sequential)
             return
-        traj = Path(recordings[0])
         outcome = auto_package.run(
-            traj,
+            Path(traj[0]),
             out_dir,
             options,
             overwrite=overwrite,

@@ -95,7 +95,10 @@ class Layout:
             if index.size == 0 or (index < 0).all():
                 return jnp.asarray(base, values.dtype)
             gathered = padded[np.where(index >= 0, index, len(self.genes))]
-            return jnp.where(index >= 0, gathered, jnp.asarray(base, values.dtype))
+            # the free entries' values are the genome's: 0 in the program's constant, so that
+            # models of other values and the same structure share their programs
+            fixed = np.where(index >= 0, 0.0, np.asarray(base, np.float64))
+            return jnp.where(index >= 0, gathered, jnp.asarray(fixed, values.dtype))
 
         return self.derive(jax.tree_util.tree_map(leaf, self.base, self.index), jnp)
 

@@ -16,6 +16,7 @@ progress and interrupts stay responsive on big models. Used by ``fit``/``resume`
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from functools import partial
@@ -66,6 +67,15 @@ def start(strategy: Strategy, problem: Problem, dtype, key) -> Run:
     state = strategy.init(key, counted)
     failed = sum(failures[1:], failures[0]) if failures else jnp.asarray(0, jnp.int32)
     return Run(state, jnp.asarray(0, jnp.int32), failed)
+
+
+def _start_from(strategy: Strategy, problem: Problem, dtype, key, starts) -> Run:
+    """:func:`start` with the problem's start genomes ``starts`` (an argument of the program,
+    or None)."""
+    if starts is not None:
+        problem = problem._replace(start=starts)
+        strategy = dataclasses.replace(strategy, problem=problem)
+    return start(strategy, problem, dtype, key)
 
 
 def step(strategy: Strategy, problem: Problem, dtype, noise, run: Run):
@@ -175,11 +185,14 @@ class Evolution:
         self.columns = history_columns(strategy, display)
         self.length = chunk_length(strategy, requested, total, seeds or 1)
         self.chunking = Chunking(self.length)
-        one_start = partial(start, strategy, problem, dtype)
+        # the problem's start genomes an argument, not a constant of the program: a model of
+        # the same structure and other values loads this one's program
+        self._starts = None if problem.start is None else np.asarray(problem.start)
+        one_start = partial(_start_from, strategy, problem, dtype)
         if seeds is None:
-            self.start_fn = jax.jit(one_start)
+            self._start = jax.jit(one_start)
         else:
-            self.start_fn = jax.jit(jax.vmap(one_start))
+            self._start = jax.jit(jax.vmap(one_start, in_axes=(0, None)))
         self._jitted: dict[int, Any] = {}
         self._compiled: dict[int, Any] = {}
 
@@ -202,16 +215,25 @@ class Evolution:
         """The first state; its time (one population evaluation, compiled apart) estimates a
         generation's for the first chunk's length."""
         began = time.perf_counter()
-        compiled = self.start_fn.lower(init_key).compile()
+        compiled = self._start.lower(init_key, self._starts).compile()
         self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
         began = time.perf_counter()
-        state = jax.block_until_ready(compiled(init_key))
+        state = jax.block_until_ready(compiled(init_key, self._starts))
         self.chunking.estimate = time.perf_counter() - began
         return state
 
     def template(self, init_key) -> Run:
         """Shapes and dtypes of the loop state, without computing it (for checkpoints)."""
-        return jax.eval_shape(self.start_fn, init_key)
+        return jax.eval_shape(self._start, init_key, self._starts)
+
+    def start_fn(self, init_key) -> Run:
+        """The first state, jitted (the start genomes passed in)."""
+        return self._start(init_key, self._starts)
+
+    def compiled_start(self, init_key):
+        """``key -> first state``, compiled ahead (for the benchmarks)."""
+        compiled = self._start.lower(init_key, self._starts).compile()
+        return lambda key: compiled(key, self._starts)
 
     def _call(self, n: int, gen_key, state: Run, stop: int):
         if n not in self._compiled:

@@ -46,7 +46,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .lm import JITTER, LOW, PRECISION, STALLED, Interrupted, _dot, _small
+from .lm import JITTER, LOW, PRECISION, STALLED, Interrupted, _dot, _larger, _small
 
 EDGE = 1e-10  # of a bound's span: a variable this close to its bound is on it
 HOLD = 1e16  # of the system's largest diagonal entry: the damping of a held variable
@@ -118,6 +118,14 @@ def _measures(grad, d, y_new, r, r_new, rtol, atol):
     return 0.5 * _dot(r_new, r_new), _dot(grad, d), small
 
 
+def _prepare(scaling, secant, system, r) -> None:
+    """The programs of an accepted step compiled now, whether or not a step is accepted: a
+    solve of these shapes compiles the same programs whichever path it takes."""
+    _larger(scaling, scaling)
+    if secant is not None:
+        secant.prepare(system, r)
+
+
 def box_levenberg_marquardt(
     residual: Callable,
     linearize: Callable,
@@ -147,6 +155,7 @@ def box_levenberg_marquardt(
     lower, upper, y, r, loss, dof = _start(residual, y0, lower, upper)
     system, grad = linearize(y, r)
     scaling = diagonal(system)
+    _prepare(scaling, secant, system, r)
     hold = _held(y, grad, lower, upper)
     nu, steps, flat = 2.0, 1, 0
     if on_step:
@@ -186,7 +195,7 @@ def box_levenberg_marquardt(
         if done:
             return y, steps, "converged"
         system, grad = new_system, new_grad
-        scaling = jax.tree.map(jnp.maximum, scaling, diagonal(system))  # MINPACK's rule
+        scaling = _larger(scaling, diagonal(system))  # MINPACK's rule
         hold = _held(y, grad, lower, upper)
         if flat >= FLAT_STEPS:
             return y, steps, flat_message(threshold / max(loss, 1e-300))

@@ -49,8 +49,17 @@ def dense_curvature(system, d):
 
 
 @jax.jit
-def _update(s_matrix, s, g_old, g_new, jt_r_new):
+def _predicted(system, step, s_matrix):
+    """The reduction of the loss each model predicted for ``step``: Gauss-Newton's, and with
+    S (one program rather than a few eager operations)."""
+    gauss_newton = system[1] @ step + 0.5 * dense_curvature(system, step)
+    return gauss_newton, gauss_newton + 0.5 * (step @ (s_matrix @ step))
+
+
+@jax.jit
+def _update(s_matrix, s, g_old, g_new, j_old, r_new):
     """The Dennis-Gay-Welsch update of S for the step s (NL2SOL's sizing first)."""
+    jt_r_new = j_old.T @ r_new
     y = g_new - g_old
     y_sharp = g_new - jt_r_new
     s_s_s = s @ (s_matrix @ s)
@@ -92,15 +101,20 @@ class Hybrid:
         if self.use:
             self.secant_steps -= 1
 
+    def prepare(self, system, r) -> None:
+        """Compile :meth:`update`'s programs for these shapes (run once on a zero step, the
+        result dropped)."""
+        zero = jnp.zeros_like(system[1])
+        _predicted(system, zero, self.s_matrix)
+        _update(self.s_matrix, zero, system[1], system[1], system[2], r)
+
     def update(self, old, new, step, r_new, change: float) -> None:
         """After an accepted ``step`` from the linearisation ``old`` to ``new`` (whose
         residuals are ``r_new``) that changed the loss by ``change``: choose the next step's
         model, then update S."""
-        g_old, j_old = old[1], old[2]
-        gauss_newton = float(g_old @ step + 0.5 * dense_curvature(old, step))
-        secant = gauss_newton + 0.5 * float(step @ (self.s_matrix @ step))
+        gauss_newton, secant = (float(x) for x in _predicted(old, step, self.s_matrix))
         use = abs(change - secant) < abs(change - gauss_newton)
         if np.isfinite(secant) and use != self.use:
             self.switches += 1
             self.use = use
-        self.s_matrix = _update(self.s_matrix, step, g_old, new[1], j_old.T @ r_new)
+        self.s_matrix = _update(self.s_matrix, step, old[1], new[1], old[2], r_new)

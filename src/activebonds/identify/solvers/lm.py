@@ -162,7 +162,7 @@ def levenberg_marquardt(
             return y, steps, "converged"
         system, grad = linearize(y, r)
         if scaling is not None:  # MINPACK's rule: D never shrinks (More 1978)
-            scaling = jax.tree.map(jnp.maximum, scaling, diagonal(system))
+            scaling = _larger(scaling, diagonal(system))
         if _precise(
             y, loss, change, dof, system, grad, scaling, step, scale, linear_enough, precision
         ):
@@ -193,6 +193,12 @@ def _precise(y, loss, change, dof, system, grad, scaling, step, scale, linear_en
     gauss_newton = step(system, jitter)
     distance = -float(_dot(grad, gauss_newton)) / variance  # d^T J^T J d / sigma^2
     return distance < precision**2
+
+
+@jax.jit
+def _larger(a, b):
+    """The larger of two pytrees, leaf by leaf (one program, not an eager one a leaf)."""
+    return jax.tree.map(jnp.maximum, a, b)
 
 
 @jax.jit
