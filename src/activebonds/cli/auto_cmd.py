@@ -71,6 +71,14 @@ def auto(
     sequential: Annotated[
         bool, typer.Option("--sequential", help="A dataset's trials one after another, no Ray.")
     ] = False,
+    subject: Annotated[
+        bool,
+        typer.Option(
+            "--subject",
+            help="The trials are one subject's: each left out in turn, a model fitted on the "
+            "others judged on it (OUT/subject.csv).",
+        ),
+    ] = False,
 ):
     """From a recording to an evaluated model: scaffold a candidate model of the fitted frames,
     decide its springs (structure), fit it (the cost as fit --cost auto), evaluate it on the
@@ -97,10 +105,10 @@ def auto(
             seed=seed,
             ahead=ahead,
         )
-        if len(traj) > 1 or Path(traj[0]).is_dir() or any(c in traj[0] for c in "*?["):
+        if subject or len(traj) > 1 or Path(traj[0]).is_dir() or any(c in traj[0] for c in "*?["):
             from .auto_dataset import run_dataset_command
 
-            run_dataset_command(traj, out_dir, options, workers, address, sequential)
+            run_dataset_command(traj, out_dir, options, workers, address, sequential, subject)
             return
         outcome = auto_package.run(
             Path(traj[0]),

@@ -11,7 +11,8 @@ from ..errors import InputError
 from .app import out, say
 
 
-def run_dataset_command(recordings, out_dir: Path, options, workers, address, sequential):
+def run_dataset_command(recordings, out_dir: Path, options, workers, address, sequential,
+                        subject=False):  # fmt: skip
     from ..auto import dataset
     from ..sweep import run as sweep_run
 
@@ -21,6 +22,8 @@ def run_dataset_command(recordings, out_dir: Path, options, workers, address, se
         option = "--workers" if workers is not None else "--sequential"
         raise InputError(option, "is for this machine; --address runs on the cluster's CPUs")
     items = dataset.trials(recordings)
+    if subject and len(items) < 3:
+        raise InputError("--subject", f"needs 3 trials or more, got {len(items)}")
     use_ray = not sequential and sweep_run.ray_available()
     if address is not None and not use_ray:
         raise InputError("--address", "needs Ray: pip install 'activebonds[ray]'")
@@ -57,6 +60,15 @@ def run_dataset_command(recordings, out_dir: Path, options, workers, address, se
             ray.shutdown()
     better = sum(1 for r in rows if r["one_step_verdict"] == "better")
     failed = sum(1 for r in rows if r["status"] != "done")
+    if subject:
+        from ..auto.subject import leave_one_out
+
+        left = leave_one_out(items, out_dir, options, {r["trial"]: r for r in rows}, say)
+        won = sum(1 for r in left if r["subject_one_step_verdict"] == "better")
+        say(
+            f"subject: the model of the other trials predicts the left-out trial one step "
+            f"better than zero force in {won} of {len(left)}: {out_dir}/subject.csv"
+        )
     out.print(f"output: {out_dir}/summary.csv, {out_dir}/index.html", markup=False)
     say(
         f"verdict: held out one step better than zero force in {better} of {len(rows)} trials"
