@@ -4,8 +4,8 @@ index.html, read back from the trial's folder; one unreadable file one row, the 
 finished; rerun: the same rows; on Ray: the same numbers as one after another.
 
 The recordings are made here: the triangle example simulated (no gravity, a free body) at
-60 Hz and cut into sections of other lengths, one resampled to 30 Hz (every other frame of a
-120 Hz simulation), one written as TRC; and a file that is not a recording."""
+60 Hz and cut into sections of other lengths, one resampled to 30 Hz (every other frame),
+written as TRC; and a file that is not a recording."""
 
 from __future__ import annotations
 
@@ -29,25 +29,24 @@ OPTIONS = auto.Options(gravity=False, population=8, generations=5, ahead=5)
 
 
 def make_trials(folder: Path) -> list[Path]:
-    """Three recordings of the triangle (sections of one simulation at 60 Hz, 200 and 160
-    frames; one at 30 Hz, resampled from 120 Hz, written as TRC) and one unreadable file."""
+    """Three recordings of the triangle, sections of one simulation at 60 Hz: frames 0-199
+    and 200-359 at 60 Hz (CSV), and frames 360-759 resampled to 30 Hz (every other frame,
+    written as TRC); and one unreadable file."""
     folder.mkdir(parents=True, exist_ok=True)
-    model = bundled("triangle.toml").path
-    simulate_to_file(model, 400, 60.0, folder / "sim60.csv", None, 1, "euler")
-    simulate_to_file(model, 400, 120.0, folder / "sim120.csv", None, 1, "euler")
-    sim60, sim120 = read_trajectory(folder / "sim60.csv"), read_trajectory(folder / "sim120.csv")
+    simulate_to_file(bundled("triangle.toml").path, 760, 60.0, folder / "sim.csv", None, 1,
+                     "euler")  # fmt: skip
+    sim = read_trajectory(folder / "sim.csv")
 
-    def cut(t: Trajectory, rows, path: Path, rate: float) -> Path:
-        write_trajectory(Trajectory(t.positions[rows], t.mask[rows], t.markers, rate), path)
+    def cut(rows, path: Path, rate: float) -> Path:
+        write_trajectory(Trajectory(sim.positions[rows], sim.mask[rows], sim.markers, rate), path)
         return path
 
     paths = [
-        cut(sim60, slice(0, 200), folder / "early.csv", 60.0),
-        cut(sim60, slice(200, 360), folder / "late.csv", 60.0),
-        cut(sim120, slice(0, 400, 2), folder / "slow.trc", 30.0),
+        cut(slice(0, 200), folder / "early.csv", 60.0),
+        cut(slice(200, 360), folder / "late.csv", 60.0),
+        cut(slice(360, 760, 2), folder / "slow.trc", 30.0),
     ]
-    (folder / "sim60.csv").unlink()
-    (folder / "sim120.csv").unlink()
+    (folder / "sim.csv").unlink()
     broken = folder / "broken.csv"
     broken.write_text("not,a recording\n1,2\n", encoding="utf-8")
     return [*paths, broken]
@@ -75,7 +74,14 @@ def test_a_row_is_read_from_the_trials_folder_and_the_page_links_its_report(tmp_
     folder = tmp_path / "early"
     folder.mkdir()
     (folder / "report.html").write_text("<html></html>")
-    (folder / "auto.json").write_text(json.dumps({"total_seconds": 12.34, "steps": {}}))
+    fit = {
+        "run": "run-gait",
+        "candidates": [
+            {"candidate": "structure", "run": "run"},
+            {"candidate": "gait", "run": "run-gait"},
+        ],
+    }
+    (folder / "auto.json").write_text(json.dumps({"total_seconds": 12.34, "steps": {"fit": fit}}))
     verdict = {"verdict": "better"}
     held = {
         "model_name": "gait",
@@ -183,3 +189,35 @@ def test_on_ray_the_trials_give_the_numbers_of_one_after_another(tmp_path):
         assert "held out one step better than zero force in 2 of 2 trials" in proc.stdout
     assert results["--workers=2"] == results["--sequential"]
     assert np.all([r[1] == "done" for r in results["--sequential"]])
+
+
+@pytest.mark.slow  # integration scale: in pytest -m slow (every landing)
+def test_a_subjects_model_predicts_each_left_out_trial_beside_its_own_and_zero_force(tmp_path):
+    """Leave-one-trial-out on three trials of the triangle (two at 60 Hz, one resampled to
+    30 Hz): the model fitted on the other trials predicts each left-out trial's held-out
+    frames one step better than zero force; the table holds its error beside the trial's own
+    model's and zero force's on the same frames; the 30 Hz trial is left out of the fits
+    (one line) and judged with the fit's step (two Euler substeps of 1/60 s)."""
+    paths = make_trials(tmp_path / "data")[:3]
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "activebonds.cli", "auto", *map(str, paths), "--out", str(out),
+         "--no-gravity", "--population", "8", "--generations", "5", "--ahead", "5",
+         "--sequential", "--subject"],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("slow left out of the fit: 30 Hz, not 60 Hz") == 2
+    with open(out / "subject.csv", newline="") as f:
+        rows = {r["left_out"]: r for r in csv.DictReader(f)}
+    assert set(rows) == {"early", "late", "slow"}
+    assert rows["slow"]["fitted_on"] == "early late" and rows["early"]["fitted_on"] == "late"
+    own = {r["trial"]: r for r in _rows(out)}
+    for name, r in rows.items():
+        assert r["subject_one_step_verdict"] == "better"
+        subject, zero = float(r["subject_one_step_mm"]), float(r["zero_force_one_step_mm"])
+        assert subject < 0.01 * zero  # the truth's family, fitted on other trials
+        assert r["held_out_frames"] == own[name]["held_out_frames"]
+        assert r["trial_model_one_step_mm"] == own[name]["one_step_mm"]
+        assert r["zero_force_one_step_mm"] == own[name]["zero_force_one_step_mm"]
+    assert "better than zero force in 3 of 3" in proc.stdout

@@ -114,7 +114,10 @@ def row(trial: Trial, folder: Path, status: str, message: str, wall: float) -> d
     except (OSError, ValueError, KeyError):
         return out
     fit = state.get("steps", {}).get("fit") or {}
-    out["family"] = held.get("model_name", "")
+    kept = [
+        c.get("candidate", "") for c in fit.get("candidates", []) if c.get("run") == fit.get("run")
+    ]
+    out["family"] = kept[0] if kept else fit.get("run", "")
     out["held_out_frames"] = "{}:{}".format(*held["frames"])
     comps = held.get("comparisons", [])
     for comp, prefix in zip(comps[:2], ("one_step", "ahead"), strict=False):
@@ -131,13 +134,12 @@ def row(trial: Trial, folder: Path, status: str, message: str, wall: float) -> d
         out["report"] = f"{trial.name}/report.html"
     if status == "done":  # the trial's own time, whether it ran now or before
         out["wall_s"] = round(float(state.get("total_seconds", wall)), 1)
-    if fit.get("run") and not out["family"]:
-        out["family"] = fit["run"]
     return out
 
 
 def _num(x) -> float | str:
-    return "" if x is None else round(float(x), 4)
+    """Four significant digits (an exact model's error is small, not 0)."""
+    return "" if x is None else float(f"{float(x):.4g}")
 
 
 # ----------------------------------------------------------------------------- running

@@ -6,7 +6,8 @@ B`` fits several recordings: their costs added) and judged on the left-out trial
 frames (its last share, which its own ``auto`` never fitted either), one step and ``--ahead``
 frames ahead, beside zero force and beside that trial's own model on the same frames.
 
-The subject's model is the spring body ``auto``'s structure step decided on the first of the
+The subject's model is evaluated with the fit's integration step (more substeps on a trial
+recorded at a lower rate). It is the spring body ``auto``'s structure step decided on the first of the
 other trials (``<trial>/structure.toml``: its springs, masses and anchors), every free
 parameter fitted on all the other trials, from that trial's exact optimum, on the one-step
 cost. Trials that were not modelled, that lack one of that model's markers or whose frame
@@ -23,7 +24,7 @@ import io
 from collections.abc import Callable
 from pathlib import Path
 
-from .dataset import Trial
+from .dataset import Trial, _num
 
 COLUMNS = (
     "left_out", "fitted_on", "held_out_frames", "ahead",
@@ -90,14 +91,19 @@ def _left_out(left: Trial, others, recordings, out: Path, options, own: dict, sa
         init="model", cost="restart", horizon=(1,),
     )  # fmt: skip
     data = [recordings[t.name].select(list(model.markers)) for t in fitted_on]
+    (out / "subject").mkdir(exist_ok=True)
     result = fit(model, data, settings, out=out / "subject" / left.name, overwrite=True)
     a, b = (int(x) for x in own["held_out_frames"].split(":"))
+    # the fit's integration step kept at the left-out trial's rate (a model identified with
+    # Euler steps of 1/60 s carries them in its parameters: at 30 Hz, two substeps)
+    substeps = max(1, round(rate * settings.substeps / test.rate))
     ev = evaluate(result.model, test, markers=list(model.markers), frames=(a, b),
+                  substeps=substeps, integrator=settings.integrator,
                   horizon=options.ahead)  # fmt: skip
     row["held_out_frames"], row["ahead"] = own["held_out_frames"], options.ahead
     for comp, prefix in zip(ev.comparisons[:2], ("one_step", "ahead"), strict=False):
-        row[f"subject_{prefix}_mm"] = round(float(comp.model_mm), 4)
-        row[f"zero_force_{prefix}_mm"] = round(float(comp.zero_force_mm), 4)
+        row[f"subject_{prefix}_mm"] = _num(comp.model_mm)
+        row[f"zero_force_{prefix}_mm"] = _num(comp.zero_force_mm)
         row[f"subject_{prefix}_verdict"] = comp.overall.word
         row[f"trial_model_{prefix}_mm"] = own[f"{prefix}_mm"]
     say(
