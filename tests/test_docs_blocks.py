@@ -64,6 +64,19 @@ UNRUNNABLE = {
     "activebonds sweep examples/sweep.toml --out sweeps --address auto": (
         "joins a running Ray cluster (tests/test_sweep.py runs sweeps on a local one)"
     ),
+    "activebonds auto trials/*.c3d --out study": (
+        "the reader's trials (tests/test_auto_dataset.py runs datasets it makes)"
+    ),
+    "activebonds auto trials/ --out study --workers 2": (
+        "the reader's trials, on Ray (tests/test_auto_dataset.py: --workers=2 against --sequential)"
+    ),
+    "activebonds auto A.c3d B.c3d C.c3d --out horse --subject": (
+        "one subject's trials (tests/test_auto_dataset.py runs --subject on three it makes)"
+    ),
+    "activebonds auto trials/*.c3d --out study --address auto": (
+        "joins a running Ray cluster (tests/test_auto_dataset_cluster.py starts one and "
+        "kills its worker node)"
+    ),
 }
 
 
