@@ -16,8 +16,6 @@ import glob
 import html
 import io
 import json
-import os
-import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +24,6 @@ from pathlib import Path
 from ..errors import InputError
 from .folder import Options
 
-RUNNING = ".running"  # OUT/.running/TRIAL.pid: which worker process runs which trial
 SUFFIXES = (".c3d", ".trc", ".csv", ".npz", ".mat")
 COLUMNS = (
     "trial", "recording", "status", "family", "held_out_frames",
@@ -78,7 +75,9 @@ def run_trial(trial: Trial, out: Path, options: Options) -> dict:
     start = time.perf_counter()
     lines: list[str] = []
     status, message = "done", ""
-    mark = _mark_running(out, trial.name)
+    from ..sweep.run import mark_running
+
+    mark = mark_running(out, trial.name)
     try:
         run(trial.path, folder, options, say=lines.append, verbose=False)
     except InputError as e:
@@ -91,16 +90,6 @@ def run_trial(trial: Trial, out: Path, options: Options) -> dict:
             with open(folder / "auto.log", "a", encoding="utf-8") as log:
                 log.writelines(f"{line}\n" for line in lines)
     return row(trial, folder, status, " ".join(message.split()), time.perf_counter() - start)
-
-
-def _mark_running(out: Path, name: str) -> Path:
-    """``out/.running/NAME.pid``: the process id and host of the worker running the trial
-    (left behind by a worker that was killed; replaced by the next attempt)."""
-    folder = out / RUNNING
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.pid"
-    path.write_text(f"{os.getpid()} {socket.gethostname()}\n", encoding="utf-8")
-    return path
 
 
 def row(trial: Trial, folder: Path, status: str, message: str, wall: float) -> dict:
@@ -167,7 +156,7 @@ def run_dataset(
                 finished(run_trial(trial, out, options))
     finally:
         try:  # no mark left: no trial runs (a killed worker's mark stays)
-            (out / RUNNING).rmdir()
+            (out / ".running").rmdir()
         except OSError:
             pass
     return [rows[t.name] for t in items]

@@ -42,7 +42,7 @@ def run_job(job: Job, out: str | Path, command: list[str] | None = None) -> Outc
     the sweep's command line, recorded in a new run's run.json (default: this process's)."""
     out = Path(out)
     run = out / job.name
-    pid_file = _mark_running(out, job.name)
+    pid_file = mark_running(out, job.name)
     try:
         action = _advance(job, run, command)
         status, message = RunDir(run).status().get("status", "unknown"), ""
@@ -77,7 +77,9 @@ def _advance(job: Job, run: Path, command: list[str] | None) -> str:
     return "ran"
 
 
-def _mark_running(out: Path, name: str) -> Path:
+def mark_running(out: Path, name: str) -> Path:
+    """``out/.running/NAME.pid``: the process id and host of the worker running ``name``
+    (left behind by a worker that was killed; replaced by the next attempt)."""
     folder = out / RUNNING
     folder.mkdir(exist_ok=True)
     path = folder / f"{name}.pid"
