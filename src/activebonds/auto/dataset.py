@@ -148,6 +148,8 @@ def run_dataset(
         write_summary(out, [rows[t.name] for t in items if t.name in rows])
         done(r)
 
+    from ..sweep.run import tidy
+
     try:
         if ray:
             _run_ray(items, out, options, finished)
@@ -155,10 +157,7 @@ def run_dataset(
             for trial in items:
                 finished(run_trial(trial, out, options))
     finally:
-        try:  # no mark left: no trial runs (a killed worker's mark stays)
-            (out / ".running").rmdir()
-        except OSError:
-            pass
+        tidy(out)  # no mark left: no trial runs (a killed worker's mark stays)
     return [rows[t.name] for t in items]
 
 
@@ -171,29 +170,13 @@ def _ray_trial(trial: Trial, out: str, options: Options) -> dict:
 
 
 def _run_ray(items: list[Trial], out: Path, options: Options, finished) -> None:
-    import ray
+    from ..sweep.run import first_line, ray_each
 
-    from ..sweep.run import MAX_RETRIES, STOP_SECONDS
+    def lost(trial: Trial, err: Exception) -> dict:
+        message = f"lost: {first_line(err)}; run the same command again to resume it"
+        return row(trial, out / trial.name, "error", message, 0.0)
 
-    task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(_ray_trial)
-    refs = {task.remote(t, str(out.absolute()), options): t for t in items}
-    pending = list(refs)
-    try:
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for ref in ready:
-                try:
-                    finished(ray.get(ref))
-                except ray.exceptions.RayError as err:  # its workers died every retry
-                    first = (str(err).strip().splitlines() or [type(err).__name__])[0]
-                    trial = refs[ref]
-                    lost = f"lost: {first}; run the same command again to resume it"
-                    finished(row(trial, out / trial.name, "error", lost, 0.0))
-    except KeyboardInterrupt:
-        for ref in pending:
-            ray.cancel(ref)  # each trial's fit saves a checkpoint and stops
-        ray.wait(pending, num_returns=len(pending), timeout=STOP_SECONDS)
-        raise
+    ray_each(_ray_trial, items, (str(out.absolute()), options), finished, lost)
 
 
 # ----------------------------------------------------------------------------- the summary

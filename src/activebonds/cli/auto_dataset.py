@@ -16,27 +16,17 @@ def run_dataset_command(recordings, out_dir: Path, options, workers, address, se
     from ..auto import dataset
     from ..sweep import run as sweep_run
 
-    if workers is not None and workers < 1:
-        raise InputError("--workers", "must be at least 1")
-    if address is not None and (workers is not None or sequential):
-        option = "--workers" if workers is not None else "--sequential"
-        raise InputError(option, "is for this machine; --address runs on the cluster's CPUs")
+    use_ray = sweep_run.use_ray(workers, address, sequential)
     items = dataset.trials(recordings)
     if subject and len(items) < 3:
         raise InputError("--subject", f"needs 3 trials or more, got {len(items)}")
-    use_ray = not sequential and sweep_run.ray_available()
-    if address is not None and not use_ray:
-        raise InputError("--address", "needs Ray: pip install 'activebonds[ray]'")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(out_dir, "exists and is not a folder; choose another --out")
     owned = sweep_run.start_ray(workers or os.cpu_count(), address) if use_ray else False
     if use_ray:
-        where = (
-            f"the Ray cluster at {address}"
-            if address
-            else (f"a local Ray cluster of {workers or os.cpu_count()} workers")
+        say(
+            f"{len(items)} trial(s) on {sweep_run.where(workers, address)}; each in {out_dir}/<trial>"
         )
-        say(f"{len(items)} trial(s) on {where}; each in {out_dir}/<trial>")
     else:
         why = "" if sequential else " (pip install 'activebonds[ray]' to run them in parallel)"
         say(f"{len(items)} trial(s), one after another{why}; each in {out_dir}/<trial>")

@@ -38,16 +38,11 @@ def sweep(
     from .. import sweep as sw
 
     try:
-        if workers is not None and workers < 1:
-            raise InputError("--workers", "must be at least 1")
-        if address is not None and (workers is not None or sequential):
-            option = "--workers" if workers is not None else "--sequential"
-            raise InputError(option, "is for this machine; --address runs on the cluster's CPUs")
+        from ..sweep.run import use_ray as choose
+
+        use_ray = choose(workers, address, sequential)
         jobs = sw.load_manifest(manifest)
         sw.check_out(jobs, out_dir)
-        use_ray = not sequential and sw.ray_available()
-        if address is not None and not use_ray:
-            raise InputError("--address", "needs Ray: pip install 'activebonds[ray]'")
         owned = sw.start_ray(workers or os.cpu_count(), address) if use_ray else False
     except InputError as e:
         fail(e)
@@ -74,9 +69,13 @@ def _run(sw, jobs, out_dir: Path, use_ray: bool, sequential: bool, address, work
 
     n = len(jobs)
     if use_ray:
-        local = f"a local Ray cluster of {workers or os.cpu_count()} workers"
-        where = f"the Ray cluster at {address}" if address else local
-        out.print(f"{n} fit{'s' if n != 1 else ''} on {where}", markup=False, highlight=False)
+        from ..sweep.run import where
+
+        out.print(
+            f"{n} fit{'s' if n != 1 else ''} on {where(workers, address)}",
+            markup=False,
+            highlight=False,
+        )
     elif not sequential:
         out.print(
             f"Ray is not installed: the {n} fits run one after another in this process "

@@ -164,8 +164,30 @@ def run_sequential(jobs: list[Job], out: str | Path, done: Done) -> list[Outcome
             outcomes.append(run_job(job, out))
             done(outcomes[-1])
     finally:
-        _tidy(Path(out))
+        tidy(Path(out))
     return outcomes
+
+
+def use_ray(workers: int | None, address: str | None, sequential: bool) -> bool:
+    """Whether the command line's work runs on Ray, from its ``--workers``, ``--address`` and
+    ``--sequential`` (InputError naming an option that cannot be: Ray without it installed,
+    this machine's options with a cluster's)."""
+    if workers is not None and workers < 1:
+        raise InputError("--workers", "must be at least 1")
+    if address is not None and (workers is not None or sequential):
+        option = "--workers" if workers is not None else "--sequential"
+        raise InputError(option, "is for this machine; --address runs on the cluster's CPUs")
+    ray = not sequential and ray_available()
+    if address is not None and not ray:
+        raise InputError("--address", "needs Ray: pip install 'activebonds[ray]'")
+    return ray
+
+
+def where(workers: int | None, address: str | None) -> str:
+    """Where Ray runs the work, in words."""
+    if address:
+        return f"the Ray cluster at {address}"
+    return f"a local Ray cluster of {workers or os.cpu_count()} workers"
 
 
 def start_ray(workers: int | None = None, address: str | None = None) -> bool:
@@ -206,46 +228,65 @@ def ray_task(job: Job, out: str, command: list[str]) -> Outcome:
 
 
 def run_ray(jobs: list[Job], out: str | Path, done: Done) -> list[Outcome]:
-    """Every fit as a Ray task of one CPU on the cluster this process is connected to
-    (:func:`start_ray`); ``done`` hears of each as it ends. A task whose worker died is
+    """Every fit as a Ray task (:func:`ray_each`) on the cluster this process is connected
+    to (:func:`start_ray`); ``done`` hears of each as it ends. A task whose worker died is
     retried (:data:`MAX_RETRIES`) and resumes from its checkpoint. On Ctrl-C the running
     fits are cancelled (each saves a checkpoint first) and KeyboardInterrupt is raised."""
-    import ray
-
     out = Path(out).absolute()
-    task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(ray_task)
-    refs = {task.remote(job, str(out), list(sys.argv)): job for job in jobs}
-    pending = list(refs)
     outcomes = []
+
+    def finished(outcome: Outcome) -> None:
+        outcomes.append(outcome)
+        done(outcome)
+
     try:
-        while pending:
-            finished, pending = ray.wait(pending, num_returns=1)
-            for ref in finished:
-                try:
-                    outcome = ray.get(ref)
-                except ray.exceptions.RayError as err:  # its workers died MAX_RETRIES + 1 times
-                    outcome = _lost(refs[ref], out, err)
-                outcomes.append(outcome)
-                done(outcome)
-    except KeyboardInterrupt:
-        for ref in pending:
-            ray.cancel(ref)  # a KeyboardInterrupt in the fit: it saves a checkpoint and stops
-        ray.wait(pending, num_returns=len(pending), timeout=STOP_SECONDS)
-        raise
+        ray_each(ray_task, jobs, (str(out), list(sys.argv)), finished,
+                 lambda job, err: _lost(job, out, err))  # fmt: skip
     finally:
-        _tidy(out)
+        tidy(out)
     return outcomes
 
 
-def _tidy(out: Path) -> None:
-    """OUT/.running removed once no fit runs (it stays if a killed worker left a mark)."""
+def ray_each(fn, items: list, args: tuple, finished, lost) -> None:
+    """``fn(item, *args)`` for every item as a Ray task of one CPU, retried
+    (:data:`MAX_RETRIES`) where its worker died; ``finished(result)`` as each ends, the
+    result ``lost(item, error)`` for a task whose workers died every time. On Ctrl-C the
+    running tasks are cancelled (a KeyboardInterrupt in each, which saves its checkpoint),
+    given :data:`STOP_SECONDS` to end, and KeyboardInterrupt is raised."""
+    import ray
+
+    task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES, retry_exceptions=False)(fn)
+    refs = {task.remote(item, *args): item for item in items}
+    pending = list(refs)
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                try:
+                    result = ray.get(ref)
+                except ray.exceptions.RayError as err:  # its workers died MAX_RETRIES + 1 times
+                    result = lost(refs[ref], err)
+                finished(result)
+    except KeyboardInterrupt:
+        for ref in pending:
+            ray.cancel(ref)
+        ray.wait(pending, num_returns=len(pending), timeout=STOP_SECONDS)
+        raise
+
+
+def tidy(out: Path) -> None:
+    """OUT/.running removed once no work runs (it stays if a killed worker left a mark)."""
     try:
         (out / RUNNING).rmdir()
     except OSError:
         pass
 
 
+def first_line(err: Exception) -> str:
+    """An error's first line, or its type's name."""
+    return (str(err).strip().splitlines() or [type(err).__name__])[0]
+
+
 def _lost(job: Job, out: Path, err: Exception) -> Outcome:
-    first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-    message = f"{type(err).__name__}: {first}; rerun the sweep to resume it"
+    message = f"{type(err).__name__}: {first_line(err)}; rerun the sweep to resume it"
     return Outcome(job.name, "error", "lost", message, row(out / job.name))

@@ -215,10 +215,10 @@ class Evolution:
         """The first state; its time (one population evaluation, compiled apart) estimates a
         generation's for the first chunk's length."""
         began = time.perf_counter()
-        compiled = self._start.lower(init_key, self._starts).compile()
+        compiled = self.compiled_start(init_key)
         self.chunking.compile = max(self.chunking.compile, time.perf_counter() - began)
         began = time.perf_counter()
-        state = jax.block_until_ready(compiled(init_key, self._starts))
+        state = jax.block_until_ready(compiled(init_key))
         self.chunking.estimate = time.perf_counter() - began
         return state
 
@@ -226,12 +226,8 @@ class Evolution:
         """Shapes and dtypes of the loop state, without computing it (for checkpoints)."""
         return jax.eval_shape(self._start, init_key, self._starts)
 
-    def start_fn(self, init_key) -> Run:
-        """The first state, jitted (the start genomes passed in)."""
-        return self._start(init_key, self._starts)
-
     def compiled_start(self, init_key):
-        """``key -> first state``, compiled ahead (for the benchmarks)."""
+        """``key -> first state``, compiled ahead (the start genomes passed in)."""
         compiled = self._start.lower(init_key, self._starts).compile()
         return lambda key: compiled(key, self._starts)
 
